@@ -1,0 +1,43 @@
+"""The Instrument protocol: what the campaign needs from any driver, simulated or real."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One shot. value: the scalar measured (value units); spectrum: raw data behind it, if any."""
+
+    value: float
+    spectrum: np.ndarray | None = None
+
+
+@runtime_checkable
+class Instrument(Protocol):
+    """A driver measures one shot at (x, t) with randomness only from ``rng``, so a simulated
+    driver is a pure function of (x, t, rng). ``truth`` and ``noise_law`` give the noiseless
+    property and the single-shot noise sd where the driver knows them (simulations), else None."""
+
+    name: str
+
+    def measure(self, x: float, t: float, rng: np.random.Generator) -> Reading: ...
+
+    def truth(self, x: np.ndarray) -> np.ndarray | None: ...
+
+    def noise_law(self, t: np.ndarray) -> np.ndarray | None: ...
+
+
+def build(config) -> Instrument:
+    """The driver for a validated instrument config (dispatch on its ``kind``)."""
+    from instruments.forrester import ForresterInstrument
+
+    drivers = {"forrester": ForresterInstrument}
+    try:
+        driver = drivers[config.kind]
+    except KeyError:
+        raise ValueError(f"unknown instrument kind {config.kind!r}; known: {sorted(drivers)}") from None
+    return driver(config)

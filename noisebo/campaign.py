@@ -1,0 +1,130 @@
+"""The campaign loop as pure functions over an explicit state: seed points, then
+propose -> measure -> update for ``n_steps`` BO steps. Every random draw is keyed by
+(campaign seed, point, shot), so one seed always gives one campaign."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from noisebo.config import CampaignConfig
+from noisebo.decision import Decision, decide, fit_models, grids, predict
+from noisebo.keys import FIT, MEASURE, SEED_POINTS, jax_key, numpy_rng
+from noisebo.schedule import reduce_shots
+from noisebo.state import CampaignState, Point
+
+
+def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
+    """(n_seed, 2) random (x, t) seed locations.
+
+    "latin_hypercube" (default) stratifies both axes, t on a log scale: the seeds then span the
+    exposure range, from a short, cheap shot to a long one, which separates A0 from A1 in the
+    noise model from the start. "uniform" draws each coordinate uniformly."""
+    s, sched = config.space, config.schedule
+    n = sched.n_seed
+    rng = numpy_rng(seed, SEED_POINTS)
+    if sched.seed_design == "latin_hypercube":
+        strata = np.column_stack([rng.permutation(n), rng.permutation(n)])
+        u = (strata + rng.random((n, 2))) / n
+    else:
+        u = rng.random((n, 2))
+    x = s.x_min + u[:, 0] * (s.x_max - s.x_min)
+    if sched.seed_t_scale == "log":
+        t = s.t_min * (s.t_max / s.t_min) ** u[:, 1]
+    else:
+        t = s.t_min + u[:, 1] * (s.t_max - s.t_min)
+    return np.column_stack([x, t])
+
+
+def shot_values(instrument, x: float, t: float, shots: int, seed: int, point: int) -> list[float]:
+    """Measure ``shots`` shots at (x, t); shot k draws from key (seed, point, k)."""
+    return [instrument.measure(x, t, numpy_rng(seed, MEASURE, point, k)).value for k in range(shots)]
+
+
+def make_point(x: float, t: float, values: Sequence[float], model_noise: float | None) -> Point:
+    """A point from its shot values. With ``model_noise`` None the noise is measured (the shots'
+    sample sd), otherwise it is the given noise-model prediction."""
+    reduced = reduce_shots(values)
+    measured = model_noise is None
+    if measured and not np.isfinite(reduced.shot_std):
+        raise ValueError("measuring the noise needs at least two shots")
+    return Point(
+        x=float(x),
+        t=float(t),
+        value=reduced.value,
+        shot_std=reduced.shot_std,
+        n_shots=reduced.n_shots,
+        noise=reduced.shot_std if measured else float(model_noise),
+        noise_measured=measured,
+    )
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Final models after the last measurement: f mean and variance on the x grid, the noise
+    curve on the fine t grid, the final predicted optimal t and hyperparameters."""
+
+    x: np.ndarray
+    f_mean: np.ndarray
+    f_var: np.ndarray
+    t_fine: np.ndarray
+    noise_fine: np.ndarray
+    t_opt: float
+    hyperparameters: dict
+
+
+def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summary:
+    """Fit both models on every point (key for step ``n_steps``) and summarise them."""
+    from noisebo.decision import hyperparameters
+
+    fitted = fit_models(config, state, jax_key(seed, FIT, config.schedule.n_steps))
+    pred = predict(config, fitted, state)
+    g = grids(config)
+    return Summary(
+        x=g.x,
+        f_mean=np.asarray(pred.posterior.f_mean),
+        f_var=np.asarray(pred.posterior.f_var),
+        t_fine=g.t_fine,
+        noise_fine=np.asarray(pred.noise_fine),
+        t_opt=float(pred.posterior.t_opt),
+        hyperparameters=hyperparameters(fitted),
+    )
+
+
+@dataclass(frozen=True)
+class CampaignResult:
+    state: CampaignState
+    decisions: tuple[Decision, ...]
+    latencies_s: tuple[float, ...]
+    summary: Summary
+
+    @property
+    def total_measurement_time(self) -> float:
+        """Sum over all shots of t (s), seed points included."""
+        return float(sum(p.t * p.n_shots for p in self.state.points))
+
+
+def run_campaign(
+    config: CampaignConfig, instrument, seed: int, on_step: Callable[[Decision, CampaignState], None] | None = None
+) -> CampaignResult:
+    """Run a whole campaign in this process and return its state, decisions and summary."""
+    state = CampaignState()
+    shots = config.schedule.shots_before
+    for i, (x, t) in enumerate(seed_points(config, seed)):
+        state = state.with_point(make_point(x, t, shot_values(instrument, x, t, shots, seed, i), None))
+    decisions, latencies = [], []
+    for step in range(config.schedule.n_steps):
+        started = time.perf_counter()
+        decision, state = decide(config, state, seed, step)
+        latencies.append(time.perf_counter() - started)
+        point_index = len(state.points)
+        values = shot_values(instrument, decision.x, decision.t, decision.shots, seed, point_index)
+        model_noise = None if decision.measure_noise else decision.noise_at_t
+        state = state.with_point(make_point(decision.x, decision.t, values, model_noise))
+        decisions.append(decision)
+        if on_step is not None:
+            on_step(decision, state)
+    return CampaignResult(state, tuple(decisions), tuple(latencies), summarize(config, state, seed))

@@ -1,0 +1,225 @@
+"""Campaign configuration: frozen, validated, versioned data.
+
+Every model here is frozen and forbids unknown keys. A configuration is validated once, at the
+boundary (``load_config`` or ``CampaignConfig(...)``); the rest of the code trusts it.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+SCHEMA_VERSION = 1
+
+
+class ConfigError(ValueError):
+    """A configuration that cannot be used; the message names the offending field."""
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
+class UniformPrior(_Frozen):
+    """Uniform(low, high) prior on a non-negative parameter, in the parameter's own units."""
+
+    low: NonNegativeFloat = 0.0
+    high: PositiveFloat = 15.0
+
+    @model_validator(mode="after")
+    def _ordered(self) -> UniformPrior:
+        if not self.low < self.high:
+            raise ValueError(f"low ({self.low}) must be below high ({self.high})")
+        return self
+
+
+class ForresterInstrumentConfig(_Frozen):
+    """Forrester benchmark: shots are f(x) + N(0, (a1/sqrt(t) + a0)^2)."""
+
+    kind: Literal["forrester"] = "forrester"
+    a0: NonNegativeFloat = 0.1
+    a1: NonNegativeFloat = 2.0
+
+
+InstrumentConfig = Annotated[Union[ForresterInstrumentConfig], Field(discriminator="kind")]
+
+
+class SpaceConfig(_Frozen):
+    """The (x, t) search space and the candidate grid over it. t is in seconds (> 0)."""
+
+    x_min: FiniteFloat = 0.0
+    x_max: FiniteFloat = 1.0
+    t_min: PositiveFloat = 0.2
+    t_max: PositiveFloat = 10.0
+    n_x: int = Field(200, ge=2, le=20_000)
+    n_t: int = Field(100, ge=2, le=20_000)
+
+    @model_validator(mode="after")
+    def _bounds(self) -> SpaceConfig:
+        if not self.x_min < self.x_max:
+            raise ValueError(f"x_min ({self.x_min}) must be below x_max ({self.x_max})")
+        if not self.t_min < self.t_max:
+            raise ValueError(f"t_min ({self.t_min}) must be below t_max ({self.t_max})")
+        return self
+
+
+class RewardConfig(_Frozen):
+    """R(t, Noise) = -alpha*t^2 - beta*Noise, normalised to [0, 1]; gamma weights it (Eq. 6)."""
+
+    alpha: PositiveFloat = 0.1
+    beta: PositiveFloat = 2.0
+    gamma: NonNegativeFloat = 5.0
+
+
+class AcquisitionConfig(_Frozen):
+    """Policy and acquisition functions.
+
+    ``policy``: "reward" (acq_x * Norm(R)^gamma) or "double" ((Norm(acq_t) + Norm(acq_x)) / 2).
+    ``f_acquisition``: UE, EI or UCB on f; ``maximize`` sets EI/UCB's direction.
+    """
+
+    policy: Literal["reward", "double"] = "reward"
+    f_acquisition: Literal["ue", "ei", "ucb"] = "ue"
+    t_acquisition: Literal["ei"] = "ei"
+    maximize: bool = True
+    ucb_kappa: PositiveFloat = 2.0
+    ei_xi: NonNegativeFloat = 0.01
+
+
+class PrimaryModelConfig(_Frozen):
+    """Priors of the Matern 5/2 GP for f (on standardised f and x scaled to [0, 1])."""
+
+    amplitude_loc: FiniteFloat = 0.0
+    amplitude_scale: PositiveFloat = 1.0
+    length_loc: FiniteFloat = math.log(0.2)
+    length_scale: PositiveFloat = 1.0
+
+
+class NoiseModelConfig(_Frozen):
+    """Structured GP for the single-shot noise standard deviation Noise(t).
+
+    ``mean``: "inv_sqrt" is the paper's A1/sqrt(t) + A0; "power" is A1/t^p + A0 with p inferred.
+    Priors on A0 and A1 are Uniform in the units of the measured value.
+    ``learn_after_convergence``: also train on the few-shot noise estimates taken after convergence
+    (weighted by their larger sampling error) instead of freezing the noise model's data.
+    """
+
+    mean: Literal["inv_sqrt", "power"] = "inv_sqrt"
+    a0_prior: UniformPrior = UniformPrior()
+    a1_prior: UniformPrior = UniformPrior()
+    p_prior: UniformPrior = UniformPrior(low=0.1, high=1.5)
+    residual_amplitude_loc: FiniteFloat = math.log(0.05)
+    residual_amplitude_scale: PositiveFloat = 1.0
+    learn_after_convergence: bool = False
+
+
+class InferenceConfig(_Frozen):
+    """How model hyperparameters are inferred.
+
+    "map": multi-start BFGS to the posterior mode; the noise model adds a Laplace approximation
+    (``laplace_samples`` draws) so its predictions carry hyperparameter uncertainty.
+    "nuts": numpyro NUTS; predictions average over ``predict_samples`` thinned posterior draws.
+    """
+
+    mode: Literal["map", "nuts"] = "map"
+    restarts: int = Field(6, ge=1, le=64)
+    laplace_samples: int = Field(32, ge=0, le=1024)
+    nuts_warmup: int = Field(500, ge=10)
+    nuts_samples: int = Field(500, ge=10)
+    predict_samples: int = Field(100, ge=1)
+
+
+class ScheduleConfig(_Frozen):
+    """Seed points, BO steps, repeated shots and the noise-model convergence rule.
+
+    Seed points are random: a Latin hypercube (or uniform draws) with t on a log or linear scale.
+
+    Converged when the population variance of the predicted optimal t over the last ``window``
+    BO steps is below ``threshold`` (s^2).
+    """
+
+    n_seed: int = Field(3, ge=1)
+    seed_design: Literal["latin_hypercube", "uniform"] = "latin_hypercube"
+    seed_t_scale: Literal["log", "linear"] = "log"
+    n_steps: int = Field(15, ge=0)
+    shots_before: int = Field(30, ge=2)
+    shots_after: int = Field(3, ge=1)
+    window: int = Field(3, ge=2)
+    threshold: PositiveFloat = 5e-4
+
+
+class CampaignConfig(_Frozen):
+    """One campaign: instrument, space, reward, policy, models, inference and schedule."""
+
+    schema_version: int = SCHEMA_VERSION
+    name: str = "campaign"
+    instrument: InstrumentConfig = ForresterInstrumentConfig()
+    space: SpaceConfig = SpaceConfig()
+    reward: RewardConfig = RewardConfig()
+    acquisition: AcquisitionConfig = AcquisitionConfig()
+    primary_model: PrimaryModelConfig = PrimaryModelConfig()
+    noise_model: NoiseModelConfig = NoiseModelConfig()
+    inference: InferenceConfig = InferenceConfig()
+    schedule: ScheduleConfig = ScheduleConfig()
+
+    @field_validator("schema_version")
+    @classmethod
+    def _known_version(cls, value: int) -> int:
+        if value != SCHEMA_VERSION:
+            raise ValueError(f"unsupported schema version {value}; this noisebo reads {SCHEMA_VERSION}")
+        return value
+
+    def with_overrides(self, **sections: Any) -> CampaignConfig:
+        """A new validated config with some fields replaced, e.g. ``acquisition={"policy": "double"}``."""
+        data = self.model_dump()
+        for key, value in sections.items():
+            if isinstance(value, dict) and isinstance(data.get(key), dict):
+                data[key] = {**data[key], **value}
+            else:
+                data[key] = value
+        return parse_config(data)
+
+
+def _describe(error: ValidationError) -> str:
+    parts = []
+    for item in error.errors():
+        loc = ".".join(str(p) for p in item["loc"]) or "<root>"
+        parts.append(f"{loc}: {item['msg']}")
+    return "; ".join(parts)
+
+
+def parse_config(data: Any, source: str = "config") -> CampaignConfig:
+    """Validate a mapping into a ``CampaignConfig``; raise ``ConfigError`` naming the field."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping of settings, got {type(data).__name__}")
+    try:
+        return CampaignConfig.model_validate(data)
+    except ValidationError as error:
+        raise ConfigError(f"{source}: {_describe(error)}") from None
+
+
+def load_config(path: str | Path) -> CampaignConfig:
+    """Read and validate a YAML campaign configuration."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as error:
+        raise ConfigError(f"{path}: cannot read config ({error.strerror or error})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{path}: not valid YAML{where}") from None
+    if data is None:
+        raise ConfigError(f"{path}: the file is empty")
+    return parse_config(data, source=str(path))

@@ -1,0 +1,149 @@
+"""The noise model: a structured GP for the single-shot noise standard deviation Noise(t).
+
+Its mean is a physical law (the paper's A1/sqrt(t) + A0, or A1/t^p + A0), its residual a small
+Matern 5/2 GP over t scaled to [0, 1]. It is trained on each point's measured noise: the sample
+standard deviation s of n shots, divided by c4(n) so it is unbiased. The sampling variance of that
+estimate is known, Var[s/c4] = Noise(t)^2 (1 - c4^2) / c4^2 (about Noise^2 / (2(n-1))), and sits
+on the covariance diagonal. Internally every noise value is divided by a data scale (the mean
+measured noise) so the residual priors are relative; A0/A1 priors are rescaled to match.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+import numpy as np
+import numpyro
+import numpyro.distributions as dist
+from scipy import optimize
+from scipy.special import gammaln
+
+from noisebo.config import NoiseModelConfig
+from noisebo.kernels import masked_covariance, matern52
+
+RESIDUAL_LENGTH_LOC = float(np.log(0.3))
+
+
+class NoiseData(NamedTuple):
+    """Padded training set of length n. t: seconds; ts: t scaled to [0, 1]; y: s/c4 over the data
+    scale (0 on padding); rel_var: (1 - c4^2)/c4^2 per point; mask: True on real points;
+    bounds: (3, 2) prior bounds of (A0, A1, p) in scaled units."""
+
+    t: jnp.ndarray
+    ts: jnp.ndarray
+    y: jnp.ndarray
+    rel_var: jnp.ndarray
+    mask: jnp.ndarray
+    bounds: jnp.ndarray
+
+
+def c4(n: np.ndarray) -> np.ndarray:
+    """E[s]/sigma for the sample standard deviation of n >= 2 normal draws."""
+    n = np.asarray(n, dtype=np.float64)
+    return np.sqrt(2.0 / (n - 1.0)) * np.exp(gammaln(n / 2.0) - gammaln((n - 1.0) / 2.0))
+
+
+def mean_law(kind: str, t: jnp.ndarray, a0, a1, p=0.5) -> jnp.ndarray:
+    """Noise(t) for the named law: "inv_sqrt" A1/sqrt(t) + A0, "power" A1/t^p + A0."""
+    if kind == "inv_sqrt":
+        return a1 / jnp.sqrt(t) + a0
+    if kind == "power":
+        return a1 * t ** (-p) + a0
+    raise ValueError(f"unknown noise law {kind!r}")
+
+
+def make_model(cfg: NoiseModelConfig):
+    """The numpyro noise model for this configuration: ``model(data: NoiseData)``."""
+
+    def noise_model(data: NoiseData) -> None:
+        a0 = numpyro.sample("a0", dist.Uniform(data.bounds[0, 0], data.bounds[0, 1]))
+        a1 = numpyro.sample("a1", dist.Uniform(data.bounds[1, 0], data.bounds[1, 1]))
+        p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if cfg.mean == "power" else 0.5
+        amplitude = numpyro.sample(
+            "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
+        )
+        length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
+        m = mean_law(cfg.mean, data.t, a0, a1, p)
+        cov = masked_covariance(matern52(data.ts, data.ts, amplitude**2, length), m**2 * data.rel_var, data.mask)
+        numpyro.sample("y", dist.MultivariateNormal(jnp.where(data.mask, m, 0.0), covariance_matrix=cov), obs=data.y)
+
+    return noise_model
+
+
+def prepare(
+    t, shot_std, n_shots, capacity: int, cfg: NoiseModelConfig, t_min: float, t_max: float
+) -> tuple[NoiseData, float]:
+    """Pad measured noise (numpy: t in s, sample std, shots per point) for the model.
+
+    Returns the data and the scale (same units as the noise) that model values are multiplied by.
+    """
+    t, shot_std, n_shots = (np.asarray(a, dtype=np.float64) for a in (t, shot_std, n_shots))
+    n = t.shape[0]
+    unbiased = shot_std / c4(n_shots)
+    scale = float(unbiased.mean()) if n else 1.0
+    if not np.isfinite(scale) or scale <= 0:
+        scale = 1.0
+    k = c4(n_shots)
+    pad = capacity - n
+    priors = (cfg.a0_prior, cfg.a1_prior)
+    bounds = [[pr.low / scale, pr.high / scale] for pr in priors] + [[cfg.p_prior.low, cfg.p_prior.high]]
+    data = NoiseData(
+        t=jnp.asarray(np.pad(t, (0, pad), constant_values=1.0)),
+        ts=jnp.asarray(np.pad((t - t_min) / (t_max - t_min), (0, pad))),
+        y=jnp.asarray(np.pad(unbiased / scale, (0, pad))),
+        rel_var=jnp.asarray(np.pad((1.0 - k**2) / k**2, (0, pad))),
+        mask=jnp.asarray(np.arange(capacity) < n),
+        bounds=jnp.asarray(bounds),
+    )
+    return data, scale
+
+
+def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
+    """A data-driven starting point for the MAP fit: the law fitted by non-negative least squares
+    (over a grid of exponents for "power"), residual GP at its prior median. Scaled units."""
+    mask = np.asarray(data.mask)
+    t, y = np.asarray(data.t)[mask], np.asarray(data.y)[mask]
+    bounds = np.asarray(data.bounds)
+    exponents = np.linspace(bounds[2, 0], bounds[2, 1], 29) if cfg.mean == "power" else np.array([0.5])
+    best = None
+    for p in exponents:
+        design = np.column_stack([np.ones_like(t), t ** (-p)]) / y[:, None]  # relative errors
+        coef, residual = optimize.nnls(design, np.ones_like(y))
+        if best is None or residual < best[0]:
+            best = (residual, coef, p)
+    _, (a0, a1), p = best
+    eps = 1e-6
+    guess = {
+        "a0": float(np.clip(a0, bounds[0, 0] + eps, bounds[0, 1] - eps)),
+        "a1": float(np.clip(a1, bounds[1, 0] + eps, bounds[1, 1] - eps)),
+        "amplitude": float(np.exp(cfg.residual_amplitude_loc)),
+        "length": float(np.exp(RESIDUAL_LENGTH_LOC)),
+    }
+    if cfg.mean == "power":
+        guess["p"] = float(np.clip(p, bounds[2, 0] + eps, bounds[2, 1] - eps))
+    return guess
+
+
+def predict_one(
+    kind: str, params: dict, data: NoiseData, t: jnp.ndarray, ts: jnp.ndarray
+) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Mean and variance of Noise (scaled units) at t (m,) seconds / ts scaled, one parameter set."""
+    p = params.get("p", 0.5)
+    amplitude, length = params["amplitude"] ** 2, params["length"]
+    m_train = mean_law(kind, data.t, params["a0"], params["a1"], p)
+    cov = masked_covariance(matern52(data.ts, data.ts, amplitude, length), m_train**2 * data.rel_var, data.mask)
+    chol = jnp.linalg.cholesky(cov)
+    k_star = jnp.where(data.mask[None, :], matern52(ts, data.ts, amplitude, length), 0.0)
+    resid = jnp.where(data.mask, data.y - m_train, 0.0)
+    mean = mean_law(kind, t, params["a0"], params["a1"], p) + k_star @ jsl.cho_solve((chol, True), resid)
+    v = jsl.solve_triangular(chol, k_star.T, lower=True)
+    var = jnp.maximum(amplitude - jnp.sum(v**2, axis=0), 1e-12)
+    return mean, var
+
+
+def predict_samples(kind: str, params: dict, data: NoiseData, t, ts):
+    """``predict_one`` over a leading sample axis of every parameter: returns (S, m) mean and var."""
+    return jax.vmap(lambda p: predict_one(kind, p, data, t, ts))(params)

@@ -1,0 +1,58 @@
+"""Campaign state: the measured points and the convergence record, as immutable values."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Point:
+    """One measured point. value: mean of its shots; shot_std: their sample sd (NaN below 2 shots);
+    noise: the single-shot noise sd the primary GP uses (shot_std if measured, else the noise
+    model's prediction at t); the GP diagonal is noise^2 / n_shots."""
+
+    x: float
+    t: float
+    value: float
+    shot_std: float
+    n_shots: int
+    noise: float
+    noise_measured: bool
+
+
+@dataclass(frozen=True)
+class CampaignState:
+    """Points in measurement order (seed points first), the predicted optimal t of each BO step,
+    and the first BO step at which the noise model converged (None until it does)."""
+
+    points: tuple[Point, ...] = ()
+    t_opt_history: tuple[float, ...] = ()
+    converged_step: int | None = None
+
+    def with_point(self, point: Point) -> CampaignState:
+        return replace(self, points=self.points + (point,))
+
+    def with_t_opt(self, t_opt: float, is_converged: bool) -> CampaignState:
+        step = len(self.t_opt_history)
+        converged_step = self.converged_step
+        if converged_step is None and is_converged:
+            converged_step = step
+        return replace(self, t_opt_history=self.t_opt_history + (float(t_opt),), converged_step=converged_step)
+
+    @property
+    def is_converged(self) -> bool:
+        return self.converged_step is not None
+
+    def column(self, name: str) -> np.ndarray:
+        """One field of every point as an array (n,)."""
+        return np.asarray([getattr(p, name) for p in self.points])
+
+    def noise_training_mask(self, include_unmeasured: bool) -> np.ndarray:
+        """Which points train the noise model: those whose noise was measured, or (optionally)
+        every point with at least two shots."""
+        measured = self.column("noise_measured").astype(bool)
+        if include_unmeasured:
+            return self.column("n_shots") >= 2
+        return measured

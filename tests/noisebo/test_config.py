@@ -1,0 +1,86 @@
+from pathlib import Path
+
+import pytest
+
+from noisebo.config import CampaignConfig, ConfigError, load_config, parse_config
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_shipped_forrester_config_has_the_papers_settings():
+    cfg = load_config(ROOT / "data" / "configs" / "forrester.yaml")
+    assert (cfg.instrument.a0, cfg.instrument.a1) == (0.1, 2.0)
+    assert (cfg.reward.alpha, cfg.reward.beta, cfg.reward.gamma) == (0.1, 2.0, 5.0)
+    assert (cfg.space.x_min, cfg.space.x_max, cfg.space.t_min, cfg.space.t_max) == (0.0, 1.0, 0.2, 10.0)
+    s = cfg.schedule
+    assert (s.n_seed, s.n_steps, s.shots_before, s.shots_after, s.window, s.threshold) == (3, 15, 30, 3, 3, 5e-4)
+    assert cfg.acquisition.f_acquisition == "ue"
+    assert (cfg.noise_model.a0_prior.low, cfg.noise_model.a0_prior.high) == (0.0, 15.0)
+
+
+def test_config_is_frozen_and_hashable():
+    cfg = CampaignConfig()
+    with pytest.raises(Exception):
+        cfg.name = "other"
+    assert hash(cfg) == hash(CampaignConfig())
+
+
+def test_overrides_validate_and_leave_the_original_alone():
+    cfg = CampaignConfig()
+    double = cfg.with_overrides(acquisition={"policy": "double"})
+    assert double.acquisition.policy == "double" and cfg.acquisition.policy == "reward"
+    with pytest.raises(ConfigError, match="acquisition.policy"):
+        cfg.with_overrides(acquisition={"policy": "greedy"})
+
+
+BAD = [
+    ({"space": {"x_min": 1.0, "x_max": 0.0}}, "space: Value error, x_min"),
+    ({"space": {"t_min": 5.0, "t_max": 1.0}}, "space: Value error, t_min"),
+    ({"space": {"t_min": 0.0}}, "space.t_min"),
+    ({"space": {"t_min": -1.0}}, "space.t_min"),
+    ({"space": {"x_max": float("nan")}}, "space.x_max"),
+    ({"space": {"x_max": float("inf")}}, "space.x_max"),
+    ({"schedule": {"shots_before": -3}}, "schedule.shots_before"),
+    ({"schedule": {"shots_after": 0}}, "schedule.shots_after"),
+    ({"schedule": {"shots_before": 1}}, "schedule.shots_before"),
+    ({"schedule": {"threshold": 0}}, "schedule.threshold"),
+    ({"schedule": {"n_steps": "many"}}, "schedule.n_steps"),
+    ({"reward": {"alpha": -0.1}}, "reward.alpha"),
+    ({"colour": "blue"}, "colour: Extra inputs are not permitted"),
+    ({"space": {"n_z": 3}}, "space.n_z"),
+    ({"instrument": {"kind": "laser"}}, "instrument"),
+    ({"acquisition": {"f_acquisition": "pi"}}, "acquisition.f_acquisition"),
+    ({"noise_model": {"a1_prior": {"low": 5, "high": 1}}}, "noise_model.a1_prior"),
+    ({"inference": {"mode": "hmc"}}, "inference.mode"),
+    ({"schema_version": 99}, "schema_version"),
+]
+
+
+@pytest.mark.parametrize("data, field", BAD, ids=[b[1] for b in BAD])
+def test_invalid_values_name_the_field(data, field):
+    with pytest.raises(ConfigError) as info:
+        parse_config(data)
+    assert field in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("space: [1, 2\n", "not valid YAML at line"),
+        ("", "the file is empty"),
+        ("- 1\n- 2\n", "expected a mapping"),
+        ("schedule:\n  window: 1\n", "schedule.window"),
+    ],
+)
+def test_bad_files_raise_config_errors(tmp_path, text, message):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    before = sorted(tmp_path.iterdir())
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def test_missing_file_is_a_config_error(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read config"):
+        load_config(tmp_path / "absent.yaml")

@@ -1,0 +1,30 @@
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from noisebo.kernels import masked_covariance, matern52, xt_matern52
+
+
+def test_matern52_matches_hand_computed_values():
+    # r = 0.5 / 0.25 = 2: (1 + 2 sqrt5 + 20/3) exp(-2 sqrt5) times amplitude 1.5
+    expected = 1.5 * (1 + 2 * math.sqrt(5) + 20 / 3) * math.exp(-2 * math.sqrt(5))
+    k = matern52(jnp.array([0.0, 0.5]), jnp.array([0.5]), 1.5, 0.25)
+    np.testing.assert_allclose(np.asarray(k), [[expected], [1.5]], rtol=1e-12)
+
+
+def test_primary_kernel_ignores_t():
+    a = jnp.array([[0.1, 0.2], [0.7, 9.0]])
+    b = jnp.array([[0.3, 5.0], [0.9, 0.2]])
+    a_other_t = a.at[:, 1].set(jnp.array([4.0, 1.0]))
+    b_other_t = b.at[:, 1].set(jnp.array([0.3, 7.7]))
+    np.testing.assert_array_equal(np.asarray(xt_matern52(a, b, 2.0, 0.3)), np.asarray(xt_matern52(a_other_t, b_other_t, 2.0, 0.3)))
+    np.testing.assert_allclose(np.asarray(xt_matern52(a, b, 2.0, 0.3)), np.asarray(matern52(a[:, 0], b[:, 0], 2.0, 0.3)))
+
+
+def test_masked_covariance_decouples_padding():
+    k = jnp.ones((3, 3))
+    cov = np.asarray(masked_covariance(k, jnp.array([0.1, 0.2, 9.0]), jnp.array([True, True, False])))
+    np.testing.assert_allclose(cov[:2, :2], [[1.1, 1.0], [1.0, 1.2]], atol=1e-7)
+    np.testing.assert_array_equal(cov[2], [0.0, 0.0, 1.0])
+    np.testing.assert_array_equal(cov[:, 2], [0.0, 0.0, 1.0])

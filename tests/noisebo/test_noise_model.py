@@ -1,0 +1,57 @@
+import jax
+import numpy as np
+import pytest
+
+from noisebo import inference, noise_model
+from noisebo.config import NoiseModelConfig
+
+
+def test_c4_known_values():
+    # c4(2) = sqrt(2/pi); c4(30) = 0.99142 (standard tables)
+    np.testing.assert_allclose(noise_model.c4(np.array([2, 3, 30])), [np.sqrt(2 / np.pi), 0.886227, 0.991418], atol=1e-5)
+
+
+def synthetic(a0, a1, n_points=16, shots=30, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.geomspace(0.2, 10.0, n_points)
+    sd = a1 / np.sqrt(t) + a0
+    shot_std = (sd[:, None] * rng.standard_normal((n_points, shots))).std(axis=1, ddof=1)
+    return t, shot_std, np.full(n_points, shots)
+
+
+def fit(cfg, t, shot_std, n_shots, key=0):
+    data, scale = noise_model.prepare(t, shot_std, n_shots, 32, cfg, 0.2, 10.0)
+    guess = noise_model.initial_guess(data, cfg)
+    samples = inference.fit_map(noise_model.make_model(cfg), data, jax.random.PRNGKey(key), 6, 0, guess)
+    return {k: float(v[0]) * (scale if k in ("a0", "a1") else 1.0) for k, v in samples.params.items()}
+
+
+@pytest.mark.parametrize("a0, a1", [(0.1, 2.0), (0.5, 1.0), (1.0, 3.0)])
+def test_recovers_a0_and_a1_from_synthetic_noise(a0, a1):
+    # 16 points x 100 shots: each noise estimate has ~7 % error; A1 within 10 %, A0 within 0.15.
+    params = fit(NoiseModelConfig(), *synthetic(a0, a1, shots=100))
+    assert params["a1"] == pytest.approx(a1, rel=0.10)
+    assert params["a0"] == pytest.approx(a0, abs=0.15)
+
+
+def test_power_law_recovers_the_exponent():
+    params = fit(NoiseModelConfig(mean="power"), *synthetic(0.1, 2.0, n_points=24, shots=200, seed=1))
+    assert params["p"] == pytest.approx(0.5, abs=0.08)
+    assert params["a1"] == pytest.approx(2.0, rel=0.1)
+
+
+def test_padding_does_not_change_predictions():
+    cfg = NoiseModelConfig()
+    t, s, n = synthetic(0.1, 2.0, n_points=6)
+    params = {"a0": np.array([0.05]), "a1": np.array([1.1]), "amplitude": np.array([0.05]), "length": np.array([0.3])}
+    tq = np.array([0.3, 2.5, 9.0])
+    out = []
+    for capacity in (8, 32):
+        data, _ = noise_model.prepare(t, s, n, capacity, cfg, 0.2, 10.0)
+        out.append(np.asarray(noise_model.predict_samples("inv_sqrt", params, data, tq, (tq - 0.2) / 9.8)))
+    np.testing.assert_allclose(out[0], out[1], rtol=1e-10)
+
+
+def test_unknown_law_is_an_error():
+    with pytest.raises(ValueError, match="unknown noise law"):
+        noise_model.mean_law("exp", np.ones(2), 0.1, 2.0)

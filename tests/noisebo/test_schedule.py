@@ -1,0 +1,44 @@
+import math
+
+import pytest
+
+from noisebo.config import ScheduleConfig
+from noisebo.schedule import converged, first_converged_step, reduce_shots, shots_for
+
+RULE = [
+    ([], False),
+    ([2.5, 2.5], False),  # fewer than window values
+    ([2.5, 2.5, 2.5], True),
+    ([2.0, 2.5, 2.5], False),  # var = 0.0556
+    ([2.50, 2.52, 2.54], True),  # var = 2.67e-4
+    ([2.50, 2.53, 2.56], False),  # var = 6.0e-4
+    ([9.0, 1.0, 2.50, 2.52, 2.54], True),  # only the last three count
+]
+
+
+@pytest.mark.parametrize("history, expected", RULE)
+def test_convergence_rule_on_hand_made_sequences(history, expected):
+    assert converged(history, window=3, threshold=5e-4) is expected
+
+
+def test_first_converged_step():
+    assert first_converged_step([1.0, 2.0, 2.5, 2.51, 2.5, 2.5], 3, 5e-4) == 4
+    assert first_converged_step([1.0, 2.0, 3.0], 3, 5e-4) is None
+
+
+def test_reduce_shots_mean_and_sample_sd():
+    r = reduce_shots([1.0, 2.0, 3.0, 6.0])
+    assert r.value == 3.0 and r.n_shots == 4
+    assert r.shot_std == pytest.approx(math.sqrt(14 / 3))
+    assert math.isnan(reduce_shots([4.0]).shot_std)
+
+
+@pytest.mark.parametrize("bad", [[], [1.0, float("nan")], [[1.0, 2.0]]])
+def test_reduce_shots_rejects_bad_input(bad):
+    with pytest.raises(ValueError):
+        reduce_shots(bad)
+
+
+def test_shots_follow_convergence():
+    s = ScheduleConfig(shots_before=30, shots_after=3)
+    assert shots_for(False, s) == 30 and shots_for(True, s) == 3
