@@ -113,10 +113,13 @@ def main(argv=None) -> int:
     parser.add_argument("--policy", choices=["reward", "double", "both"], default="both")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--inference", choices=["map", "nuts"], default=None, help="override the config's mode")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
 
     base = load_config(args.config)
+    if args.inference:
+        base = base.with_overrides(inference={"mode": args.inference})
     policies = ["reward", "double"] if args.policy == "both" else [args.policy]
     instrument = build(base.instrument)
     s, rew = base.space, base.reward

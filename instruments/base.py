@@ -35,9 +35,12 @@ def build(config) -> Instrument:
     """The driver for a validated instrument config (dispatch on its ``kind``)."""
     from instruments.forrester import ForresterInstrument
 
+    from instruments.guard import TimeoutGuard
+
     drivers = {"forrester": ForresterInstrument}
     try:
         driver = drivers[config.kind]
     except KeyError:
         raise ValueError(f"unknown instrument kind {config.kind!r}; known: {sorted(drivers)}") from None
-    return driver(config)
+    instrument = driver(config)
+    return TimeoutGuard(instrument, config.timeout_s) if config.timeout_s is not None else instrument

@@ -11,8 +11,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from noisebo.config import CampaignConfig
-from noisebo.decision import Decision, decide, fit_models, grids, predict
-from noisebo.keys import FIT, MEASURE, SEED_POINTS, jax_key, numpy_rng
+from noisebo.decision import Decision, decide, fit_key, fit_models, grids, predict
+from noisebo.keys import MEASURE, SEED_POINTS, numpy_rng
 from noisebo.schedule import reduce_shots
 from noisebo.state import CampaignState, Point
 
@@ -39,9 +39,19 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     return np.column_stack([x, t])
 
 
-def shot_values(instrument, x: float, t: float, shots: int, seed: int, point: int) -> list[float]:
-    """Measure ``shots`` shots at (x, t); shot k draws from key (seed, point, k)."""
-    return [instrument.measure(x, t, numpy_rng(seed, MEASURE, point, k)).value for k in range(shots)]
+def shot_values(
+    instrument, x: float, t: float, shots: int, seed: int, point: int,
+    done: Sequence[float] = (), on_shot: Callable[[int, float], None] | None = None,
+) -> list[float]:
+    """Shot values ``len(done)..shots-1`` of a point appended to ``done``; shot k draws from key
+    (seed, point, k), and each new value goes to ``on_shot(k, value)`` as soon as it is taken."""
+    values = list(done)
+    for k in range(len(values), shots):
+        value = instrument.measure(x, t, numpy_rng(seed, MEASURE, point, k)).value
+        if on_shot is not None:
+            on_shot(k, value)
+        values.append(value)
+    return values
 
 
 def make_point(x: float, t: float, values: Sequence[float], model_noise: float | None) -> Point:
@@ -80,7 +90,7 @@ def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summar
     """Fit both models on every point (key for step ``n_steps``) and summarise them."""
     from noisebo.decision import hyperparameters
 
-    fitted = fit_models(config, state, jax_key(seed, FIT, config.schedule.n_steps))
+    fitted = fit_models(config, state, fit_key(seed, config.schedule.n_steps))
     pred = predict(config, fitted, state)
     g = grids(config)
     return Summary(

@@ -43,11 +43,14 @@ class UniformPrior(_Frozen):
 
 
 class ForresterInstrumentConfig(_Frozen):
-    """Forrester benchmark: shots are f(x) + N(0, (a1/sqrt(t) + a0)^2)."""
+    """Forrester benchmark: shots are f(x) + N(0, (a1/sqrt(t) + a0)^2).
+
+    ``timeout_s``: the instrument layer gives up on a shot after this long (None: no limit)."""
 
     kind: Literal["forrester"] = "forrester"
     a0: NonNegativeFloat = 0.1
     a1: NonNegativeFloat = 2.0
+    timeout_s: PositiveFloat | None = None
 
 
 InstrumentConfig = Annotated[Union[ForresterInstrumentConfig], Field(discriminator="kind")]
@@ -96,12 +99,14 @@ class AcquisitionConfig(_Frozen):
 
 
 class PrimaryModelConfig(_Frozen):
-    """Priors of the Matern 5/2 GP for f (on standardised f and x scaled to [0, 1])."""
+    """LogNormal(loc, scale) priors of the Matern 5/2 GP for f, on standardised f and x scaled to
+    [0, 1]. The default length prior puts 95 % of its mass between 0.075 and 0.53 of the x range:
+    features much shorter cannot be resolved by a few dozen points, much longer ones are flat."""
 
     amplitude_loc: FiniteFloat = 0.0
     amplitude_scale: PositiveFloat = 1.0
     length_loc: FiniteFloat = math.log(0.2)
-    length_scale: PositiveFloat = 1.0
+    length_scale: PositiveFloat = 0.5
 
 
 class NoiseModelConfig(_Frozen):
@@ -119,7 +124,7 @@ class NoiseModelConfig(_Frozen):
     p_prior: UniformPrior = UniformPrior(low=0.1, high=1.5)
     residual_amplitude_loc: FiniteFloat = math.log(0.05)
     residual_amplitude_scale: PositiveFloat = 1.0
-    learn_after_convergence: bool = False
+    learn_after_convergence: bool = True
 
 
 class InferenceConfig(_Frozen):

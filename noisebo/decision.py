@@ -193,11 +193,12 @@ def hyperparameters(fitted: Fitted) -> dict[str, float]:
     return out
 
 
-def decide(config: CampaignConfig, state: CampaignState, seed: int, step: int) -> tuple[Decision, CampaignState]:
-    """Fit, predict, update the convergence record and propose the next point.
+def acquire(
+    config: CampaignConfig, fitted: Fitted, state: CampaignState, step: int
+) -> tuple[Decision, CampaignState]:
+    """From fitted models: predict, update the convergence record, and propose the next point.
 
     Returns the decision and the state with this step's predicted optimal t recorded."""
-    fitted = fit_models(config, state, jax_key(seed, FIT, step))
     prediction = predict(config, fitted, state)
     t_opt = float(prediction.posterior.t_opt)
     history = state.t_opt_history + (t_opt,)
@@ -222,3 +223,13 @@ def decide(config: CampaignConfig, state: CampaignState, seed: int, step: int) -
         acq_map=np.asarray(values),
     )
     return decision, new_state
+
+
+def fit_key(seed: int, step: int) -> jax.Array:
+    """The key of BO step ``step``'s fits (step ``n_steps`` is the final summary's)."""
+    return jax_key(seed, FIT, step)
+
+
+def decide(config: CampaignConfig, state: CampaignState, seed: int, step: int) -> tuple[Decision, CampaignState]:
+    """One whole BO decision: fit both models (key (seed, step)), then ``acquire``."""
+    return acquire(config, fit_models(config, state, fit_key(seed, step)), state, step)

@@ -15,6 +15,7 @@ Data enter as traced arguments with fixed (padded) shapes, so each fitter compil
 
 from __future__ import annotations
 
+import threading
 from functools import lru_cache
 from typing import Callable, NamedTuple
 
@@ -99,9 +100,11 @@ def _minimise(value_and_grad, x0: np.ndarray, data) -> tuple[np.ndarray, float]:
 
 
 @lru_cache(maxsize=None)
-def nuts_runner(model: Callable, warmup: int, samples: int) -> MCMC:
-    """One MCMC object per model, reused so its compiled sampler is reused across steps."""
-    return MCMC(NUTS(model), num_warmup=warmup, num_samples=samples, progress_bar=False, jit_model_args=True)
+def nuts_runner(model: Callable, warmup: int, samples: int, thread: int) -> MCMC:
+    """One MCMC object per model and thread (``run`` mutates it), reused so its compiled sampler
+    is reused across steps."""
+    # progress_bar=False makes numpyro 0.22 recompile on every run; silence the bar with TQDM_DISABLE=1.
+    return MCMC(NUTS(model), num_warmup=warmup, num_samples=samples, progress_bar=True, jit_model_args=True)
 
 
 def fit_map(model, data, key, restarts: int, laplace_samples: int = 0, guess: dict | None = None) -> Samples:
@@ -124,7 +127,7 @@ def fit_map(model, data, key, restarts: int, laplace_samples: int = 0, guess: di
 
 def fit_nuts(model, data, key, warmup: int, samples: int, keep: int) -> Samples:
     """NUTS posterior of ``model(data)``, thinned evenly to ``keep`` draws."""
-    mcmc = nuts_runner(model, warmup, samples)
+    mcmc = nuts_runner(model, warmup, samples, threading.get_ident())
     mcmc.run(key, data)
     draws = mcmc.get_samples()
     idx = jnp.linspace(0, samples - 1, min(keep, samples)).astype(jnp.int32)

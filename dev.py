@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+"""Set up and use noisebo with nothing but Python 3.11+.
+
+    python3 dev.py run [ARGS...]   # a default Forrester campaign (extra ARGS go to `noisebo run`)
+    python3 dev.py test [ARGS...]  # the test suite (extra ARGS go to pytest)
+    python3 dev.py bench [ARGS...] # the Forrester benchmark (extra ARGS go to benchmarks/forrester.py)
+
+The first call creates .venv/ beside this file and installs the package with its pinned
+dependencies; later calls reuse it, and reinstall only when pyproject.toml changes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / ".venv"
+BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
+STAMP = VENV / ".noisebo-installed"
+
+
+def _say(message: str) -> None:
+    print(f"[dev] {message}", file=sys.stderr, flush=True)
+
+
+def ensure_environment() -> None:
+    if sys.version_info < (3, 11):
+        sys.exit(f"noisebo needs Python 3.11 or newer; this is {sys.version.split()[0]}")
+    wanted = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    if STAMP.exists() and STAMP.read_text() == wanted:
+        return
+    if not (BIN / "python").exists():
+        _say(f"creating {VENV}")
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    _say("installing noisebo and its dependencies (first run: a few minutes)")
+    pip = [str(BIN / "python"), "-m", "pip", "install", "--disable-pip-version-check", "-q"]
+    subprocess.run(pip + ["--upgrade", "pip"], check=True)
+    subprocess.run(pip + ["-e", f"{ROOT}[test]"], check=True, cwd=ROOT)
+    STAMP.write_text(wanted)
+
+
+def environment() -> dict[str, str]:
+    env = dict(os.environ)
+    env.setdefault("TQDM_DISABLE", "1")
+    env.setdefault("DO_NOT_TRACK", "1")
+    return env
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0] not in {"run", "test", "bench"}:
+        print(__doc__, file=sys.stderr)
+        return 2
+    command, rest = argv[0], argv[1:]
+    ensure_environment()
+    python = str(BIN / "python")
+    if command == "run":
+        args = [str(BIN / "noisebo"), "run", str(ROOT / "data" / "configs" / "forrester.yaml"), *rest]
+    elif command == "test":
+        args = [python, "-m", "pytest", *rest]
+    else:
+        args = [python, str(ROOT / "benchmarks" / "forrester.py"), *rest]
+    return subprocess.run(args, cwd=ROOT, env=environment()).returncode
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))

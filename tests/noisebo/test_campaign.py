@@ -1,0 +1,63 @@
+import numpy as np
+import pytest
+
+from instruments import build
+from noisebo.campaign import make_point, run_campaign, seed_points
+from noisebo.config import CampaignConfig
+from noisebo.diagnostics import compile_count
+
+SHORT = CampaignConfig().with_overrides(schedule={"n_steps": 5}, space={"n_x": 50, "n_t": 40})
+
+
+@pytest.fixture(scope="module")
+def short_run():
+    return run_campaign(SHORT, build(SHORT.instrument), seed=11)
+
+
+def test_seed_points_are_a_latin_hypercube_in_x_and_log_t():
+    cfg = CampaignConfig().with_overrides(schedule={"n_seed": 5})
+    pts = seed_points(cfg, 3)
+    assert pts.shape == (5, 2)
+    assert sorted(np.floor(pts[:, 0] * 5).astype(int)) == [0, 1, 2, 3, 4]
+    log_strata = np.floor(np.log(pts[:, 1] / 0.2) / np.log(10 / 0.2) * 5).astype(int)
+    assert sorted(log_strata) == [0, 1, 2, 3, 4]
+
+
+def test_same_seed_same_campaign(short_run):
+    again = run_campaign(SHORT, build(SHORT.instrument), seed=11)
+    assert again.state == short_run.state
+    assert [(d.x, d.t, d.acq_value) for d in again.decisions] == [(d.x, d.t, d.acq_value) for d in short_run.decisions]
+
+
+def test_other_seed_other_campaign(short_run):
+    other = run_campaign(SHORT, build(SHORT.instrument), seed=12)
+    assert other.state.points[0] != short_run.state.points[0]
+
+
+def test_campaign_shape_and_bookkeeping(short_run):
+    state = short_run.state
+    assert len(state.points) == 3 + 5 and len(state.t_opt_history) == 5
+    for p in state.points:
+        assert 0.0 <= p.x <= 1.0 and 0.2 <= p.t <= 10.0
+    # Points proposed after convergence get 3 shots and model noise; before, 30 and measured noise.
+    for step, decision in enumerate(short_run.decisions):
+        point = state.points[3 + step]
+        assert (point.x, point.t, point.n_shots) == (decision.x, decision.t, decision.shots)
+        converged = state.converged_step is not None and step >= state.converged_step
+        assert point.noise_measured is (not converged)
+        assert point.n_shots == (3 if converged else 30)
+        if converged:
+            assert point.noise == decision.noise_at_t
+    assert short_run.total_measurement_time == pytest.approx(sum(p.t * p.n_shots for p in state.points))
+
+
+def test_no_recompilation_after_the_first_step(short_run):
+    marks = []
+    run_campaign(SHORT, build(SHORT.instrument), seed=5, on_step=lambda d, s: marks.append(compile_count()))
+    assert marks[-1] == marks[0]
+
+
+def test_measured_noise_needs_two_shots():
+    with pytest.raises(ValueError, match="at least two shots"):
+        make_point(0.1, 1.0, [2.0], None)
+    assert make_point(0.1, 1.0, [2.0], 0.7).noise == 0.7

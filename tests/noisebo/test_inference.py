@@ -1,0 +1,58 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from noisebo import inference, noise_model
+from noisebo.config import NoiseModelConfig
+from noisebo.inference import combine
+
+
+def test_combine_map_uses_the_map_mean_and_widens_by_the_draws():
+    mean = jnp.array([[1.0, 2.0], [3.0, 2.0], [5.0, 2.0]])
+    var = jnp.array([[0.5, 0.5], [9.0, 9.0], [9.0, 9.0]])
+    m, v = combine(mean, var, map_first=True)
+    np.testing.assert_allclose(np.asarray(m), [1.0, 2.0])
+    np.testing.assert_allclose(np.asarray(v), [0.5 + 1.0, 0.5])  # var of draws' means [3, 5] is 1
+
+
+def test_combine_posterior_draws_is_the_mixture():
+    mean = jnp.array([[1.0], [3.0]])
+    var = jnp.array([[1.0], [3.0]])
+    m, v = combine(mean, var, map_first=False)
+    assert float(m[0]) == 2.0 and float(v[0]) == 2.0 + 1.0
+
+
+def _data():
+    rng = np.random.default_rng(3)
+    t = np.geomspace(0.2, 10.0, 12)
+    s = ((2 / np.sqrt(t) + 0.1)[:, None] * rng.standard_normal((12, 30))).std(axis=1, ddof=1)
+    return noise_model.prepare(t, s, np.full(12, 30), 32, NoiseModelConfig(), 0.2, 10.0)
+
+
+def test_map_is_a_local_optimum_and_laplace_draws_spread_around_it():
+    cfg = NoiseModelConfig()
+    data, _ = _data()
+    model = noise_model.make_model(cfg)
+    samples = inference.fit_map(model, data, jax.random.PRNGKey(0), 4, 16, noise_model.initial_guess(data, cfg))
+    a1 = np.asarray(samples.params["a1"])
+    assert a1.shape == (17,) and samples.map_first
+    assert 0 < np.std(a1[1:]) < 0.5 * a1[0]
+    program = inference._map_program(model, 4, 16)
+    best = program.flatten({k: v[0] for k, v in samples.params.items()}, data)
+    value, grad = program.value_and_grad(best, data)
+    assert np.max(np.abs(np.asarray(grad))) < 1e-2
+    for direction in np.eye(best.shape[0]):
+        for step in (0.05, -0.05):
+            assert float(program.value_and_grad(best + step * direction, data)[0]) >= float(value) - 1e-9
+
+
+@pytest.mark.slow
+def test_nuts_posterior_covers_the_truth():
+    cfg = NoiseModelConfig()
+    data, scale = _data()
+    samples = inference.fit_nuts(noise_model.make_model(cfg), data, jax.random.PRNGKey(1), 300, 300, 100)
+    a1 = np.asarray(samples.params["a1"]) * scale
+    assert a1.shape == (100,) and not samples.map_first
+    lo, hi = np.percentile(a1, [1, 99])
+    assert lo < 2.0 < hi
