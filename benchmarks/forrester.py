@@ -28,14 +28,10 @@ from instruments import build  # noqa: E402
 from noisebo.campaign import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 from noisebo.diagnostics import compile_count  # noqa: E402
-from noisebo.metrics import median_iqr, relative_error, rmse  # noqa: E402
+from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table  # noqa: E402
 from noisebo.reward import true_optimal_t  # noqa: E402
-from noisebo.schedule import first_converged_step  # noqa: E402
 
-RMSE_POINTS = 200
-
-
-def run_one(config, instrument, seed: int, t_star: float) -> dict:
+def run_one(config, instrument, seed: int) -> dict:
     compiles = {"after_first": None}
     before = compile_count()
 
@@ -46,65 +42,20 @@ def run_one(config, instrument, seed: int, t_star: float) -> dict:
     started = time.perf_counter()
     result = run_campaign(config, instrument, seed, on_step=on_step)
     wall = time.perf_counter() - started
-    s = config.space
-    x_eval = np.linspace(s.x_min, s.x_max, RMSE_POINTS)
-    f_pred = np.interp(x_eval, result.summary.x, result.summary.f_mean)
-    sched = config.schedule
-    history = list(result.state.t_opt_history)
-    after_first = compiles["after_first"]
-    return {
-        "policy": config.acquisition.policy,
-        "seed": seed,
-        "converged_step": first_converged_step(history, sched.window, sched.threshold),
-        "t_opt_pred": history + [result.summary.t_opt],
-        "t_star": t_star,
-        "t_opt_rel_error": relative_error(result.summary.t_opt, t_star),
-        "rmse_f": rmse(f_pred, instrument.truth(x_eval)),
-        "total_measurement_time": result.total_measurement_time,
-        "step_latency_s": list(result.latencies_s),
-        "recompiles_after_first_step": None if after_first is None else compile_count() - after_first,
-        "compiles_total": compile_count() - before,
-        "hyperparameters": result.summary.hyperparameters,
-        "wall_s": wall,
-    }
-
-
-def summarise(records: list[dict]) -> dict:
-    conv = [r["converged_step"] for r in records]
-    within = sum(1 for c in conv if c is not None and c <= 9)
-    first = [r["step_latency_s"][0] for r in records if r["step_latency_s"]]
-    rest = [v for r in records for v in r["step_latency_s"][1:]]
-    return {
-        "campaigns": len(records),
-        "converged_within_10": within / len(records),
-        "converged_step": median_iqr([c for c in conv if c is not None]),
-        "t_rel_error": median_iqr([r["t_opt_rel_error"] for r in records]),
-        "rmse_f": median_iqr([r["rmse_f"] for r in records]),
-        "measurement_time_s": median_iqr([r["total_measurement_time"] for r in records]),
-        "latency_first_s": median_iqr(first)[0],
-        "latency_rest_s": median_iqr(rest)[0],
-        "recompiles_after_first": sum(r["recompiles_after_first_step"] or 0 for r in records),
-    }
-
-
-def fmt(m: tuple[float, float, float], digits: int = 3) -> str:
-    return f"{m[0]:.{digits}f} [{m[1]:.{digits}f}, {m[2]:.{digits}f}]"
-
-
-def print_table(rows: dict[str, dict], t_star: float, mode: str) -> None:
-    print(f"\nt* = {t_star:.4f} s   inference = {mode}   (median [IQR])")
-    header = (
-        "| policy | campaigns | converged <= step 9 | first converged step | final abs(t_opt - t*)/t* "
-        "| final RMSE f | measurement time (s) | latency step 0 (s) | latency median rest (s) | recompiles |"
+    points = result.state.points
+    record = campaign_figures(
+        config, instrument, result.state.t_opt_history, result.summary.t_opt, result.summary.x,
+        result.summary.f_mean, [p.t for p in points for _ in range(p.n_shots)], result.latencies_s,
     )
-    print(header)
-    print("|---" * (header.count("|") - 1) + "|")
-    for policy, s in rows.items():
-        print(
-            f"| {policy} | {s['campaigns']} | {100 * s['converged_within_10']:.0f} % | {fmt(s['converged_step'], 1)} "
-            f"| {fmt(s['t_rel_error'])} | {fmt(s['rmse_f'])} | {fmt(s['measurement_time_s'], 0)} "
-            f"| {s['latency_first_s']:.2f} | {s['latency_rest_s']:.3f} | {s['recompiles_after_first']} |"
-        )
+    after_first = compiles["after_first"]
+    record.update(
+        seed=seed,
+        recompiles_after_first_step=None if after_first is None else compile_count() - after_first,
+        compiles_total=compile_count() - before,
+        hyperparameters=result.summary.hyperparameters,
+        wall_s=wall,
+    )
+    return record
 
 
 def main(argv=None) -> int:
@@ -129,7 +80,7 @@ def main(argv=None) -> int:
         config = base.with_overrides(acquisition={"policy": policy})
         mine = []
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            rec = run_one(config, instrument, seed, t_star)
+            rec = run_one(config, instrument, seed)
             mine.append(rec)
             print(
                 f"{policy:>6} seed {seed:3d}: converged step {rec['converged_step']}, "
@@ -140,8 +91,12 @@ def main(argv=None) -> int:
                 flush=True,
             )
         records += mine
-        rows[policy] = summarise(mine)
-    print_table(rows, t_star, base.inference.mode)
+        rows[policy] = summarise_campaigns(mine)
+        rows[policy]["recompiles_after_first"] = sum(r["recompiles_after_first_step"] or 0 for r in mine)
+    print(f"\nt* = {t_star:.4f} s   inference = {base.inference.mode}   (median [IQR])")
+    print(summary_table(rows))
+    print("XLA recompilations after the first BO step, all campaigns: "
+          + ", ".join(f"{p} {r['recompiles_after_first']}" for p, r in rows.items()))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"records": records, "summary": rows}, indent=1))

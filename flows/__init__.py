@@ -1,0 +1,1 @@
+"""Prefect flows: one campaign, and a multi-seed sweep of campaigns."""

@@ -1,55 +1,177 @@
-"""The ``noisebo`` command line."""
+"""The ``noisebo`` command line: run, resume, sweep and inspect campaigns.
+
+Every command validates its input before it creates anything; a problem is reported as one line
+``noisebo: error: ...`` with exit code 2.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
-import time
+from pathlib import Path
 
 from noisebo.config import ConfigError, load_config
+from noisebo.storage.hdf5 import CampaignFileError
+
+EXIT_USAGE = 2
 
 
-def _run(args: argparse.Namespace) -> int:
-    from instruments import build
-    from noisebo.campaign import run_campaign
+class UsageError(ValueError):
+    """Bad command-line input."""
 
+
+def parse_seeds(text: str) -> list[int]:
+    """"3" -> [3]; "0-4" -> [0, 1, 2, 3, 4]; "1,5,9" -> [1, 5, 9]."""
+    try:
+        if "-" in text:
+            lo, hi = (int(v) for v in text.split("-", 1))
+            seeds = list(range(lo, hi + 1))
+        else:
+            seeds = [int(v) for v in text.split(",")]
+    except ValueError:
+        raise UsageError(f"--seeds {text!r}: expected N, A-B or A,B,C with non-negative integers") from None
+    if not seeds or min(seeds) < 0:
+        raise UsageError(f"--seeds {text!r}: expected a non-empty range of non-negative integers")
+    return seeds
+
+
+def _prefect():
+    from noisebo import runtime
+
+    runtime.configure()
+    import flows.campaign
+    import flows.sweep
+
+    return flows.campaign, flows.sweep
+
+
+def _run(args) -> int:
     config = load_config(args.config)
     if args.policy:
         config = config.with_overrides(acquisition={"policy": args.policy})
-    instrument = build(config.instrument)
-    n_steps = config.schedule.n_steps
-    print(
-        f"campaign {config.name!r}: seed {args.seed}, policy {config.acquisition.policy}, "
-        f"{config.schedule.n_seed} seed points + {n_steps} BO steps",
-        flush=True,
-    )
-    started = time.perf_counter()
+    campaign_flows, _ = _prefect()
+    path = campaign_flows.campaign_path(config, args.seed, args.out)
+    if path.exists() or path.with_suffix(".journal").exists():
+        raise CampaignFileError(f"{path} already exists; continue it with `noisebo resume {path}`")
+    print(f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}: "
+          f"{config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}", flush=True)
+    print(campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out)))
+    return 0
 
-    def progress(decision, state) -> None:
-        status = "converged" if decision.converged else "learning noise"
-        print(
-            f"  step {decision.step + 1:>3}/{n_steps}: x={decision.x:.4g} t={decision.t:.4g} s "
-            f"shots={decision.shots} t_opt={decision.t_opt:.4g} s ({status})",
-            flush=True,
-        )
 
-    result = run_campaign(config, instrument, args.seed, on_step=progress)
-    state = result.state
-    print(
-        f"done in {time.perf_counter() - started:.1f} s: predicted optimal t {result.summary.t_opt:.4g} s, "
-        f"first converged step {state.converged_step}, measurement time {result.total_measurement_time:.1f} s"
-    )
+def _resume(args) -> int:
+    path = Path(args.file)
+    if not path.with_suffix(".journal").exists():
+        raise CampaignFileError(f"cannot resume {path}: no journal {path.with_suffix('.journal')} beside it")
+    campaign_flows, _ = _prefect()
+    print(f"resuming {path}", flush=True)
+    print(campaign_flows.resume(str(path)))
+    return 0
+
+
+def _sweep(args) -> int:
+    seeds = parse_seeds(args.seeds)
+    config = load_config(args.config)
+    policies = ["reward", "double"] if args.policy == "both" else [args.policy]
+    if args.workers < 1:
+        raise UsageError("--workers must be at least 1")
+    _, sweep_flows = _prefect()
+    from prefect.task_runners import ThreadPoolTaskRunner
+
+    flow = sweep_flows.sweep.with_options(task_runner=ThreadPoolTaskRunner(max_workers=args.workers))
+    print(f"sweep {config.name!r}: seeds {seeds[0]}..{seeds[-1]} x {policies} on {args.workers} workers -> {args.out}", flush=True)
+    table = flow(config, seeds=seeds, policies=policies, out_dir=str(args.out))
+    print(Path(table).read_text())
+    print(table)
+    return 0
+
+
+def inspect_summary(path: Path) -> dict:
+    """The JSON view of a campaign file (see ``noisebo inspect --json``)."""
+    from noisebo.storage.hdf5 import read_campaign
+
+    data = read_campaign(path)
+    attrs, points, steps = data["attrs"], data["points"], data["steps"]
+    t_opt = {int(s): float(v) for s, v in zip(steps["step"], steps["t_opt"])}
+    rows = []
+    for i in range(len(points["x"])):
+        step = int(points["step"][i])
+        rows.append({
+            "point": i,
+            "step": None if step < 0 else step,
+            "x": float(points["x"][i]),
+            "t": float(points["t"][i]),
+            "n_shots": int(points["n_shots"][i]),
+            "value": float(points["value"][i]),
+            "noise": float(points["noise"][i]),
+            "noise_measured": bool(points["noise_measured"][i]),
+            "t_opt": t_opt.get(step),
+        })
+    converged = int(attrs["converged_step"])
+    return {
+        "file": str(path),
+        "status": attrs["status"],
+        "status_reason": attrs["status_reason"],
+        "seed": int(attrs["seed"]),
+        "policy": attrs["policy"],
+        "config": attrs["config"],
+        "first_converged_step": None if converged < 0 else converged,
+        "final_t_opt": None if data["summary"] is None else data["summary"]["t_opt"],
+        "n_shots": int(attrs["n_shots"]),
+        "measurement_time_s": float(sum(data["shots"]["t"])),
+        "points": rows,
+    }
+
+
+def _inspect(args) -> int:
+    summary = inspect_summary(Path(args.file))
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    conv = summary["first_converged_step"]
+    print(f"{summary['file']}: {summary['config']['name']} seed {summary['seed']}, policy {summary['policy']}, "
+          f"status {summary['status']}{' (' + summary['status_reason'] + ')' if summary['status_reason'] else ''}")
+    print(f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
+          f"noise model converged at step {conv if conv is None else conv + 1}; "
+          f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s")
+    print(f"  {'step':>5} {'x':>9} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
+    for row in summary["points"]:
+        step = "seed" if row["step"] is None else str(row["step"] + 1)
+        t_opt = "" if row["t_opt"] is None else f"{row['t_opt']:.4f}"
+        print(f"  {step:>5} {row['x']:>9.4g} {row['t']:>8.4g} {row['n_shots']:>5} {row['value']:>10.4g} "
+              f"{row['noise']:>8.3g}{'' if row['noise_measured'] else '*'} {t_opt:>9}")
+    print("  * noise from the noise model")
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="noisebo", description="Bayesian optimisation of where and how long to measure.")
     commands = parser.add_subparsers(dest="command", required=True)
-    run = commands.add_parser("run", help="run one campaign")
+
+    run = commands.add_parser("run", help="run one campaign through the Prefect flow")
     run.add_argument("config", help="campaign YAML, e.g. data/configs/forrester.yaml")
     run.add_argument("--seed", type=int, default=0)
     run.add_argument("--policy", choices=["reward", "double"], default=None)
+    run.add_argument("--out", type=Path, default=Path("data/runs"))
     run.set_defaults(handler=_run)
+
+    resume = commands.add_parser("resume", help="continue an interrupted campaign")
+    resume.add_argument("file", help="the campaign's .h5 file")
+    resume.set_defaults(handler=_resume)
+
+    sweep = commands.add_parser("sweep", help="run campaigns over seeds and policies in parallel")
+    sweep.add_argument("config")
+    sweep.add_argument("--seeds", required=True, help="N, A-B or A,B,C")
+    sweep.add_argument("--policy", choices=["reward", "double", "both"], default="both")
+    sweep.add_argument("--out", type=Path, default=Path("data/runs/sweep"))
+    sweep.add_argument("--workers", type=int, default=2)
+    sweep.set_defaults(handler=_sweep)
+
+    inspect = commands.add_parser("inspect", help="summarise a campaign file")
+    inspect.add_argument("file")
+    inspect.add_argument("--json", action="store_true", help="machine-readable output")
+    inspect.set_defaults(handler=_inspect)
     return parser
 
 
@@ -57,9 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.handler(args)
-    except ConfigError as error:
+    except (ConfigError, CampaignFileError, UsageError) as error:
         print(f"noisebo: error: {error}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

@@ -25,3 +25,80 @@ def median_iqr(values) -> tuple[float, float, float]:
         return float("nan"), float("nan"), float("nan")
     q25, q50, q75 = np.percentile(arr, [25, 50, 75])
     return float(q50), float(q25), float(q75)
+
+
+RMSE_POINTS = 200
+
+
+def campaign_figures(
+    config,
+    instrument,
+    t_opt_history,
+    t_opt_final: float,
+    grid_x: np.ndarray,
+    f_mean_final: np.ndarray,
+    shot_t: np.ndarray,
+    latencies_s,
+) -> dict:
+    """The benchmark figures of one finished campaign.
+
+    t* comes from the instrument's true noise law and the configured reward; RMSE compares the
+    final f prediction (interpolated from the x grid) with the truth at 200 evenly spaced x. Either
+    is None when the instrument does not know its truth."""
+    from noisebo.reward import true_optimal_t
+    from noisebo.schedule import first_converged_step
+
+    s, rew, sched = config.space, config.reward, config.schedule
+    t_star = None
+    if instrument.noise_law(np.array([s.t_min])) is not None:
+        t_star = true_optimal_t(instrument.noise_law, s.t_min, s.t_max, rew.alpha, rew.beta)
+    x_eval = np.linspace(s.x_min, s.x_max, RMSE_POINTS)
+    truth = instrument.truth(x_eval)
+    history = [float(v) for v in t_opt_history]
+    return {
+        "policy": config.acquisition.policy,
+        "converged_step": first_converged_step(history, sched.window, sched.threshold),
+        "t_opt_pred": history + [float(t_opt_final)],
+        "t_star": t_star,
+        "t_opt_rel_error": None if t_star is None else relative_error(t_opt_final, t_star),
+        "rmse_f": None if truth is None else rmse(np.interp(x_eval, grid_x, f_mean_final), truth),
+        "total_measurement_time": float(np.sum(shot_t)),
+        "step_latency_s": [float(v) for v in latencies_s],
+    }
+
+
+def summarise_campaigns(records: list[dict]) -> dict:
+    """Medians and IQRs over campaigns of one policy (records from ``campaign_figures``)."""
+    conv = [r["converged_step"] for r in records]
+    first = [r["step_latency_s"][0] for r in records if r["step_latency_s"]]
+    rest = [v for r in records for v in r["step_latency_s"][1:]]
+    return {
+        "campaigns": len(records),
+        "converged_within_10": sum(1 for c in conv if c is not None and c <= 9) / max(len(records), 1),
+        "converged_step": median_iqr([c for c in conv if c is not None]),
+        "t_rel_error": median_iqr([r["t_opt_rel_error"] for r in records]),
+        "rmse_f": median_iqr([r["rmse_f"] for r in records]),
+        "measurement_time_s": median_iqr([r["total_measurement_time"] for r in records]),
+        "latency_first_s": median_iqr(first)[0],
+        "latency_rest_s": median_iqr(rest)[0],
+    }
+
+
+def _fmt(m, digits: int = 3) -> str:
+    return f"{m[0]:.{digits}f} [{m[1]:.{digits}f}, {m[2]:.{digits}f}]"
+
+
+def summary_table(rows: dict[str, dict]) -> str:
+    """A Markdown table of ``summarise_campaigns`` results keyed by policy (median [IQR])."""
+    header = (
+        "| policy | campaigns | converged <= step 9 | first converged step | final abs(t_opt - t*)/t* "
+        "| final RMSE f | measurement time (s) | latency step 0 (s) | latency median rest (s) |"
+    )
+    lines = [header, "|---" * (header.count("|") - 1) + "|"]
+    for policy, s in rows.items():
+        lines.append(
+            f"| {policy} | {s['campaigns']} | {100 * s['converged_within_10']:.0f} % | {_fmt(s['converged_step'], 1)} "
+            f"| {_fmt(s['t_rel_error'])} | {_fmt(s['rmse_f'])} | {_fmt(s['measurement_time_s'], 0)} "
+            f"| {s['latency_first_s']:.2f} | {s['latency_rest_s']:.3f} |"
+        )
+    return "\n".join(lines)

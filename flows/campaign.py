@@ -1,0 +1,94 @@
+"""The campaign flow: seed points, then fit -> acquire -> measure -> reduce -> record per step.
+
+The journal is the campaign's memory: the flow reads where it stands from the recorder, so the
+same code starts a new campaign and resumes a killed one, and a resumed campaign proposes and
+measures exactly what the uninterrupted one would have.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable, Literal
+
+from prefect import flow
+
+from tasks import campaign as ops
+from instruments import build
+from noisebo.config import CampaignConfig, load_config
+from noisebo.storage import records
+from noisebo.storage.recorder import Recorder
+
+Progress = Callable[[str], None]
+
+
+def campaign_path(config: CampaignConfig, seed: int, out_dir: str | Path) -> Path:
+    """Where a campaign's HDF5 file goes: OUT/NAME_POLICY_sSEED.h5."""
+    return Path(out_dir) / f"{config.name}_{config.acquisition.policy}_s{seed:04d}.h5"
+
+
+def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> CampaignConfig:
+    """A validated config from a YAML path or a config object, with an optional policy override."""
+    cfg = config if isinstance(config, CampaignConfig) else load_config(config)
+    return cfg.with_overrides(acquisition={"policy": policy}) if policy else cfg
+
+
+def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, step, say: Progress) -> None:
+    progress = recorder.progress
+    index = len(progress.state.points)
+    values = ops.measure(instrument, x, t, shots, progress.seed, index, recorder)
+    point = ops.reduce(x, t, values, model_noise)
+    ops.record(recorder, records.point_record(index, step, point))
+    label = "seed point" if step < 0 else f"step {step + 1}/{progress.config.schedule.n_steps}"
+    say(f"{label}: x={x:.4g} t={t:.4g} s shots={shots} value={point.value:.4g} noise={point.noise:.3g}")
+
+
+def run(recorder: Recorder, say: Progress = lambda line: None) -> Path:
+    """Drive a campaign from wherever its journal stands to the end."""
+    progress = recorder.progress
+    config, seed = progress.config, progress.seed
+    sched = config.schedule
+    instrument = build(config.instrument)
+    seeds = ops.seed_points(config, seed)
+    for i in range(len(progress.state.points), sched.n_seed):
+        x, t = (float(v) for v in seeds[i])
+        _measure_point(recorder, instrument, x, t, sched.shots_before, None, -1, say)
+    while recorder.progress.next_step < sched.n_steps or recorder.progress.pending is not None:
+        progress = recorder.progress
+        pending = progress.pending
+        if pending is None:
+            step = progress.next_step
+            fitted, fit_s = ops.update_models(config, progress.state, seed, step)
+            decision, acq_s = ops.acquire(config, fitted, progress.state, step)
+            ops.record(recorder, records.decision_record(decision, fit_s + acq_s), snapshot=False)
+            pending = recorder.progress.pending
+        f = pending.fields
+        if f["converged"] and not (f["step"] > 0 and progress.decisions[f["step"] - 1].fields["converged"]):
+            say(f"noise model converged at step {f['step'] + 1}: t_opt = {f['t_opt']:.4g} s")
+        _measure_point(
+            recorder, instrument, f["x"], f["t"], f["shots"], None if f["measure_noise"] else f["noise_at_t"],
+            f["step"], say,
+        )
+    if recorder.progress.status != "completed":
+        summary = ops.summarize(config, recorder.progress.state, seed)
+        ops.record(recorder, records.summary_record(summary), records.status_record("completed"))
+    return recorder.h5_path
+
+
+@flow(name="campaign")
+def campaign(
+    config: str | CampaignConfig = "data/configs/forrester.yaml",
+    seed: int = 0,
+    policy: Literal["reward", "double"] | None = None,
+    out_dir: str = "data/runs",
+) -> str:
+    """Run one campaign and return the path of its HDF5 file."""
+    cfg = resolve_config(config, policy)
+    with Recorder.create(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
+        return str(run(recorder, print))
+
+
+@flow(name="resume")
+def resume(path: str) -> str:
+    """Continue a campaign from its file (after a crash, a kill or an abort)."""
+    with Recorder.resume(Path(path)) as recorder:
+        return str(run(recorder, print))

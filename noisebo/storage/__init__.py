@@ -1,0 +1,2 @@
+"""Durable campaign records: an append-only journal (the source of truth) and the HDF5 file
+derived from it."""

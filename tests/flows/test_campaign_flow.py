@@ -1,0 +1,87 @@
+"""The campaign and sweep flows under a real (temporary) Prefect server."""
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from flows.campaign import campaign, campaign_path, resume
+from flows.sweep import sweep
+from instruments import build
+from noisebo.campaign import run_campaign
+from noisebo.storage.hdf5 import CampaignFileError
+from noisebo.storage.recorder import Recorder
+
+
+def points_of(path):
+    with h5py.File(path, "r") as f:
+        return {k: v[()] for k, v in f["points"].items()}, {k: v[()] for k, v in f["shots"].items()}, dict(f.attrs)
+
+
+@pytest.fixture(scope="module")
+def finished(tiny_config, prefect_harness, tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs")
+    return campaign(tiny_config, seed=5, out_dir=str(out))
+
+
+def test_flow_campaign_equals_the_pure_loop(tiny_config, finished):
+    points, shots, attrs = points_of(finished)
+    pure = run_campaign(tiny_config, build(tiny_config.instrument), 5)
+    assert attrs["status"] == "completed" and attrs["n_points"] == 3 + 4
+    np.testing.assert_array_equal(points["x"], [p.x for p in pure.state.points])
+    np.testing.assert_array_equal(points["t"], [p.t for p in pure.state.points])
+    np.testing.assert_array_equal(points["value"], [p.value for p in pure.state.points])
+    np.testing.assert_array_equal(points["n_shots"], [p.n_shots for p in pure.state.points])
+    assert len(shots["value"]) == sum(p.n_shots for p in pure.state.points)
+    assert json.loads(attrs["config_json"])["name"] == "tiny"
+
+
+def test_file_layout_is_readable_with_plain_h5py(finished):
+    with h5py.File(finished, "r") as f:
+        assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 1
+        assert f["steps/acq_map"].shape == (4, 40, 30)
+        assert f["steps/t_opt"].attrs["units"] == "s"
+        assert set(json.loads(f.attrs["versions_json"])) >= {"python", "jax", "numpyro", "h5py", "prefect"}
+        assert f["summary/f_mean"].shape == (40,)
+        for i in range(f.attrs["n_points"]):
+            mine = f["shots/point"][()] == i
+            assert f["shots/value"][mine].mean() == pytest.approx(f["points/value"][i])
+
+
+def test_a_second_campaign_on_the_same_file_is_refused(tiny_config, finished):
+    before = Path(finished).read_bytes()
+    with pytest.raises(CampaignFileError, match="already exists"):
+        Recorder.create(finished, tiny_config, 5)
+    assert Path(finished).read_bytes() == before
+
+
+def test_a_running_campaign_locks_its_journal(tiny_config, tmp_path):
+    path = campaign_path(tiny_config, 1, tmp_path)
+    with Recorder.create(path, tiny_config, 1):
+        with pytest.raises(CampaignFileError, match="in use by another running campaign"):
+            Recorder.resume(path)
+
+
+def test_resuming_a_finished_campaign_changes_nothing(finished, prefect_harness):
+    before = points_of(finished)
+    resume(finished)
+    after = points_of(finished)
+    for a, b in zip(before[:2], after[:2]):
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key])
+
+
+def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect_harness, tmp_path):
+    table = sweep(tiny_config, seeds=[5, 6], policies=["reward", "double"], out_dir=str(tmp_path))
+    files = sorted(p.name for p in tmp_path.glob("*.h5"))
+    assert files == ["tiny_double_s0005.h5", "tiny_double_s0006.h5", "tiny_reward_s0005.h5", "tiny_reward_s0006.h5"]
+    text = Path(table).read_text()
+    assert "| reward | 2 |" in text and "| double | 2 |" in text
+    # Per-seed results do not depend on running in a sweep.
+    alone, _, _ = points_of(finished)
+    swept, _, _ = points_of(tmp_path / "tiny_reward_s0005.h5")
+    np.testing.assert_array_equal(alone["value"], swept["value"])
+    summary = json.loads((tmp_path / "sweep_summary.json").read_text())
+    assert len(summary["records"]) == 4
