@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Set up and use noisebo with nothing but Python 3.11+.
 
-    python3 dev.py run [ARGS...]   # a default Forrester campaign (extra ARGS go to `noisebo run`)
+    python3 dev.py run [ARGS...]   # a default Forrester campaign through the Prefect flow, into
+                                   # data/runs/<time>/ (extra ARGS go to `noisebo run`)
     python3 dev.py test [ARGS...]  # the test suite (extra ARGS go to pytest)
     python3 dev.py bench [ARGS...] # the Forrester benchmark (extra ARGS go to benchmarks/forrester.py)
 
@@ -15,6 +16,7 @@ import hashlib
 import os
 import subprocess
 import sys
+import time
 import venv
 from pathlib import Path
 
@@ -60,6 +62,9 @@ def main(argv: list[str]) -> int:
     python = str(BIN / "python")
     if command == "run":
         args = [str(BIN / "noisebo"), "run", str(ROOT / "data" / "configs" / "forrester.yaml"), *rest]
+        if "--out" not in rest:  # a fresh folder per call, so the command can be repeated
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            args += ["--out", str(ROOT / "data" / "runs" / stamp)]
     elif command == "test":
         args = [python, "-m", "pytest", *rest]
     else:

@@ -1,6 +1,7 @@
 """The campaign flow: seed points, then fit -> acquire -> measure -> reduce -> record per step.
 
-The journal is the campaign's memory: the flow reads where it stands from the recorder, so the
+Large arguments are passed ``quote``d: Prefect then skips walking them for futures, which
+otherwise costs milliseconds per task. The journal is the campaign's memory: the flow reads where it stands from the recorder, so the
 same code starts a new campaign and resumes a killed one, and a resumed campaign proposes and
 measures exactly what the uninterrupted one would have.
 """
@@ -11,6 +12,7 @@ from pathlib import Path
 from typing import Callable, Literal
 
 from prefect import flow
+from prefect.utilities.annotations import quote
 
 from tasks import campaign as ops
 from instruments import build
@@ -35,9 +37,9 @@ def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> C
 def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, step, say: Progress) -> None:
     progress = recorder.progress
     index = len(progress.state.points)
-    values = ops.measure(instrument, x, t, shots, progress.seed, index, recorder)
-    point = ops.reduce(x, t, values, model_noise)
-    ops.record(recorder, records.point_record(index, step, point))
+    values = ops.measure(quote(instrument), x, t, shots, progress.seed, index, quote(recorder))
+    point = ops.reduce(x, t, quote(values), model_noise)
+    ops.record(quote(recorder), quote(records.point_record(index, step, point)))
     label = "seed point" if step < 0 else f"step {step + 1}/{progress.config.schedule.n_steps}"
     say(f"{label}: x={x:.4g} t={t:.4g} s shots={shots} value={point.value:.4g} noise={point.noise:.3g}")
 
@@ -48,7 +50,7 @@ def run(recorder: Recorder, say: Progress = lambda line: None) -> Path:
     config, seed = progress.config, progress.seed
     sched = config.schedule
     instrument = build(config.instrument)
-    seeds = ops.seed_points(config, seed)
+    seeds = ops.seed_points(quote(config), seed)
     for i in range(len(progress.state.points), sched.n_seed):
         x, t = (float(v) for v in seeds[i])
         _measure_point(recorder, instrument, x, t, sched.shots_before, None, -1, say)
@@ -57,9 +59,9 @@ def run(recorder: Recorder, say: Progress = lambda line: None) -> Path:
         pending = progress.pending
         if pending is None:
             step = progress.next_step
-            fitted, fit_s = ops.update_models(config, progress.state, seed, step)
-            decision, acq_s = ops.acquire(config, fitted, progress.state, step)
-            ops.record(recorder, records.decision_record(decision, fit_s + acq_s), snapshot=False)
+            fitted, fit_s = ops.update_models(quote(config), quote(progress.state), seed, step)
+            decision, acq_s = ops.acquire(quote(config), quote(fitted), quote(progress.state), step)
+            ops.record(quote(recorder), quote(records.decision_record(decision, fit_s + acq_s)), snapshot=False)
             pending = recorder.progress.pending
         f = pending.fields
         if f["converged"] and not (f["step"] > 0 and progress.decisions[f["step"] - 1].fields["converged"]):
@@ -69,8 +71,8 @@ def run(recorder: Recorder, say: Progress = lambda line: None) -> Path:
             f["step"], say,
         )
     if recorder.progress.status != "completed":
-        summary = ops.summarize(config, recorder.progress.state, seed)
-        ops.record(recorder, records.summary_record(summary), records.status_record("completed"))
+        summary = ops.summarize(quote(config), quote(recorder.progress.state), seed)
+        ops.record(quote(recorder), quote(records.summary_record(summary)), quote(records.status_record("completed")))
     return recorder.h5_path
 
 
@@ -80,15 +82,20 @@ def campaign(
     seed: int = 0,
     policy: Literal["reward", "double"] | None = None,
     out_dir: str = "data/runs",
+    show_progress: bool = True,
 ) -> str:
     """Run one campaign and return the path of its HDF5 file."""
     cfg = resolve_config(config, policy)
     with Recorder.create(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
-        return str(run(recorder, print))
+        return str(run(recorder, print if show_progress else _silent))
 
 
 @flow(name="resume")
-def resume(path: str) -> str:
+def resume(path: str, show_progress: bool = True) -> str:
     """Continue a campaign from its file (after a crash, a kill or an abort)."""
     with Recorder.resume(Path(path)) as recorder:
-        return str(run(recorder, print))
+        return str(run(recorder, print if show_progress else _silent))
+
+
+def _silent(line: str) -> None:
+    pass

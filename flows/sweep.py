@@ -26,8 +26,11 @@ from noisebo.storage.hdf5 import read_campaign
 def sweep_campaign(config: CampaignConfig, seed: int, out_dir: str) -> str:
     path = campaign_path(config, seed, out_dir)
     if path.exists():
-        return resume(str(path))
-    return campaign(config, seed=seed, out_dir=out_dir)
+        done = resume(str(path), show_progress=False)
+    else:
+        done = campaign(config, seed=seed, out_dir=out_dir, show_progress=False)
+    print(f"finished {done}", flush=True)
+    return done
 
 
 def figures_from_file(path: str | Path) -> dict:

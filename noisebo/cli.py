@@ -11,6 +11,7 @@ import json
 import sys
 from pathlib import Path
 
+from noisebo import runtime
 from noisebo.config import ConfigError, load_config
 from noisebo.storage.hdf5 import CampaignFileError
 
@@ -37,8 +38,6 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def _prefect():
-    from noisebo import runtime
-
     runtime.configure()
     import flows.campaign
     import flows.sweep
@@ -56,7 +55,9 @@ def _run(args) -> int:
         raise CampaignFileError(f"{path} already exists; continue it with `noisebo resume {path}`")
     print(f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}: "
           f"{config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}", flush=True)
-    print(campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out)))
+    with runtime.flow_settings():
+        path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out))
+    print(path)
     return 0
 
 
@@ -66,7 +67,9 @@ def _resume(args) -> int:
         raise CampaignFileError(f"cannot resume {path}: no journal {path.with_suffix('.journal')} beside it")
     campaign_flows, _ = _prefect()
     print(f"resuming {path}", flush=True)
-    print(campaign_flows.resume(str(path)))
+    with runtime.flow_settings():
+        done = campaign_flows.resume(str(path))
+    print(done)
     return 0
 
 
@@ -81,7 +84,8 @@ def _sweep(args) -> int:
 
     flow = sweep_flows.sweep.with_options(task_runner=ThreadPoolTaskRunner(max_workers=args.workers))
     print(f"sweep {config.name!r}: seeds {seeds[0]}..{seeds[-1]} x {policies} on {args.workers} workers -> {args.out}", flush=True)
-    table = flow(config, seeds=seeds, policies=policies, out_dir=str(args.out))
+    with runtime.flow_settings():
+        table = flow(config, seeds=seeds, policies=policies, out_dir=str(args.out))
     print(Path(table).read_text())
     print(table)
     return 0
@@ -145,9 +149,16 @@ def _inspect(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage mistake is one line, like every other error."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"noisebo: error: {message} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="noisebo", description="Bayesian optimisation of where and how long to measure.")
-    commands = parser.add_subparsers(dest="command", required=True)
+    parser = _Parser(prog="noisebo", description="Bayesian optimisation of where and how long to measure.")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = commands.add_parser("run", help="run one campaign through the Prefect flow")
     run.add_argument("config", help="campaign YAML, e.g. data/configs/forrester.yaml")

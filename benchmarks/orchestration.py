@@ -1,0 +1,83 @@
+"""Orchestration overhead: the same campaigns through the Prefect flow and through the pure loop.
+
+    python benchmarks/orchestration.py [--config PATH] [--seeds N] [--policy reward|double|both]
+
+For each campaign it runs the pure core loop (noisebo.campaign.run_campaign) and the campaign
+flow (Prefect tasks, journal, an HDF5 snapshot per point) in this process, after a warm-up flow
+run that absorbs the temporary Prefect server's start and XLA compilation. It prints, per BO
+step: the flow's wall time minus the pure loop's (everything the pipeline adds), and the flow's
+wall time minus the core decision time (the issue's definition: includes the simulated
+measurements). It also checks that both give the same points.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from noisebo import runtime  # noqa: E402
+
+runtime.configure()
+
+import h5py  # noqa: E402
+
+from flows.campaign import campaign  # noqa: E402
+from instruments import build  # noqa: E402
+from noisebo.campaign import run_campaign  # noqa: E402
+from noisebo.config import load_config  # noqa: E402
+
+
+def main(argv=None) -> int:
+    with runtime.flow_settings():
+        return _main(argv)
+
+
+def _main(argv) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--policy", choices=["reward", "double", "both"], default="both")
+    args = parser.parse_args(argv)
+    base = load_config(args.config)
+    policies = ["reward", "double"] if args.policy == "both" else [args.policy]
+    out = Path(tempfile.mkdtemp(prefix="noisebo-orchestration-"))
+    n_steps = base.schedule.n_steps
+    started = time.perf_counter()
+    campaign(base, seed=10_000, out_dir=str(out / "warmup"), show_progress=False)
+    print(f"warm-up flow run (temporary Prefect server start + compilation): {time.perf_counter() - started:.1f} s")
+    print("| policy | seed | pure loop (s) | flow (s) | added per BO step (s) | flow minus decisions, per step (s) | same points |")
+    print("|---|---|---|---|---|---|---|")
+    rows = []
+    for policy in policies:
+        config = base.with_overrides(acquisition={"policy": policy})
+        for seed in range(args.seeds):
+            t0 = time.perf_counter()
+            pure = run_campaign(config, build(config.instrument), seed)
+            t1 = time.perf_counter()
+            path = campaign(config, seed=seed, out_dir=str(out), show_progress=False)
+            t2 = time.perf_counter()
+            with h5py.File(path, "r") as f:
+                same = np.array_equal(f["points/value"][()], [p.value for p in pure.state.points])
+                decisions = float(np.sum(f["steps/latency_s"][()]))
+            added = (t2 - t1 - (t1 - t0)) / n_steps
+            literal = (t2 - t1 - decisions) / n_steps
+            rows.append((added, literal, same))
+            print(f"| {policy} | {seed} | {t1 - t0:.2f} | {t2 - t1:.2f} | {added:.3f} | {literal:.3f} | {same} |", flush=True)
+    added, literal, same = zip(*rows)
+    print(f"\nmedian added per BO step: {np.median(added):.3f} s; median flow minus decisions per step: "
+          f"{np.median(literal):.3f} s; identical points in {sum(same)}/{len(same)} campaigns")
+    os.environ.get("KEEP") or __import__("shutil").rmtree(out, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,87 @@
+"""Bad input on the command line: one clear line, exit code 2, no file created or changed."""
+
+import json
+
+import h5py
+import pytest
+
+from noisebo.cli import main, parse_seeds
+
+
+def snapshot(folder):
+    return {p: (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*")}
+
+
+def setup_files(tmp_path, tiny_yaml):
+    (tmp_path / "broken.yaml").write_text("space: [1, 2\n")
+    (tmp_path / "inverted.yaml").write_text("space: {t_min: 5.0, t_max: 1.0}\n")
+    (tmp_path / "laser.yaml").write_text("instrument: {kind: laser}\n")
+    (tmp_path / "extra.yaml").write_text("colour: blue\n")
+    (tmp_path / "empty.h5").write_bytes(b"")
+    (tmp_path / "noise.h5").write_bytes(b"\x89HDF-not-really" * 50)
+    with h5py.File(tmp_path / "other.h5", "w") as f:
+        f["data"] = [1, 2, 3]
+    with h5py.File(tmp_path / "future.h5", "w") as f:
+        f.attrs["schema"] = "noisebo.campaign"
+        f.attrs["schema_version"] = 99
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    (runs / "tiny_reward_s0000.h5").write_bytes(b"existing results")
+
+
+CASES = [
+    (["run", "broken.yaml"], "broken.yaml: not valid YAML at line 2"),
+    (["run", "inverted.yaml"], "t_min (5.0) must be below t_max (1.0)"),
+    (["run", "laser.yaml"], "instrument"),
+    (["run", "extra.yaml"], "colour: Extra inputs are not permitted"),
+    (["run", "absent.yaml"], "cannot read config"),
+    (["run", "TINY", "--policy", "greedy"], "invalid choice: 'greedy'"),
+    (["run", "TINY", "--seed", "x"], "invalid int value"),
+    (["run", "TINY", "--out", "runs"], "already exists; continue it with `noisebo resume"),
+    (["resume", "absent.h5"], "cannot resume absent.h5"),
+    (["resume", "other.h5"], "cannot resume other.h5"),
+    (["inspect", "absent.h5"], "no such file"),
+    (["inspect", "empty.h5"], "empty file (0 bytes)"),
+    (["inspect", "noise.h5"], "not a readable HDF5 file"),
+    (["inspect", "other.h5"], "not a noisebo campaign"),
+    (["inspect", "future.h5"], "schema version 99"),
+    (["sweep", "TINY", "--seeds", "a-b"], "--seeds 'a-b'"),
+    (["sweep", "TINY", "--seeds", "1", "--workers", "0"], "--workers must be at least 1"),
+    (["launch"], "invalid choice: 'launch'"),
+]
+
+
+@pytest.mark.parametrize("argv, message", CASES, ids=[" ".join(c[0]) for c in CASES])
+def test_bad_input_is_one_line_exit_2_and_touches_nothing(argv, message, tmp_path, tiny_yaml, monkeypatch, capsys):
+    setup_files(tmp_path, tiny_yaml)
+    monkeypatch.chdir(tmp_path)
+    argv = [str(tiny_yaml) if a == "TINY" else a for a in argv]
+    before = snapshot(tmp_path)
+    with pytest.raises(SystemExit) as info:
+        raise SystemExit(main(argv))
+    err = capsys.readouterr().err.strip()
+    assert info.value.code == 2
+    assert len(err.splitlines()) == 1 and err.startswith("noisebo: error: ")
+    assert message in err
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("text, seeds", [("3", [3]), ("0-3", [0, 1, 2, 3]), ("1,5,9", [1, 5, 9])])
+def test_seed_ranges(text, seeds):
+    assert parse_seeds(text) == seeds
+
+
+def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harness, capsys):
+    from flows.campaign import campaign
+
+    path = campaign(tiny_config, seed=2, out_dir=str(tmp_path))
+    capsys.readouterr()
+    assert main(["inspect", path, "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["seed"] == 2 and data["status"] == "completed" and data["config"]["name"] == "tiny"
+    assert len(data["points"]) == 7 and data["points"][0]["step"] is None and data["points"][3]["step"] == 0
+    assert {"x", "t", "n_shots", "value", "noise", "t_opt"} <= set(data["points"][3])
+    assert data["first_converged_step"] is None or 0 <= data["first_converged_step"] < 4
+    assert main(["inspect", path]) == 0
+    text = capsys.readouterr().out
+    assert "status completed" in text and "t_opt (s)" in text
