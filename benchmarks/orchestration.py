@@ -31,13 +31,14 @@ runtime.configure()
 import h5py  # noqa: E402
 
 from flows.campaign import campaign  # noqa: E402
+from flows.local import flow_settings  # noqa: E402
 from instruments import build  # noqa: E402
 from noisebo.campaign import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 
 
 def main(argv=None) -> int:
-    with runtime.flow_settings():
+    with flow_settings():
         return _main(argv)
 
 

@@ -45,6 +45,13 @@ def _prefect():
     return flows.campaign, flows.sweep
 
 
+def flow_settings():
+    runtime.configure()
+    from flows.local import flow_settings as settings
+
+    return settings()
+
+
 def _run(args) -> int:
     config = load_config(args.config)
     if args.policy:
@@ -55,7 +62,7 @@ def _run(args) -> int:
         raise CampaignFileError(f"{path} already exists; continue it with `noisebo resume {path}`")
     print(f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}: "
           f"{config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}", flush=True)
-    with runtime.flow_settings():
+    with flow_settings():
         path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out))
     print(path)
     return 0
@@ -67,7 +74,7 @@ def _resume(args) -> int:
         raise CampaignFileError(f"cannot resume {path}: no journal {path.with_suffix('.journal')} beside it")
     campaign_flows, _ = _prefect()
     print(f"resuming {path}", flush=True)
-    with runtime.flow_settings():
+    with flow_settings():
         done = campaign_flows.resume(str(path))
     print(done)
     return 0
@@ -84,7 +91,7 @@ def _sweep(args) -> int:
 
     flow = sweep_flows.sweep.with_options(task_runner=ThreadPoolTaskRunner(max_workers=args.workers))
     print(f"sweep {config.name!r}: seeds {seeds[0]}..{seeds[-1]} x {policies} on {args.workers} workers -> {args.out}", flush=True)
-    with runtime.flow_settings():
+    with flow_settings():
         table = flow(config, seeds=seeds, policies=policies, out_dir=str(args.out))
     print(Path(table).read_text())
     print(table)

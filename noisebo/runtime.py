@@ -8,7 +8,6 @@ Call ``configure()`` before Prefect is imported (the CLI and the tests do).
 
 from __future__ import annotations
 
-import contextlib
 import os
 from pathlib import Path
 
@@ -41,16 +40,3 @@ def configure() -> None:
         jax.config.update("jax_compilation_cache_dir", cache)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
-
-@contextlib.contextmanager
-def flow_settings():
-    """Settings around a flow call from the command line. With Prefect's temporary server
-    (PREFECT_API_URL unset) nothing watches flow-run heartbeats, and their thread makes every
-    flow run end on a whole second (0.5-1 s lost per campaign): turn them off there."""
-    import prefect.settings as ps
-
-    if os.environ.get("PREFECT_API_URL"):
-        yield
-        return
-    with ps.temporary_settings({ps.PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None}):
-        yield
