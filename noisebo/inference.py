@@ -28,6 +28,21 @@ from numpyro.infer import MCMC, NUTS
 from numpyro.infer.util import constrain_fn, log_density, unconstrain_fn
 from scipy import optimize
 
+# numpyro's effect-handler stack is one module-level list, shared by all threads, so two threads
+# tracing a model at once corrupt each other's traces. Every function below that runs model code
+# under handlers holds this lock while its Python body runs: that is only while JAX traces it
+# (compiled calls do not enter the body), and for NUTS, for the whole sampler run.
+TRACE_LOCK = threading.RLock()
+
+
+def _traced(fn: Callable) -> Callable:
+    def locked(*args, **kwargs):
+        with TRACE_LOCK:
+            return fn(*args, **kwargs)
+
+    return locked
+
+
 MIN_CURVATURE = 1.0  # Laplace draws never spread wider than one unit of unconstrained space.
 UNCONSTRAINED_BOUND = 12.0  # keeps L-BFGS-B away from degenerate corners (e.g. length -> 0).
 
@@ -85,7 +100,12 @@ def _map_program(model: Callable, restarts: int, laplace_samples: int) -> _MapPr
     def flatten(params, data):
         return ravel_pytree(unconstrain_fn(model, (data,), {}, params))[0]
 
-    return _MapProgram(jax.jit(starts), jax.jit(flatten), jax.jit(jax.value_and_grad(objective)), jax.jit(laplace))
+    return _MapProgram(
+        jax.jit(_traced(starts)),
+        jax.jit(_traced(flatten)),
+        jax.jit(_traced(jax.value_and_grad(objective))),
+        jax.jit(_traced(laplace)),
+    )
 
 
 def _minimise(value_and_grad, x0: np.ndarray, data) -> tuple[np.ndarray, float]:
@@ -128,8 +148,9 @@ def fit_map(model, data, key, restarts: int, laplace_samples: int = 0, guess: di
 def fit_nuts(model, data, key, warmup: int, samples: int, keep: int) -> Samples:
     """NUTS posterior of ``model(data)``, thinned evenly to ``keep`` draws."""
     mcmc = nuts_runner(model, warmup, samples, threading.get_ident())
-    mcmc.run(key, data)
-    draws = mcmc.get_samples()
+    with TRACE_LOCK:
+        mcmc.run(key, data)
+        draws = mcmc.get_samples()
     idx = jnp.linspace(0, samples - 1, min(keep, samples)).astype(jnp.int32)
     return Samples({k: v[idx] for k, v in draws.items()}, map_first=False)
 
