@@ -11,8 +11,10 @@ import json
 from pathlib import Path
 from typing import Literal
 
+import httpx
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
+from prefect.exceptions import PrefectHTTPStatusError
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows.campaign import campaign, campaign_path, resolve_config, resume
@@ -22,7 +24,25 @@ from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
 from noisebo.storage.hdf5 import read_campaign
 
 
-@task(name="sweep-campaign", cache_policy=NO_CACHE)
+def _orchestration_failed(task, task_run, state) -> bool:
+    """Retry a campaign whose Prefect API call failed (the temporary server answers 503 under
+    load): its journal makes the retry a resume, so nothing is measured twice."""
+    try:
+        state.result()
+    except (PrefectHTTPStatusError, httpx.HTTPError):
+        return True
+    except Exception:  # noqa: BLE001 - anything else is a real failure
+        return False
+    return False
+
+
+@task(
+    name="sweep-campaign",
+    cache_policy=NO_CACHE,
+    retries=3,
+    retry_delay_seconds=2,
+    retry_condition_fn=_orchestration_failed,
+)
 def sweep_campaign(config: CampaignConfig, seed: int, out_dir: str) -> str:
     path = campaign_path(config, seed, out_dir)
     if path.exists():
@@ -74,5 +94,19 @@ def sweep(
         for policy in policies
         for seed in seeds
     ]
-    paths = [future.result() for future in futures]
-    return str(write_summary(paths, out_dir))
+    paths, failures = [], []
+    for future in futures:
+        outcome = future.result(raise_on_failure=False)
+        if isinstance(outcome, BaseException):
+            failures.append(f"{type(outcome).__name__}: {outcome}")
+        else:
+            paths.append(outcome)
+    table = write_summary(paths, out_dir) if paths else None
+    if failures:
+        raise SweepError(f"{len(failures)} of {len(futures)} campaigns failed (summary of the rest: {table}): "
+                         + "; ".join(failures))
+    return str(table)
+
+
+class SweepError(RuntimeError):
+    """Some campaigns of a sweep failed; the others finished and are summarised."""
