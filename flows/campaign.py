@@ -1,9 +1,9 @@
 """The campaign flow: seed points, then fit -> acquire -> measure -> reduce -> record per step.
 
-Large arguments are passed ``quote``d: Prefect then skips walking them for futures, which
-otherwise costs milliseconds per task. The journal is the campaign's memory: the flow reads where it stands from the recorder, so the
+The journal is the campaign's memory: the flow reads where it stands from the recorder, so the
 same code starts a new campaign and resumes a killed one, and a resumed campaign proposes and
-measures exactly what the uninterrupted one would have.
+measures exactly what the uninterrupted one would have. Large arguments are passed ``quote``d:
+Prefect then skips walking them for futures, which otherwise costs milliseconds per task.
 """
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from typing import Callable, Literal
 from prefect import flow
 from prefect.utilities.annotations import quote
 
-from tasks import campaign as ops
 from instruments import build
 from noisebo.config import CampaignConfig, load_config
 from noisebo.storage import records
 from noisebo.storage.recorder import Recorder
+from tasks import campaign as ops
 
 Progress = Callable[[str], None]
 
