@@ -104,3 +104,21 @@ def test_external_kill_at_a_random_moment_then_resume(tiny_yaml, tmp_path, prefe
     done = noisebo(["resume", str(path)], env)
     assert done.returncode == 0, done.stderr[-2000:]
     assert_equals_reference(path, reference)
+
+
+def test_another_process_reads_the_file_while_the_campaign_runs(tiny_yaml, tmp_path, prefect_harness, reference):
+    out = tmp_path / "runs"
+    path = out / f"tiny_reward_s{SEED:04d}.h5"
+    proc = subprocess.Popen([sys.executable, "-m", "noisebo.cli", "run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)],
+                            env=cli_env(prefect_harness), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    seen, deadline = [], time.monotonic() + 240
+    while proc.poll() is None and time.monotonic() < deadline:
+        if path.exists():
+            with h5py.File(path, "r") as f:  # plain h5py, while the campaign writes
+                seen.append((str(f.attrs["status"]), int(f.attrs["n_points"]), len(f["shots/value"])))
+        time.sleep(0.01)
+    assert proc.wait(timeout=60) == 0
+    running = [s for s in seen if s[0] == "running"]
+    assert len({s[1] for s in running}) >= 3, "the reader saw the file grow point by point"
+    assert [s[1] for s in seen] == sorted(s[1] for s in seen)
+    assert_equals_reference(path, reference)
