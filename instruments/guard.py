@@ -2,13 +2,11 @@
 
 A Prefect timeout cannot interrupt a thread blocked in a driver or in native code, so the
 instrument layer enforces its own: each call runs on a worker thread and the caller stops
-waiting after ``timeout_s``. The stuck worker is abandoned (it is a daemon) and a fresh one
-serves the next call.
+waiting after ``timeout_s``.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import threading
 
 import numpy as np
@@ -24,13 +22,11 @@ class InstrumentTimeout(InstrumentError):
     """The instrument did not answer within its timeout."""
 
 
-def _daemon_executor() -> cf.ThreadPoolExecutor:
-    executor = cf.ThreadPoolExecutor(max_workers=1, thread_name_prefix="instrument")
-    return executor
-
-
 class TimeoutGuard:
-    """Wraps an instrument so that ``measure`` returns or raises within ``timeout_s`` seconds."""
+    """Wraps an instrument so that ``measure`` returns or raises within ``timeout_s`` seconds.
+
+    Each call runs on its own daemon thread: a driver that never returns is abandoned, and does
+    not keep the process alive at exit (a thread pool's workers would)."""
 
     def __init__(self, inner: Instrument, timeout_s: float):
         if not timeout_s > 0:
@@ -38,18 +34,24 @@ class TimeoutGuard:
         self.inner = inner
         self.name = inner.name
         self.timeout_s = float(timeout_s)
-        self._lock = threading.Lock()
-        self._executor = _daemon_executor()
 
     def measure(self, x: float, t: float, rng: np.random.Generator) -> Reading:
-        with self._lock:
-            future = self._executor.submit(self.inner.measure, x, t, rng)
+        outcome: dict = {}
+
+        def call() -> None:
             try:
-                return future.result(timeout=self.timeout_s)
-            except cf.TimeoutError:
-                self._executor.shutdown(wait=False, cancel_futures=True)
-                self._executor = _daemon_executor()
-                raise InstrumentTimeout(f"{self.name}: no reading within {self.timeout_s:g} s at x={x:g}, t={t:g}") from None
+                outcome["reading"] = self.inner.measure(x, t, rng)
+            except BaseException as error:  # noqa: BLE001 - re-raised in the caller's thread
+                outcome["error"] = error
+
+        worker = threading.Thread(target=call, name=f"{self.name}-shot", daemon=True)
+        worker.start()
+        worker.join(self.timeout_s)
+        if worker.is_alive():
+            raise InstrumentTimeout(f"{self.name}: no reading within {self.timeout_s:g} s at x={x:g}, t={t:g}")
+        if "error" in outcome:
+            raise outcome["error"]
+        return outcome["reading"]
 
     def truth(self, x):
         return self.inner.truth(x)
