@@ -105,7 +105,7 @@ def inspect_summary(path: Path) -> dict:
 
     data = read_campaign(path)
     attrs, points, steps = data["attrs"], data["points"], data["steps"]
-    t_opt = {int(s): float(v) for s, v in zip(steps["step"], steps["t_opt"])}
+    t_opt = {int(s): float(v) for s, v in zip(steps["step"], steps["t_opt"], strict=True)}
     rows = []
     for i in range(len(points["x"])):
         step = int(points["step"][i])

@@ -19,7 +19,7 @@ from noisebo import inference, noise_model, primary
 from noisebo.config import CampaignConfig
 from noisebo.keys import FIT, jax_key
 from noisebo.policies import Posterior, acquisition_map, argmax_2d
-from noisebo.reward import normalise, reward
+from noisebo.reward import reward
 from noisebo.schedule import converged, shots_for
 from noisebo.state import CampaignState
 
