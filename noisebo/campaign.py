@@ -11,7 +11,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from noisebo.config import CampaignConfig
-from noisebo.decision import Decision, decide, fit_key, fit_models, grids, predict
+from noisebo.decision import Decision, decide, fit_key, fit_models, grids, hyperparameters, predict
 from noisebo.keys import MEASURE, SEED_POINTS, numpy_rng
 from noisebo.schedule import reduce_shots
 from noisebo.state import CampaignState, Point
@@ -88,8 +88,6 @@ class Summary:
 
 def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summary:
     """Fit both models on every point (key for step ``n_steps``) and summarise them."""
-    from noisebo.decision import hyperparameters
-
     fitted = fit_models(config, state, fit_key(seed, config.schedule.n_steps))
     pred = predict(config, fitted, state)
     g = grids(config)
