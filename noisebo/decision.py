@@ -19,7 +19,7 @@ from noisebo import inference, noise_model, primary
 from noisebo.config import CampaignConfig
 from noisebo.keys import FIT, jax_key
 from noisebo.policies import Posterior, acquisition_map, argmax_2d
-from noisebo.reward import reward
+from noisebo.reward import optimal_index, reward
 from noisebo.schedule import converged, shots_for
 from noisebo.state import CampaignState
 
@@ -120,8 +120,7 @@ def _predict_program(config: CampaignConfig):
         n_mean, n_var = n_mean * fitted.noise_scale, n_var * fitted.noise_scale**2
         grid_mean, fine_mean, train_mean = n_mean[:n_t], n_mean[n_t : n_t + N_FINE], n_mean[n_t + N_FINE :]
         r_grid = reward(jnp.asarray(g.t), grid_mean, rew.alpha, rew.beta)
-        r_fine = reward(jnp.asarray(g.t_fine), fine_mean, rew.alpha, rew.beta)
-        best_i = jnp.argmax(r_fine)
+        best_i = optimal_index(jnp.asarray(g.t_fine), fine_mean, rew.alpha, rew.beta)
         lo, span = jnp.min(r_grid), jnp.max(r_grid) - jnp.min(r_grid)
         r_train = (reward(t_train, train_mean, rew.alpha, rew.beta) - lo) / jnp.where(span > 0, span, 1.0)
         post = Posterior(

@@ -19,9 +19,10 @@ def normalise(values: jnp.ndarray) -> jnp.ndarray:
     return jnp.where(span > 0, (values - lo) / jnp.where(span > 0, span, 1.0), 0.0)
 
 
-def optimal_t_on_grid(t: jnp.ndarray, noise: jnp.ndarray, alpha: float, beta: float) -> jnp.ndarray:
-    """argmax over the grid t (m,) of R along a noise curve (m,): the predicted optimal t (s)."""
-    return t[jnp.argmax(reward(t, noise, alpha, beta))]
+def optimal_index(t: jnp.ndarray, noise: jnp.ndarray, alpha: float, beta: float) -> jnp.ndarray:
+    """Index of the argmax over the grid t (m,) of R along a noise curve (m,): t[index] is the
+    predicted optimal t (s)."""
+    return jnp.argmax(reward(t, noise, alpha, beta))
 
 
 def true_optimal_t(noise_law, t_min: float, t_max: float, alpha: float, beta: float) -> float:
