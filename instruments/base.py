@@ -2,18 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-
-@dataclass(frozen=True)
-class Reading:
-    """One shot. value: the scalar measured (value units); spectrum: raw data behind it, if any."""
-
-    value: float
-    spectrum: np.ndarray | None = None
+from noisebo.reduction import Reading  # noqa: F401 - the drivers' return type, re-exported
 
 
 @runtime_checkable
@@ -34,10 +27,10 @@ class Instrument(Protocol):
 def build(config) -> Instrument:
     """The driver for a validated instrument config (dispatch on its ``kind``)."""
     from instruments.forrester import ForresterInstrument
-
     from instruments.guard import TimeoutGuard
+    from instruments.pfm import PFMInstrument
 
-    drivers = {"forrester": ForresterInstrument}
+    drivers = {"forrester": ForresterInstrument, "pfm": PFMInstrument}
     try:
         driver = drivers[config.kind]
     except KeyError:

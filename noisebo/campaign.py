@@ -13,6 +13,7 @@ import numpy as np
 from noisebo.config import CampaignConfig
 from noisebo.decision import Decision, decide, fit_key, fit_models, grids, hyperparameters, predict
 from noisebo.keys import MEASURE, SEED_POINTS, numpy_rng
+from noisebo.reduction import ShotValue, shot_values, usable
 from noisebo.schedule import reduce_shots
 from noisebo.state import CampaignState, Point
 
@@ -39,28 +40,30 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     return np.column_stack([x, t])
 
 
-def shot_values(
+def shot_readings(
     instrument, x: float, t: float, shots: int, seed: int, point: int,
-    done: Sequence[float] = (), on_shot: Callable[[int, float], None] | None = None,
-) -> list[float]:
-    """Shot values ``len(done)..shots-1`` of a point appended to ``done``; shot k draws from key
-    (seed, point, k), and each new value goes to ``on_shot(k, value)`` as soon as it is taken."""
-    values = list(done)
-    for k in range(len(values), shots):
-        value = instrument.measure(x, t, numpy_rng(seed, MEASURE, point, k)).value
+    done: Sequence = (), on_shot: Callable[[int, object], None] | None = None,
+) -> list:
+    """Readings ``len(done)..shots-1`` of a point appended to ``done``; shot k draws from key
+    (seed, point, k), and each new reading goes to ``on_shot(k, reading)`` as soon as it is taken."""
+    readings = list(done)
+    for k in range(len(readings), shots):
+        reading = instrument.measure(x, t, numpy_rng(seed, MEASURE, point, k))
         if on_shot is not None:
-            on_shot(k, value)
-        values.append(value)
-    return values
+            on_shot(k, reading)
+        readings.append(reading)
+    return readings
 
 
-def make_point(x: float, t: float, values: Sequence[float], model_noise: float | None) -> Point:
-    """A point from its shot values. With ``model_noise`` None the noise is measured (the shots'
-    sample sd), otherwise it is the given noise-model prediction."""
-    reduced = reduce_shots(values)
+def make_point(
+    x: float, t: float, readings: Sequence, model_noise: float | None, instrument_config
+) -> tuple[Point, list[ShotValue]]:
+    """A point from its readings (spectra are fitted here) and each shot's value. The point uses
+    the ok shots only. With ``model_noise`` None the noise is measured (the sample sd of the ok
+    shots, at least two needed), otherwise it is the given noise-model prediction."""
+    shots = shot_values(readings, instrument_config)
     measured = model_noise is None
-    if measured and not np.isfinite(reduced.shot_std):
-        raise ValueError("measuring the noise needs at least two shots")
+    reduced = reduce_shots(usable(shots, 2 if measured else 1))
     return Point(
         x=float(x),
         t=float(t),
@@ -69,7 +72,7 @@ def make_point(x: float, t: float, values: Sequence[float], model_noise: float |
         n_shots=reduced.n_shots,
         noise=reduced.shot_std if measured else float(model_noise),
         noise_measured=measured,
-    )
+    ), shots
 
 
 @dataclass(frozen=True)
@@ -122,16 +125,17 @@ def run_campaign(
     state = CampaignState()
     shots = config.schedule.shots_before
     for i, (x, t) in enumerate(seed_points(config, seed)):
-        state = state.with_point(make_point(x, t, shot_values(instrument, x, t, shots, seed, i), None))
+        readings = shot_readings(instrument, x, t, shots, seed, i)
+        state = state.with_point(make_point(x, t, readings, None, config.instrument)[0])
     decisions, latencies = [], []
     for step in range(config.schedule.n_steps):
         started = time.perf_counter()
         decision, state = decide(config, state, seed, step)
         latencies.append(time.perf_counter() - started)
         point_index = len(state.points)
-        values = shot_values(instrument, decision.x, decision.t, decision.shots, seed, point_index)
+        readings = shot_readings(instrument, decision.x, decision.t, decision.shots, seed, point_index)
         model_noise = None if decision.measure_noise else decision.noise_at_t
-        state = state.with_point(make_point(decision.x, decision.t, values, model_noise))
+        state = state.with_point(make_point(decision.x, decision.t, readings, model_noise, config.instrument)[0])
         decisions.append(decision)
         if on_step is not None:
             on_step(decision, state)

@@ -53,7 +53,76 @@ class ForresterInstrumentConfig(_Frozen):
     timeout_s: PositiveFloat | None = None
 
 
-InstrumentConfig = Annotated[Union[ForresterInstrumentConfig], Field(discriminator="kind")]
+class ScanProfileConfig(_Frozen):
+    """A line across a real PFM scan (pyNSID layout: amplitude and phase channels). ``file`` is
+    resolved against the project root when relative; ``start_px``/``end_px`` are (row, column)
+    pixels; the response is amplitude (pm) signed by the phase against the scan's dominant
+    domain phase, after a Gaussian smoothing of ``smooth_px`` pixels (the scan's own noise)."""
+
+    source: Literal["scan"] = "scan"
+    file: str = "data/pfm/PTO_Funakubo0003.h5"
+    amplitude_channel: int = Field(1, ge=0)
+    phase_channel: int = Field(3, ge=0)
+    start_px: tuple[FiniteFloat, FiniteFloat] = (20.0, 120.0)
+    end_px: tuple[FiniteFloat, FiniteFloat] = (200.0, 255.0)
+    smooth_px: NonNegativeFloat = 1.0
+
+    @model_validator(mode="after")
+    def _distinct(self) -> ScanProfileConfig:
+        if self.start_px == self.end_px:
+            raise ValueError("start_px and end_px must differ")
+        return self
+
+
+class SyntheticProfileConfig(_Frozen):
+    """Domains of alternating sign along ``length_um``, with walls of width ``wall_um`` where the
+    response passes through zero (tanh profile), and domain amplitudes ``amplitude_pm`` times a
+    per-domain factor drawn from ``seed``."""
+
+    source: Literal["synthetic"] = "synthetic"
+    length_um: PositiveFloat = 1.0
+    n_domains: int = Field(4, ge=1, le=1000)
+    amplitude_pm: PositiveFloat = 100.0
+    wall_um: PositiveFloat = 0.02
+    seed: int = 0
+
+
+ProfileConfig = Annotated[Union[ScanProfileConfig, SyntheticProfileConfig], Field(discriminator="source")]
+
+
+class PFMInstrumentConfig(_Frozen):
+    """Simulated contact-resonance PFM along a line profile (x in um).
+
+    A shot at (x, t) is a frequency sweep of ``round(sample_rate_hz * t)`` samples across
+    ``resonance_hz +- sweep_half_span_hz``: the amplitude spectrum of Eq. 8 with the local
+    response, ``q`` and the resonance, plus ``sample_noise_pm`` Gaussian noise per sample (the
+    source of the A1/sqrt(t) part once fitted); and a phase spectrum. Time-independent noise per
+    sweep: relative gain jitter ``gain_jitter`` (drive and contact), tip-position jitter
+    ``position_jitter_um`` and resonance drift ``resonance_jitter_hz``."""
+
+    kind: Literal["pfm"] = "pfm"
+    profile: ProfileConfig = ScanProfileConfig()
+    resonance_hz: PositiveFloat = 372_000.0
+    q: float = Field(250.0, gt=1, allow_inf_nan=False)
+    sweep_half_span_hz: PositiveFloat = 5_000.0
+    sample_rate_hz: PositiveFloat = 10_000.0
+    sample_noise_pm: NonNegativeFloat = 8_000.0
+    gain_jitter: NonNegativeFloat = 0.02
+    position_jitter_um: NonNegativeFloat = 0.001
+    resonance_jitter_hz: NonNegativeFloat = 50.0
+    q_bounds: tuple[PositiveFloat, PositiveFloat] = (5.0, 5000.0)
+    timeout_s: PositiveFloat | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> PFMInstrumentConfig:
+        if self.sweep_half_span_hz >= self.resonance_hz:
+            raise ValueError("sweep_half_span_hz must be below resonance_hz")
+        if not self.q_bounds[0] < self.q < self.q_bounds[1]:
+            raise ValueError(f"q ({self.q}) must lie inside q_bounds {self.q_bounds}")
+        return self
+
+
+InstrumentConfig = Annotated[Union[ForresterInstrumentConfig, PFMInstrumentConfig], Field(discriminator="kind")]
 
 
 class SpaceConfig(_Frozen):

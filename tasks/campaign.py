@@ -13,6 +13,7 @@ from instruments.guard import InstrumentError
 from noisebo import campaign as core
 from noisebo import decision as core_decision
 from noisebo.config import CampaignConfig
+from noisebo.reduction import Reading, ShotValue
 from noisebo.state import CampaignState, Point
 from noisebo.storage.journal import Record
 from noisebo.storage.recorder import Recorder
@@ -23,9 +24,9 @@ MEASURE_RETRIES = 3
 class ShotLog(Protocol):
     """Where shots go as they are taken (the campaign's journal)."""
 
-    def taken(self, point: int) -> list[float]: ...
+    def taken(self, point: int) -> list[Reading]: ...
 
-    def add(self, point: int, shot: int, x: float, t: float, value: float) -> None: ...
+    def add(self, point: int, shot: int, x: float, t: float, reading: Reading) -> None: ...
 
 
 def _instrument_failed(task, task_run, state) -> bool:
@@ -51,20 +52,23 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     retry_delay_seconds=0.2,
     retry_condition_fn=_instrument_failed,
 )
-def measure(instrument, x: float, t: float, shots: int, seed: int, point: int, log: ShotLog) -> list[float]:
+def measure(instrument, x: float, t: float, shots: int, seed: int, point: int, log: ShotLog) -> list[Reading]:
     """Shots of a point up to ``shots``, starting after those ``log`` already holds and handing
     each new one to the log as soon as it is taken; a retry or a resumed campaign therefore
     continues where the last attempt stopped, and no shot is taken or recorded twice."""
 
-    def add(k: int, value: float) -> None:
-        log.add(point, k, x, t, value)
+    def add(k: int, reading: Reading) -> None:
+        log.add(point, k, x, t, reading)
 
-    return core.shot_values(instrument, x, t, shots, seed, point, log.taken(point), add)
+    return core.shot_readings(instrument, x, t, shots, seed, point, log.taken(point), add)
 
 
 @task(name="reduce", cache_policy=NO_CACHE)
-def reduce(x: float, t: float, values: Sequence[float], model_noise: float | None) -> Point:
-    return core.make_point(x, t, values, model_noise)
+def reduce(
+    x: float, t: float, readings: Sequence[Reading], model_noise: float | None, instrument_config
+) -> tuple[Point, list[ShotValue]]:
+    """Each shot's value (resonance sweeps are SHO-fitted here), then the point from the ok ones."""
+    return core.make_point(x, t, readings, model_noise, instrument_config)
 
 
 @task(name="update-models", cache_policy=NO_CACHE)

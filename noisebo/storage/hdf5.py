@@ -78,16 +78,7 @@ def _fill(f: h5py.File, progress: Progress) -> None:
     _put(grid, "t", g.t, "s", "candidate t grid")
     _put(grid, "t_fine", g.t_fine, "s", "t grid of the predicted optimal t")
 
-    shots = f.create_group("shots")
-    rows = progress.shot_rows
-    for name, dtype, units, description in (
-        ("point", np.int32, "1", "index of the point the shot belongs to"),
-        ("shot", np.int32, "1", "shot index within its point"),
-        ("x", np.float64, "x units", "position"),
-        ("t", np.float64, "s", "exposure time"),
-        ("value", np.float64, "f units", "measured value"),
-    ):
-        _put(shots, name, np.asarray([r[name] for r in rows], dtype=dtype), units, description)
+    _fill_shots(f, progress)
 
     points = f.create_group("points")
     state = progress.state
@@ -124,6 +115,73 @@ def _fill(f: h5py.File, progress: Progress) -> None:
         _put(summary, "f_mean", progress.summary.arrays["f_mean"], "f units", "final predicted f on grid/x")
         _put(summary, "f_var", progress.summary.arrays["f_var"], "f units^2", "its variance")
         _put(summary, "noise_fine", progress.summary.arrays["noise_fine"], "f units", "final noise sd on grid/t_fine")
+
+
+SHOT_COLUMNS = (
+    ("point", np.int32, "1", "index of the point the shot belongs to"),
+    ("shot", np.int32, "1", "shot index within its point"),
+    ("x", np.float64, "x units", "position"),
+    ("t", np.float64, "s", "exposure (sweep) time"),
+    ("value", np.float64, "f units", "the shot's value (for a sweep: the signed SHO amplitude); NaN if rejected or not reduced yet"),
+    ("committed", bool, "bool", "its point has been reduced and committed"),
+    ("ok", bool, "bool", "the value is usable (False: rejected, see reason)"),
+)
+FIT_UNITS = {
+    "amplitude": ("f units", "fitted SHO amplitude r_real"),
+    "amplitude_se": ("f units", "its standard error from the fit covariance"),
+    "resonance_hz": ("Hz", "fitted resonance frequency"),
+    "resonance_se": ("Hz", "its standard error"),
+    "q": ("1", "fitted quality factor"),
+    "q_se": ("1", "its standard error"),
+    "phase_deg": ("deg", "local response phase (measured phase minus the oscillator's lag)"),
+    "sign": ("1", "domain sign from the phase"),
+}
+
+
+def _shot_value(row: dict) -> float:
+    if "reduced" in row:
+        return row["reduced"]
+    return float("nan") if row["value"] is None else float(row["value"])
+
+
+def _fill_shots(f: h5py.File, progress: Progress) -> None:
+    shots = f.create_group("shots")
+    rows = progress.shot_rows
+    getters = {
+        "value": _shot_value,
+        "committed": lambda r: "reduced" in r,
+        "ok": lambda r: bool(r.get("ok", False)),
+    }
+    for name, dtype, units, description in SHOT_COLUMNS:
+        get = getters.get(name, lambda r, n=name: r[n])
+        _put(shots, name, np.asarray([get(r) for r in rows], dtype=dtype), units, description)
+    strings = h5py.string_dtype()
+    _put(shots, "reason", np.asarray([r.get("reason", "") for r in rows], dtype=object).astype(strings),
+         "text", "why the shot was rejected (empty if ok)")
+    if any("amplitude" in r for r in rows):
+        fit = shots.create_group("fit")
+        for name, (units, description) in FIT_UNITS.items():
+            _put(fit, name, np.asarray([r.get(name, np.nan) for r in rows], dtype=np.float64), units, description)
+        _put(fit, "note", np.asarray([r.get("fit_reason", "") for r in rows], dtype=object).astype(strings),
+             "text", "how the fit went (empty: free fit; else why the nominal resonance was used or it failed)")
+    spectra = {i: rs for i, rs in progress.shots.items() if rs and rs[0].spectrum is not None}
+    if spectra:
+        group = f.create_group("spectra")
+        group.attrs["description"] = "raw resonance sweeps per point: (shot, row, sample); rows frequency, amplitude, phase"
+        group.attrs["rows"] = "frequency_hz, amplitude_pm, phase_deg"
+        for i, readings in sorted(spectra.items()):
+            data = np.stack([r.spectrum for r in readings])
+            ds = group.create_dataset(f"point_{i:04d}", data=data, chunks=(1, *data.shape[1:]), compression="gzip", compression_opts=1)
+            ds.attrs["units"] = "Hz, pm, deg"
+
+
+def read_spectra(path: Path, point: int) -> np.ndarray:
+    """The raw sweeps of one point, (n_shots, 3, N): rows frequency Hz, amplitude pm, phase deg."""
+    with h5py.File(path, "r") as f:
+        name = f"spectra/point_{point:04d}"
+        if name not in f:
+            raise CampaignFileError(f"{path}: no spectra for point {point}")
+        return f[name][()]
 
 
 def write_snapshot(path: Path, progress: Progress) -> None:
@@ -179,7 +237,7 @@ def read_campaign(path: Path) -> dict:
                 "attrs": {k: (v.item() if hasattr(v, "item") else v) for k, v in attrs.items()},
                 "grid": {k: v[()] for k, v in f["grid"].items()},
                 "points": {k: v[()] for k, v in f["points"].items()},
-                "shots": {k: v[()] for k, v in f["shots"].items()},
+                "shots": {k: v[()] for k, v in f["shots"].items() if isinstance(v, h5py.Dataset)},
                 "steps": {k: v[()] for k, v in f["steps"].items() if isinstance(v, h5py.Dataset)},
                 "summary": None,
             }

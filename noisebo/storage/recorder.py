@@ -89,13 +89,13 @@ class Recorder:
         self._writer.append(record)
         self.progress = records.replay_one(self.progress, record)
 
-    def taken(self, point: int) -> list[float]:
-        """Shot values of ``point`` already in the journal."""
+    def taken(self, point: int) -> list:
+        """Readings of ``point`` already in the journal."""
         return list(self.progress.shots.get(point, []))
 
-    def add(self, point: int, shot: int, x: float, t: float, value: float) -> None:
-        """Journal one shot."""
-        self.append(records.shot_record(point, shot, x, t, value))
+    def add(self, point: int, shot: int, x: float, t: float, reading) -> None:
+        """Journal one shot (its raw reading)."""
+        self.append(records.shot_record(point, shot, x, t, reading))
 
     def snapshot(self) -> None:
         write_snapshot(self.h5_path, self.progress)

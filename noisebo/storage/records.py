@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from noisebo.config import CampaignConfig, parse_config
+from noisebo.reduction import Reading
 from noisebo.state import CampaignState, Point
 from noisebo.storage.journal import Record
 
@@ -43,12 +44,33 @@ def decision_record(decision, latency_s: float) -> Record:
     return Record("decision", fields, arrays)
 
 
-def shot_record(point: int, shot: int, x: float, t: float, value: float) -> Record:
-    return Record("shot", {"point": int(point), "shot": int(shot), "x": float(x), "t": float(t), "value": float(value)})
+def shot_record(point: int, shot: int, x: float, t: float, reading) -> Record:
+    """One raw shot: its scalar value (None for a spectrum, which is fitted at reduction) and
+    its spectrum, if any, as an array."""
+    value = None if reading.value is None else float(reading.value)
+    fields = {"point": int(point), "shot": int(shot), "x": float(x), "t": float(t), "value": value}
+    arrays = {} if reading.spectrum is None else {"spectrum": np.asarray(reading.spectrum)}
+    return Record("shot", fields, arrays)
 
 
-def point_record(index: int, step: int, point: Point) -> Record:
-    return Record("point", {"index": int(index), "step": int(step), **asdict(point)})
+def point_record(index: int, step: int, point: Point, shots=()) -> Record:
+    """A committed point with each shot's reduced value, status and (for spectra) SHO fit."""
+    fields = {
+        "index": int(index), "step": int(step), **asdict(point),
+        "shot_ok": [bool(v.ok) for v in shots], "shot_reason": [v.reason for v in shots],
+        "fit_reason": [v.fit.reason if v.fit is not None else "" for v in shots],
+    }
+    arrays = {"shot_value": np.asarray([v.value for v in shots], dtype=np.float64)}
+    if any(v.fit is not None for v in shots):
+        arrays["shot_fit"] = np.asarray([_fit_numbers(v.fit) for v in shots], dtype=np.float64).reshape(-1, len(FIT_NUMBERS))
+    return Record("point", fields, arrays)
+
+
+FIT_NUMBERS = ("amplitude", "amplitude_se", "resonance_hz", "resonance_se", "q", "q_se", "phase_deg", "sign")
+
+
+def _fit_numbers(fit) -> list[float]:
+    return [float("nan")] * len(FIT_NUMBERS) if fit is None else [float(getattr(fit, k)) for k in FIT_NUMBERS]
 
 
 def summary_record(summary) -> Record:
@@ -68,7 +90,8 @@ class Progress:
     """A campaign as far as its journal goes.
 
     ``state`` holds the committed points; ``decisions`` every recorded decision (fields and
-    arrays); ``shots[i]`` the committed shot values of point i; ``pending`` the decision of a BO
+    arrays); ``shots[i]`` the journaled readings of point i; ``shot_rows`` one dict per shot
+    (raw fields, then its reduced value, status and fit once its point is committed); ``pending`` the decision of a BO
     step whose point is not committed yet (None if there is none)."""
 
     config: CampaignConfig
@@ -77,7 +100,7 @@ class Progress:
     created_utc: str
     state: CampaignState = field(default_factory=CampaignState)
     decisions: list[Record] = field(default_factory=list)
-    shots: dict[int, list[float]] = field(default_factory=dict)
+    shots: dict[int, list] = field(default_factory=dict)
     shot_rows: list[dict] = field(default_factory=list)
     point_steps: list[int] = field(default_factory=list)
     summary: Record | None = None
@@ -93,6 +116,24 @@ class Progress:
     def next_step(self) -> int:
         """The BO step to decide next."""
         return len(self.decisions)
+
+
+POINT_FIELDS = tuple(Point.__dataclass_fields__)
+
+
+def _commit_shots(progress: Progress, fields: dict, arrays: dict) -> None:
+    """Attach each shot's reduced value, status and fit to its row."""
+    rows = [r for r in progress.shot_rows if r["point"] == fields["index"]]
+    values = arrays.get("shot_value", np.full(len(rows), np.nan))
+    fits = arrays.get("shot_fit")
+    for k, row in enumerate(rows):
+        if k >= len(values):
+            break
+        row.update(reduced=float(values[k]), ok=fields.get("shot_ok", [True] * len(rows))[k],
+                   reason=fields.get("shot_reason", [""] * len(rows))[k],
+                   fit_reason=fields.get("fit_reason", [""] * len(rows))[k])
+        if fits is not None:
+            row.update(zip(FIT_NUMBERS, (float(v) for v in fits[k])))
 
 
 class CorruptJournal(ValueError):
@@ -122,13 +163,14 @@ def replay_one(progress: Progress, record: Record) -> Progress:
         shots = progress.shots.setdefault(f["point"], [])
         if f["point"] != len(progress.state.points) or f["shot"] != len(shots):
             raise CorruptJournal(f"shot {f['shot']} of point {f['point']} out of order")
-        shots.append(f["value"])
-        progress.shot_rows.append(f)
+        shots.append(Reading(f["value"], record.arrays.get("spectrum")))
+        progress.shot_rows.append(dict(f))
     elif record.type == "point":
         if f["index"] != len(progress.state.points):
             raise CorruptJournal(f"point {f['index']} out of order")
-        fields = {k: v for k, v in f.items() if k not in ("index", "step")}
+        fields = {k: v for k, v in f.items() if k in POINT_FIELDS}
         progress.state = progress.state.with_point(Point(**fields))
+        _commit_shots(progress, f, record.arrays)
         progress.point_steps.append(f["step"])
     elif record.type == "summary":
         progress.summary = record

@@ -5,6 +5,7 @@ from instruments import build
 from noisebo.campaign import make_point, run_campaign, seed_points
 from noisebo.config import CampaignConfig
 from noisebo.diagnostics import compile_count
+from noisebo.reduction import NoUsableShots, Reading
 
 SHORT = CampaignConfig().with_overrides(schedule={"n_steps": 5}, space={"n_x": 50, "n_t": 40})
 
@@ -57,7 +58,12 @@ def test_no_recompilation_after_the_first_step(short_run):
     assert marks[-1] == marks[0]
 
 
-def test_measured_noise_needs_two_shots():
-    with pytest.raises(ValueError, match="at least two shots"):
-        make_point(0.1, 1.0, [2.0], None)
-    assert make_point(0.1, 1.0, [2.0], 0.7).noise == 0.7
+def test_measured_noise_needs_two_usable_shots():
+    forrester = CampaignConfig().instrument
+    with pytest.raises(NoUsableShots, match="1 of 1 shots usable, 2 needed"):
+        make_point(0.1, 1.0, [Reading(2.0)], None, forrester)
+    with pytest.raises(NoUsableShots, match="1 of 2 shots usable, 2 needed .non-finite reading"):
+        make_point(0.1, 1.0, [Reading(2.0), Reading(float("nan"))], None, forrester)
+    point, shots = make_point(0.1, 1.0, [Reading(2.0), Reading(float("inf"))], 0.7, forrester)
+    assert (point.value, point.n_shots, point.noise) == (2.0, 1, 0.7)
+    assert [s.ok for s in shots] == [True, False] and shots[1].reason == "non-finite reading"

@@ -8,6 +8,7 @@ from instruments import build
 from instruments.guard import InstrumentError
 from noisebo import campaign as core
 from noisebo.decision import decide
+from noisebo.reduction import Reading
 from noisebo.state import CampaignState
 from noisebo.storage import journal, records
 from noisebo.storage.recorder import Recorder
@@ -18,8 +19,8 @@ def seeded_state(config, seed=3):
     inst = build(config.instrument)
     state = CampaignState()
     for i, (x, t) in enumerate(core.seed_points(config, seed)):
-        values = core.shot_values(inst, x, t, config.schedule.shots_before, seed, i)
-        state = state.with_point(core.make_point(x, t, values, None))
+        readings = core.shot_readings(inst, x, t, config.schedule.shots_before, seed, i)
+        state = state.with_point(core.make_point(x, t, readings, None, config.instrument)[0])
     return state
 
 
@@ -48,7 +49,8 @@ def test_measure_continues_after_the_shots_already_taken(tiny_config):
 
 
 def test_reduce_task(tiny_config):
-    point = ops.reduce.fn(0.5, 1.0, [1.0, 3.0], None)
+    point, shots = ops.reduce.fn(0.5, 1.0, [Reading(1.0), Reading(3.0)], None, tiny_config.instrument)
+    assert [s.value for s in shots] == [1.0, 3.0]
     assert point.value == 2.0 and point.shot_std == pytest.approx(np.sqrt(2.0)) and point.noise_measured
 
 
@@ -64,7 +66,7 @@ def test_update_models_and_acquire_equal_the_core_decision(tiny_config):
 def test_record_task_journals_then_snapshots(tiny_config, tmp_path):
     path = tmp_path / "c.h5"
     with Recorder.create(path, tiny_config, 1) as recorder:
-        ops.record.fn(recorder, records.shot_record(0, 0, 0.1, 1.0, 2.0))
+        ops.record.fn(recorder, records.shot_record(0, 0, 0.1, 1.0, Reading(2.0)))
     found, _ = journal.read(path.with_suffix(".journal"))
     assert [r.type for r in found] == ["campaign", "shot"]
     import h5py
@@ -118,7 +120,7 @@ def test_measure_retries_instrument_errors_and_keeps_the_shots_it_took(tiny_conf
         return ops.measure(inst, 0.3, 2.0, 5, 1, 0, log)
 
     values = one_point()
-    reference = core.shot_values(build(tiny_config.instrument), 0.3, 2.0, 5, 1, 0)
+    reference = core.shot_readings(build(tiny_config.instrument), 0.3, 2.0, 5, 1, 0)
     assert values == reference
     assert [k for _, k, _ in log.rows] == [0, 1, 2, 3, 4]
     assert inst.calls == 7

@@ -1,6 +1,7 @@
 import pytest
 
 from noisebo.config import CampaignConfig
+from noisebo.reduction import Reading
 from noisebo.state import Point
 from noisebo.storage import records
 from noisebo.storage.records import CorruptJournal, replay
@@ -15,21 +16,21 @@ def head():
 def test_replay_rebuilds_points_and_shots():
     progress = replay([
         head(),
-        records.shot_record(0, 0, 0.1, 1.0, 1.5),
-        records.shot_record(0, 1, 0.1, 1.0, 2.5),
+        records.shot_record(0, 0, 0.1, 1.0, Reading(1.5)),
+        records.shot_record(0, 1, 0.1, 1.0, Reading(2.5)),
         records.point_record(0, -1, POINT),
-        records.shot_record(1, 0, 0.4, 2.0, 9.0),
+        records.shot_record(1, 0, 0.4, 2.0, Reading(9.0)),
     ])
     assert progress.seed == 7 and progress.state.points == (POINT,)
-    assert progress.shots == {0: [1.5, 2.5], 1: [9.0]}
+    assert progress.shots == {0: [Reading(1.5), Reading(2.5)], 1: [Reading(9.0)]}
     assert progress.pending is None and progress.next_step == 0 and progress.status == "running"
 
 
 @pytest.mark.parametrize(
     "tail, message",
     [
-        ([records.shot_record(0, 1, 0.1, 1.0, 1.0)], "shot 1 of point 0 out of order"),
-        ([records.shot_record(3, 0, 0.1, 1.0, 1.0)], "shot 0 of point 3 out of order"),
+        ([records.shot_record(0, 1, 0.1, 1.0, Reading(1.0))], "shot 1 of point 0 out of order"),
+        ([records.shot_record(3, 0, 0.1, 1.0, Reading(1.0))], "shot 0 of point 3 out of order"),
         ([records.point_record(2, -1, POINT)], "point 2 out of order"),
         ([head()], "a second campaign record"),
         ([records.status_record("done"), records.Record("weird", {})], "unknown record type"),
@@ -42,4 +43,4 @@ def test_records_out_of_order_are_rejected(tail, message):
 
 def test_a_journal_must_start_with_its_campaign():
     with pytest.raises(CorruptJournal, match="does not start"):
-        replay([records.shot_record(0, 0, 0.1, 1.0, 1.0)])
+        replay([records.shot_record(0, 0, 0.1, 1.0, Reading(1.0))])

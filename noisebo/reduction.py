@@ -1,0 +1,63 @@
+"""From raw readings to shot values: a scalar reading is its own value; a resonance sweep is
+fitted with the SHO model and its value is the signed fitted amplitude. A shot that yields no
+trustworthy value is kept with ok False and the reason, and never reaches a model."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from noisebo.sho import SHOFit, fit_sho
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One shot as an instrument returns it: a scalar ``value`` (value units), or a raw
+    ``spectrum`` that the reduction turns into one (PFM: rows frequency Hz, amplitude pm,
+    phase deg, float32) with value None."""
+
+    value: float | None
+    spectrum: np.ndarray | None = None
+
+
+class ShotValue(NamedTuple):
+    """value: the shot's number (NaN when not ok); fit: the SHO fit behind it, if any."""
+
+    value: float
+    ok: bool
+    reason: str
+    fit: SHOFit | None
+
+
+class NoUsableShots(ValueError):
+    """A point none (or too few) of whose shots gave a value."""
+
+
+def shot_value(reading, instrument_config) -> ShotValue:
+    """The value of one reading (``instruments.base.Reading``) for this instrument's config."""
+    if reading.spectrum is None:
+        value = float(reading.value)
+        ok = bool(np.isfinite(value))
+        return ShotValue(value if ok else float("nan"), ok, "" if ok else "non-finite reading", None)
+    spectrum = np.asarray(reading.spectrum)
+    if spectrum.ndim != 2 or spectrum.shape[0] not in (2, 3):
+        return ShotValue(float("nan"), False, f"spectrum of shape {spectrum.shape}, expected (2 or 3, N)", None)
+    phase = spectrum[2] if spectrum.shape[0] == 3 else None
+    nominal = (instrument_config.resonance_hz, instrument_config.q)
+    fit = fit_sho(spectrum[0], spectrum[1], phase, tuple(instrument_config.q_bounds), 0.0, nominal)
+    return ShotValue(fit.value if fit.ok else float("nan"), fit.ok, fit.reason if not fit.ok else "", fit)
+
+
+def shot_values(readings: Sequence, instrument_config) -> list[ShotValue]:
+    return [shot_value(r, instrument_config) for r in readings]
+
+
+def usable(values: Sequence[ShotValue], needed: int) -> np.ndarray:
+    """The finite values of the ok shots; raise ``NoUsableShots`` with fewer than ``needed``."""
+    good = np.asarray([v.value for v in values if v.ok], dtype=np.float64)
+    if good.size < needed:
+        reasons = sorted({v.reason for v in values if not v.ok})
+        raise NoUsableShots(f"{good.size} of {len(values)} shots usable, {needed} needed ({'; '.join(reasons)})")
+    return good
