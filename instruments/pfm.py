@@ -7,7 +7,8 @@ phase spectrum (0 deg for a positive domain, 180 deg for a negative one, minus t
 lag). The per-sample noise phase channel has sd sample_noise / (m + sample_noise) rad for model
 amplitude m: coherent where the response is strong, up to 1 rad where it is weak.
 
-Per sweep the tip lands ``position_jitter_um`` off target, the gain (drive and contact) varies by
+Per sweep an electrostatic background of sd ``background_pm`` adds to the local response, the
+tip lands ``position_jitter_um`` off target, the gain (drive and contact) varies by
 ``gain_jitter`` and the resonance drifts by ``resonance_jitter_hz``: noise that longer sweeps do
 not average away. The amplitude noise after the SHO fit therefore falls roughly as
 A1/sqrt(t) + A0 because the fit averages 10 000*t samples; ``noise_law`` computes it from the
@@ -56,9 +57,9 @@ class PFMInstrument:
             raise ValueError(f"PFM sweep needs finite x and t > 0, got x={x}, t={t}")
         if not -1e-9 <= x <= self.length_um + 1e-9:
             raise ValueError(f"x={x} um lies outside the profile [0, {self.length_um:.4g}] um")
-        jitter = rng.standard_normal(3)
+        jitter = rng.standard_normal(4)
         landed = float(np.clip(x + c.position_jitter_um * jitter[0], 0.0, self.length_um))
-        response = float(self.profile(landed)) * (1.0 + c.gain_jitter * jitter[1])
+        response = float(self.profile(landed)) * (1.0 + c.gain_jitter * jitter[1]) + c.background_pm * jitter[3]
         resonance = c.resonance_hz + c.resonance_jitter_hz * jitter[2]
         freq = self.frequencies(t)
         model = sho_amplitude(freq, abs(response), resonance, c.q)
@@ -73,7 +74,7 @@ class PFMInstrument:
         """Single-shot sd (pm) of the fitted signed amplitude at sweep time t (s), averaged over
         the profile: sqrt(fit variance(t) + jitter variance). The fit variance is the asymptotic
         sigma^2 [(J^T J)^-1]_rr of Eq. 8 (independent of the amplitude); the jitter variance is
-        E_x Var[(1 + g e) r(x + d)] by Gauss-Hermite quadrature over the position jitter."""
+        E_x Var[(1 + g e) r(x + d) + b] by Gauss-Hermite quadrature over the position jitter."""
         t = np.asarray(t, dtype=np.float64)
         fit_var = np.array([self._fit_variance(int(n)) for n in self._samples(t).ravel()]).reshape(t.shape)
         return np.sqrt(fit_var + self._jitter_variance())
@@ -100,4 +101,4 @@ class PFMInstrument:
         r = self.profile(landed)
         mean = r @ weights
         second = (r**2) @ weights * (1.0 + c.gain_jitter**2)
-        return float(np.mean(second - mean**2))
+        return float(np.mean(second - mean**2)) + c.background_pm**2

@@ -37,6 +37,8 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
         t = s.t_min * (s.t_max / s.t_min) ** u[:, 1]
     else:
         t = s.t_min + u[:, 1] * (s.t_max - s.t_min)
+    if config.acquisition.fixed_t is not None:
+        t = np.full(n, grids(config).t[np.argmin(np.abs(grids(config).t - config.acquisition.fixed_t))])
     return np.column_stack([x, t])
 
 

@@ -97,7 +97,8 @@ class PFMInstrumentConfig(_Frozen):
     ``resonance_hz +- sweep_half_span_hz``: the amplitude spectrum of Eq. 8 with the local
     response, ``q`` and the resonance, plus ``sample_noise_pm`` Gaussian noise per sample (the
     source of the A1/sqrt(t) part once fitted); and a phase spectrum. Time-independent noise per
-    sweep: relative gain jitter ``gain_jitter`` (drive and contact), tip-position jitter
+    sweep: an electrostatic background response ``background_pm`` (sd, added to the local
+    response), relative gain jitter ``gain_jitter`` (drive and contact), tip-position jitter
     ``position_jitter_um`` and resonance drift ``resonance_jitter_hz``."""
 
     kind: Literal["pfm"] = "pfm"
@@ -106,9 +107,10 @@ class PFMInstrumentConfig(_Frozen):
     q: float = Field(250.0, gt=1, allow_inf_nan=False)
     sweep_half_span_hz: PositiveFloat = 5_000.0
     sample_rate_hz: PositiveFloat = 10_000.0
-    sample_noise_pm: NonNegativeFloat = 8_000.0
-    gain_jitter: NonNegativeFloat = 0.02
-    position_jitter_um: NonNegativeFloat = 0.001
+    sample_noise_pm: NonNegativeFloat = 5_000.0
+    background_pm: NonNegativeFloat = 2.0
+    gain_jitter: NonNegativeFloat = 0.01
+    position_jitter_um: NonNegativeFloat = 0.0005
     resonance_jitter_hz: NonNegativeFloat = 50.0
     q_bounds: tuple[PositiveFloat, PositiveFloat] = (5.0, 5000.0)
     timeout_s: PositiveFloat | None = None
@@ -165,6 +167,9 @@ class AcquisitionConfig(_Frozen):
     maximize: bool = True
     ucb_kappa: PositiveFloat = 2.0
     ei_xi: NonNegativeFloat = 0.01
+    fixed_t: PositiveFloat | None = None
+    """A baseline without time optimisation: every proposal uses the t-grid value nearest this
+    (s), chosen by the policy's acquisition over x alone; None (default) optimises t."""
 
 
 class PrimaryModelConfig(_Frozen):
@@ -245,6 +250,13 @@ class CampaignConfig(_Frozen):
     inference: InferenceConfig = InferenceConfig()
     schedule: ScheduleConfig = ScheduleConfig()
 
+    @model_validator(mode="after")
+    def _fixed_t_in_range(self) -> CampaignConfig:
+        fixed, s = self.acquisition.fixed_t, self.space
+        if fixed is not None and not s.t_min <= fixed <= s.t_max:
+            raise ValueError(f"acquisition.fixed_t ({fixed}) must lie in [t_min, t_max] = [{s.t_min}, {s.t_max}]")
+        return self
+
     @field_validator("schema_version")
     @classmethod
     def _known_version(cls, value: int) -> int:
@@ -253,10 +265,12 @@ class CampaignConfig(_Frozen):
         return value
 
     def with_overrides(self, **sections: Any) -> CampaignConfig:
-        """A new validated config with some fields replaced, e.g. ``acquisition={"policy": "double"}``."""
+        """A new validated config with some fields replaced, e.g. ``acquisition={"policy": "double"}``.
+        A section dict merges into the old one, unless it names another instrument ``kind``."""
         data = self.model_dump()
         for key, value in sections.items():
-            if isinstance(value, dict) and isinstance(data.get(key), dict):
+            old = data.get(key)
+            if isinstance(value, dict) and isinstance(old, dict) and value.get("kind", old.get("kind")) == old.get("kind"):
                 data[key] = {**data[key], **value}
             else:
                 data[key] = value

@@ -142,10 +142,14 @@ def _predict_program(config: CampaignConfig):
 @lru_cache(maxsize=None)
 def _propose_program(config: CampaignConfig):
     acq, rew = config.acquisition, config.reward
+    g = grids(config)
+    allowed = np.ones(g.t.size, dtype=bool)
+    if acq.fixed_t is not None:
+        allowed = np.arange(g.t.size) == int(np.argmin(np.abs(g.t - acq.fixed_t)))
 
     def propose(post: Posterior, shots):
         values = acquisition_map(post, shots, acq, rew)
-        i, j = argmax_2d(values)
+        i, j = argmax_2d(jnp.where(jnp.asarray(allowed)[None, :], values, -jnp.inf))
         return values, i, j
 
     return jax.jit(propose)

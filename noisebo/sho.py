@@ -203,6 +203,8 @@ def _free_fit(freq_hz, amplitude, phase_deg, q_bounds, reference_phase_deg) -> S
         return _failed("non-finite samples in the sweep")
     if not np.all(np.diff(freq) > 0):
         return _failed("frequencies must increase along the sweep")
+    if np.ptp(amp) == 0:
+        return _failed("flat spectrum: no resonance")
     centre = 0.5 * (freq[0] + freq[-1])
     u = freq / centre
     lower = np.array([0.0, u[0], q_bounds[0]])

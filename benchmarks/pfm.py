@@ -1,0 +1,117 @@
+"""The simulated PFM protocol over many seeds, against fixed-sweep-time baselines.
+
+    python benchmarks/pfm.py [--config PATH] [--seeds N] [--first-seed S] [--json PATH]
+
+For each seed it runs the configured campaign (t optimised) and two baselines that keep every
+sweep at a fixed time (2 s and 0.1 s) with the same steps and shot schedule, then prints: the
+fraction of optimised campaigns whose final predicted optimal t lies within 10 % of t* (t*
+computed numerically from the simulator's own noise law and the configured reward), the usual
+convergence and latency figures, and the final RMSE of the profile and the total measurement
+time of all three. It also prints SHO fits per second for 1 000- and 20 000-sample sweeps, and
+the simulator's noise law against the scatter of fitted amplitudes it actually produces.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from forrester import run_one  # noqa: E402
+
+from instruments import build  # noqa: E402
+from noisebo.config import load_config  # noqa: E402
+from noisebo.metrics import summarise_campaigns, summary_table  # noqa: E402
+from noisebo.reduction import shot_value  # noqa: E402
+from noisebo.reward import true_optimal_t  # noqa: E402
+
+BASELINES = {"fixed 2 s": 2.0, "fixed 0.1 s": 0.1}
+
+
+def fit_speed(instrument, config, t: float, repeats: int = 60) -> float:
+    """SHO fits per second of t-second sweeps (median over three timed batches)."""
+    rng = np.random.default_rng(0)
+    readings = [instrument.measure(0.3, t, rng) for _ in range(repeats)]
+    rates = []
+    for _ in range(3):
+        started = time.perf_counter()
+        for r in readings:
+            shot_value(r, config.instrument)
+        rates.append(repeats / (time.perf_counter() - started))
+    return float(np.median(rates))
+
+
+def law_check(instrument, config, ts=(0.1, 0.5, 2.0), positions=16, repeats=20) -> list[dict]:
+    """Pooled within-position sd of fitted values at random positions, next to the noise law."""
+    rng = np.random.default_rng(1)
+    rows = []
+    for t in ts:
+        var = []
+        for x in rng.uniform(config.space.x_min, config.space.x_max, positions):
+            values = [shot_value(instrument.measure(x, t, rng), config.instrument).value for _ in range(repeats)]
+            var.append(np.nanvar(values, ddof=1))
+        rows.append({"t": t, "empirical_sd": float(np.sqrt(np.mean(var))), "law_sd": float(instrument.noise_law(np.array([t]))[0])})
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "pfm.yaml"))
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args(argv)
+
+    base = load_config(args.config)
+    instrument = build(base.instrument)
+    s, rew = base.space, base.reward
+    t_star = true_optimal_t(instrument.noise_law, s.t_min, s.t_max, rew.alpha, rew.beta)
+    variants = {f"{base.acquisition.policy} (t optimised)": base}
+    variants |= {name: base.with_overrides(acquisition={"fixed_t": t}) for name, t in BASELINES.items()}
+    records, rows, within = [], {}, {}
+    for name, config in variants.items():
+        mine = []
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            rec = run_one(config, instrument, seed) | {"variant": name}
+            mine.append(rec)
+            print(
+                f"{name:>20} seed {seed:3d}: converged step {rec['converged_step']}, t_opt {rec['t_opt_pred'][-1]:.3f} s "
+                f"({100 * rec['t_opt_rel_error']:.1f} %), RMSE {rec['rmse_f']:.2f} pm, time {rec['total_measurement_time']:.0f} s",
+                file=sys.stderr, flush=True,
+            )
+        records += mine
+        rows[name] = summarise_campaigns(mine)
+        within[name] = sum(r["t_opt_rel_error"] <= 0.10 for r in mine) / len(mine)
+
+    print(f"\nt* = {t_star:.4f} s from the simulator's noise law   (median [IQR], RMSE in pm)")
+    print(summary_table(rows))
+    print("\nfinal predicted optimal t within 10 % of t*: "
+          + ", ".join(f"{k} {100 * v:.0f} %" for k, v in within.items() if "optimised" in k))
+    print("\n| campaign | final RMSE of the profile (pm) | total measurement time (s) |\n|---|---|---|")
+    for name, row in rows.items():
+        rm, tm = row["rmse_f"], row["measurement_time_s"]
+        print(f"| {name} | {rm[0]:.2f} [{rm[1]:.2f}, {rm[2]:.2f}] | {tm[0]:.0f} [{tm[1]:.0f}, {tm[2]:.0f}] |")
+    speeds = {n: fit_speed(instrument, base, n / base.instrument.sample_rate_hz) for n in (1000, 20000)}
+    print("\nSHO fits per second: " + ", ".join(f"{n} samples {v:.0f}/s" for n, v in speeds.items()))
+    check = law_check(instrument, base)
+    print("noise law vs fitted scatter (pooled over 16 random positions, 20 sweeps each): "
+          + ", ".join(f"t={c['t']} s law {c['law_sd']:.2f} pm, measured {c['empirical_sd']:.2f} pm" for c in check))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        out = {"t_star": t_star, "records": records, "summary": rows, "within_10pct": within,
+               "fits_per_second": speeds, "noise_law_check": check}
+        args.json.write_text(json.dumps(out, indent=1))
+        print(f"\nwrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,78 @@
+import numpy as np
+import pytest
+
+from instruments import Instrument, build
+from instruments.pfm import PFMInstrument
+from instruments.pfm_profile import ProfileError, scan_profile, synthetic_profile
+from noisebo.config import ConfigError, PFMInstrumentConfig, ScanProfileConfig, SyntheticProfileConfig, parse_config
+from noisebo.reduction import shot_value
+
+SYNTH = PFMInstrumentConfig(profile=SyntheticProfileConfig(length_um=1.0, n_domains=2, amplitude_pm=100.0, seed=0))
+
+
+def test_scan_profile_is_the_signed_amplitude_along_the_line():
+    profile = scan_profile(ScanProfileConfig())
+    # 225 pixels; the scan's x axis runs 0..1 um over 256 pixels
+    assert profile.length_um == pytest.approx(np.hypot(180, 135) / 255, rel=1e-6)
+    assert profile.response_pm.min() < -50 and profile.response_pm.max() > 100  # both domain signs
+
+
+def test_synthetic_profile_alternates_sign_and_vanishes_at_walls():
+    profile = synthetic_profile(SyntheticProfileConfig(length_um=1.0, n_domains=2, wall_um=0.02))
+    assert profile(0.25) > 50 and profile(0.75) < -50 and abs(profile(0.5)) < 1e-9
+
+
+def test_driver_fits_the_protocol_and_is_deterministic():
+    inst = build(SYNTH)
+    assert isinstance(inst, Instrument) and inst.name == "pfm"
+    a = inst.measure(0.25, 0.3, np.random.default_rng(5))
+    b = inst.measure(0.25, 0.3, np.random.default_rng(5))
+    assert a.value is None and a.spectrum.shape == (3, 3000) and a.spectrum.dtype == np.float32
+    np.testing.assert_array_equal(a.spectrum, b.spectrum)
+
+
+def test_fitted_sweep_measures_the_local_response():
+    inst = PFMInstrument(SYNTH)
+    rng = np.random.default_rng(0)
+    for x in (0.25, 0.75):
+        values = [shot_value(inst.measure(x, 1.0, rng), SYNTH).value for _ in range(20)]
+        assert np.mean(values) == pytest.approx(inst.truth(x), abs=3 * inst.noise_law(np.array([1.0]))[0])
+
+
+def test_noise_law_falls_with_sweep_time_towards_the_time_independent_floor():
+    inst = PFMInstrument(SYNTH)
+    law = inst.noise_law(np.array([0.1, 0.5, 2.0, 100.0]))
+    assert np.all(np.diff(law) < 0)
+    assert law[-1] == pytest.approx(np.sqrt(inst._jitter_variance()), rel=0.02) and law[-1] >= SYNTH.background_pm
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"profile": {"source": "scan", "file": "nowhere.h5"}}, "cannot open the PFM scan"),
+        ({"profile": {"source": "scan", "start_px": [0, 0], "end_px": [300, 10]}}, "outside the 256 x 256 scan"),
+    ],
+)
+def test_bad_profiles_name_the_problem(change, message):
+    with pytest.raises(ProfileError, match=message):
+        PFMInstrument(PFMInstrumentConfig(**change))
+
+
+@pytest.mark.parametrize(
+    "instrument, field",
+    [
+        ({"kind": "pfm", "q": 0.5}, "instrument.pfm.q"),
+        ({"kind": "pfm", "sweep_half_span_hz": 400000.0}, "sweep_half_span_hz must be below"),
+        ({"kind": "pfm", "profile": {"source": "scan", "start_px": [3, 3], "end_px": [3, 3]}}, "must differ"),
+        ({"kind": "pfm", "profile": {"source": "film"}}, "instrument.pfm.profile"),
+        ({"kind": "pfm", "sample_noise_pm": -1}, "sample_noise_pm"),
+    ],
+)
+def test_bad_pfm_config_is_rejected_naming_the_field(instrument, field):
+    with pytest.raises(ConfigError, match=field):
+        parse_config({"instrument": instrument})
+
+
+def test_measuring_outside_the_profile_is_an_error():
+    with pytest.raises(ValueError, match="outside the profile"):
+        PFMInstrument(SYNTH).measure(1.5, 0.1, np.random.default_rng(0))
