@@ -1,6 +1,6 @@
 """The simulated PFM protocol over many seeds, against fixed-sweep-time baselines.
 
-    python benchmarks/pfm.py [--config PATH] [--seeds N] [--first-seed S] [--json PATH]
+    python benchmarks/pfm.py [--config PATH] [--seeds N] [--baseline-seeds M] [--first-seed S] [--json PATH]
 
 For each seed it runs the configured campaign (t optimised) and two baselines that keep every
 sweep at a fixed time (2 s and 0.1 s) with the same steps and shot schedule, then prints: the
@@ -67,6 +67,7 @@ def main(argv=None) -> int:
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "pfm.yaml"))
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--baseline-seeds", type=int, default=None, help="seeds per fixed-t baseline (default: --seeds)")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
 
@@ -79,7 +80,8 @@ def main(argv=None) -> int:
     records, rows, within = [], {}, {}
     for name, config in variants.items():
         mine = []
-        for seed in range(args.first_seed, args.first_seed + args.seeds):
+        n = args.seeds if "optimised" in name or args.baseline_seeds is None else args.baseline_seeds
+        for seed in range(args.first_seed, args.first_seed + n):
             rec = run_one(config, instrument, seed) | {"variant": name}
             mine.append(rec)
             print(
