@@ -38,7 +38,8 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     else:
         t = s.t_min + u[:, 1] * (s.t_max - s.t_min)
     if config.acquisition.fixed_t is not None:
-        t = np.full(n, grids(config).t[np.argmin(np.abs(grids(config).t - config.acquisition.fixed_t))])
+        t_grid = grids(config).t
+        t = np.full(n, t_grid[np.argmin(np.abs(t_grid - config.acquisition.fixed_t))])
     return np.column_stack([x, t])
 
 

@@ -158,18 +158,28 @@ def fit_sho(
     free fit fails (typically a weak response buried in noise): r_real is then the linear
     least-squares projection on the nominal resonance curve, with its exact standard error, and
     ``reason`` says so while ``ok`` stays True."""
+    problem = _input_problem(np.asarray(freq_hz, dtype=np.float64), np.asarray(amplitude, dtype=np.float64))
+    if problem:
+        return _failed(problem)
     fit = _free_fit(freq_hz, amplitude, phase_deg, q_bounds, reference_phase_deg)
-    if fit.ok or nominal is None or not _usable(freq_hz, amplitude):
+    if fit.ok or nominal is None:
         return fit
     return _nominal_fit(freq_hz, amplitude, phase_deg, nominal, reference_phase_deg, fit.reason)
 
 
-def _usable(freq_hz, amplitude) -> bool:
-    freq, amp = np.asarray(freq_hz), np.asarray(amplitude)
-    return (
-        freq.ndim == 1 and freq.shape == amp.shape and freq.size >= MIN_SAMPLES
-        and bool(np.all(np.isfinite(freq)) and np.all(np.isfinite(amp)) and np.all(np.diff(freq) > 0))
-    )
+def _input_problem(freq: np.ndarray, amp: np.ndarray) -> str:
+    """Why a sweep cannot be fitted at all (empty string: it can)."""
+    if freq.ndim != 1 or freq.shape != amp.shape:
+        return f"frequency and amplitude must be equal-length 1-D arrays, got {freq.shape} and {amp.shape}"
+    if freq.size < MIN_SAMPLES:
+        return f"{freq.size} samples; a fit needs at least {MIN_SAMPLES}"
+    if not (np.all(np.isfinite(freq)) and np.all(np.isfinite(amp))):
+        return "non-finite samples in the sweep"
+    if not np.all(np.diff(freq) > 0):
+        return "frequencies must increase along the sweep"
+    if np.ptp(amp) == 0:
+        return "flat spectrum: no resonance"
+    return ""
 
 
 def _nominal_fit(freq_hz, amplitude, phase_deg, nominal, reference_phase_deg, why: str) -> SHOFit:
@@ -195,16 +205,6 @@ def _nominal_fit(freq_hz, amplitude, phase_deg, nominal, reference_phase_deg, wh
 def _free_fit(freq_hz, amplitude, phase_deg, q_bounds, reference_phase_deg) -> SHOFit:
     freq = np.asarray(freq_hz, dtype=np.float64)
     amp = np.asarray(amplitude, dtype=np.float64)
-    if freq.ndim != 1 or freq.shape != amp.shape:
-        return _failed(f"frequency and amplitude must be equal-length 1-D arrays, got {freq.shape} and {amp.shape}")
-    if freq.size < MIN_SAMPLES:
-        return _failed(f"{freq.size} samples; a fit needs at least {MIN_SAMPLES}")
-    if not (np.all(np.isfinite(freq)) and np.all(np.isfinite(amp))):
-        return _failed("non-finite samples in the sweep")
-    if not np.all(np.diff(freq) > 0):
-        return _failed("frequencies must increase along the sweep")
-    if np.ptp(amp) == 0:
-        return _failed("flat spectrum: no resonance")
     centre = 0.5 * (freq[0] + freq[-1])
     u = freq / centre
     lower = np.array([0.0, u[0], q_bounds[0]])

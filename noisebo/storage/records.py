@@ -123,7 +123,8 @@ POINT_FIELDS = tuple(Point.__dataclass_fields__)
 
 def _commit_shots(progress: Progress, fields: dict, arrays: dict) -> None:
     """Attach each shot's reduced value, status and fit to its row."""
-    rows = [r for r in progress.shot_rows if r["point"] == fields["index"]]
+    taken = len(progress.shots.get(fields["index"], []))
+    rows = progress.shot_rows[len(progress.shot_rows) - taken:]  # a point's shots are the latest rows
     values = arrays.get("shot_value", np.full(len(rows), np.nan))
     fits = arrays.get("shot_fit")
     for k, row in enumerate(rows):
