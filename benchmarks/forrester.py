@@ -65,12 +65,16 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--inference", choices=["map", "nuts"], default=None, help="override the config's mode")
+    parser.add_argument("--quadrature", type=int, default=None,
+                        help="override inference.primary_quadrature (nodes per dimension, 0 = MAP)")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
 
     base = load_config(args.config)
     if args.inference:
         base = base.with_overrides(inference={"mode": args.inference})
+    if args.quadrature is not None:
+        base = base.with_overrides(inference={"primary_quadrature": args.quadrature})
     policies = ["reward", "double"] if args.policy == "both" else [args.policy]
     instrument = build(base.instrument)
     s, rew = base.space, base.reward
@@ -93,7 +97,8 @@ def main(argv=None) -> int:
         records += mine
         rows[policy] = summarise_campaigns(mine)
         rows[policy]["recompiles_after_first"] = sum(r["recompiles_after_first_step"] or 0 for r in mine)
-    print(f"\nt* = {t_star:.4f} s   inference = {base.inference.mode}   (median [IQR])")
+    print(f"\nt* = {t_star:.4f} s   inference = {base.inference.mode}   "
+          f"primary quadrature = {base.inference.primary_quadrature}   (median [IQR])")
     print(summary_table(rows))
     print("XLA recompilations after the first BO step, all campaigns: "
           + ", ".join(f"{p} {r['recompiles_after_first']}" for p, r in rows.items()))

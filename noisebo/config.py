@@ -207,6 +207,9 @@ class InferenceConfig(_Frozen):
     "map": multi-start BFGS to the posterior mode; the noise model adds a Laplace approximation
     (``laplace_samples`` draws) so its predictions carry hyperparameter uncertainty.
     "nuts": numpyro NUTS; predictions average over ``predict_samples`` thinned posterior draws.
+    ``primary_quadrature`` (map mode): if > 0, the GP for f predicts with a weighted Gauss-Hermite
+    quadrature of its two-hyperparameter posterior around the mode, this many nodes per
+    dimension, instead of the mode alone.
     """
 
     mode: Literal["map", "nuts"] = "map"
@@ -215,6 +218,7 @@ class InferenceConfig(_Frozen):
     nuts_warmup: int = Field(500, ge=10)
     nuts_samples: int = Field(500, ge=10)
     predict_samples: int = Field(100, ge=1)
+    primary_quadrature: int = Field(0, ge=0, le=15)
 
 
 class ScheduleConfig(_Frozen):

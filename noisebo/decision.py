@@ -62,11 +62,11 @@ def _models(config: CampaignConfig):
     return primary.make_model(config.primary_model), noise_model.make_model(config.noise_model)
 
 
-def _fit_one(config: CampaignConfig, model, data, key, laplace: bool, guess: dict) -> inference.Samples:
+def _fit_one(config: CampaignConfig, model, data, key, guess: dict, laplace: int, quadrature: int) -> inference.Samples:
     inf = config.inference
     if inf.mode == "nuts":
         return inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.predict_samples)
-    return inference.fit_map(model, data, key, inf.restarts, inf.laplace_samples if laplace else 0, guess)
+    return inference.fit_map(model, data, key, inf.restarts, laplace, guess, quadrature)
 
 
 def fit_models(config: CampaignConfig, state: CampaignState, key: jax.Array) -> Fitted:
@@ -82,11 +82,14 @@ def fit_models(config: CampaignConfig, state: CampaignState, key: jax.Array) -> 
     )
     primary_fn, noise_fn = _models(config)
     k_primary, k_noise = jax.random.split(key)
+    inf = config.inference
     return Fitted(
-        _fit_one(config, primary_fn, pdata, k_primary, False, primary.prior_median(config.primary_model)),
+        _fit_one(config, primary_fn, pdata, k_primary, primary.prior_median(config.primary_model), 0,
+                 inf.primary_quadrature),
         pdata,
         std,
-        _fit_one(config, noise_fn, ndata, k_noise, True, noise_model.initial_guess(ndata, config.noise_model)),
+        _fit_one(config, noise_fn, ndata, k_noise, noise_model.initial_guess(ndata, config.noise_model),
+                 inf.laplace_samples, 0),
         ndata,
         scale,
     )
@@ -109,13 +112,15 @@ def _predict_program(config: CampaignConfig):
     def predict(fitted: Fitted, primary_first: bool, noise_first: bool, f_best) -> Prediction:
         std = fitted.standardisation
         f_mean, f_var = inference.combine(
-            *primary.predict_samples(fitted.primary.params, fitted.primary_data, xs), primary_first
+            *primary.predict_samples(fitted.primary.params, fitted.primary_data, xs), primary_first,
+            fitted.primary.weights,
         )
         t_train = fitted.noise_data.t
         t_all = jnp.concatenate([jnp.asarray(g.t), jnp.asarray(g.t_fine), t_train])
         ts_all = (t_all - s.t_min) / (s.t_max - s.t_min)
         n_mean, n_var = inference.combine(
-            *noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t_all, ts_all), noise_first
+            *noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t_all, ts_all), noise_first,
+            fitted.noise.weights,
         )
         n_mean, n_var = n_mean * fitted.noise_scale, n_var * fitted.noise_scale**2
         grid_mean, fine_mean, train_mean = n_mean[:n_t], n_mean[n_t : n_t + N_FINE], n_mean[n_t + N_FINE :]
@@ -184,12 +189,14 @@ class Decision:
 
 
 def hyperparameters(fitted: Fitted) -> dict[str, float]:
-    """Point summaries of the fitted hyperparameters (MAP, or posterior mean), A0/A1 in value units."""
+    """Point summaries of the fitted hyperparameters (MAP, or the posterior or quadrature mean),
+    A0/A1 in value units."""
     out = {}
     for prefix, samples in (("primary", fitted.primary), ("noise", fitted.noise)):
+        weights = None if samples.weights is None else np.asarray(samples.weights)
         for name, values in samples.params.items():
             v = np.asarray(values)
-            est = float(v[0] if samples.map_first else v.mean())
+            est = float(v[0] if samples.map_first else np.average(v, weights=weights))
             if prefix == "noise" and name in ("a0", "a1"):
                 est *= fitted.noise_scale
             out[f"{prefix}.{name}"] = est

@@ -8,6 +8,10 @@ a flag saying how predictions combine them.
   Optionally a Laplace approximation around it (Gaussian in the unconstrained space with the
   Hessian of the negative log posterior as precision). Sample 0 is the MAP point; the others are
   Laplace draws used only for the spread of predictions.
+  Or a quadrature of the hyperposterior around it: a Gauss-Hermite grid laid along the
+  Hessian's eigenvectors (slightly widened, ``QUADRATURE_WIDTH``), each node weighted by the exact
+  posterior density over the Gaussian it was drawn for. Predictions are the weighted mixture: a
+  deterministic stand-in for NUTS when the model has few hyperparameters.
 - NUTS: numpyro's sampler; predictions average over thinned posterior draws.
 
 Data enter as traced arguments with fixed (padded) shapes, so each fitter compiles once.
@@ -25,7 +29,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from numpyro import handlers
 from numpyro.infer import MCMC, NUTS
-from numpyro.infer.util import constrain_fn, log_density, unconstrain_fn
+from numpyro.infer.util import constrain_fn, log_density, potential_energy, unconstrain_fn
 from scipy import optimize
 
 # numpyro's effect-handler stack is one module-level list, shared by all threads, so two threads
@@ -47,11 +51,18 @@ MIN_CURVATURE = 1.0  # Laplace draws never spread wider than one unit of unconst
 UNCONSTRAINED_BOUND = 12.0  # keeps L-BFGS-B away from degenerate corners (e.g. length -> 0).
 
 
+QUADRATURE_WIDTH = 1.25  # node spread in Laplace standard deviations: a margin for skewed posteriors.
+
+
 class Samples(NamedTuple):
-    """Constrained parameters, each (S,), and whether sample 0 is a MAP point (else all are draws)."""
+    """Constrained parameters, each (S,), and whether sample 0 is a MAP point (else all are draws).
+
+    ``weights`` (S,), summing to 1, when the draws are weighted (quadrature); None: equal weights.
+    """
 
     params: dict
     map_first: bool
+    weights: jnp.ndarray | None = None
 
 
 def _latent_prior_draw(model, key, data) -> dict:
@@ -64,10 +75,26 @@ class _MapProgram(NamedTuple):
     flatten: Callable  # (constrained params, data) -> (d,) unconstrained point
     value_and_grad: Callable  # (flat, data) -> (objective, gradient)
     laplace: Callable  # (flat, key, data) -> params dict (1 + laplace_samples,)
+    quadrature: Callable  # (flat, data) -> (params dict (nodes^d,), weights (nodes^d,))
+
+
+def _eigen_curvature(objective, best, data):
+    """Eigenvalues (floored at MIN_CURVATURE) and eigenvectors of the objective's Hessian at best."""
+    hess = jax.hessian(objective)(best, data)
+    evals, evecs = jnp.linalg.eigh(0.5 * (hess + hess.T))
+    return jnp.maximum(jnp.where(jnp.isfinite(evals), evals, MIN_CURVATURE), MIN_CURVATURE), evecs
+
+
+def _hermite_grid(nodes: int, dims: int) -> tuple[np.ndarray, np.ndarray]:
+    """Probabilists' Gauss-Hermite nodes (nodes^dims, dims) and log weights (nodes^dims,)."""
+    u, w = np.polynomial.hermite_e.hermegauss(nodes)
+    grid = np.stack(np.meshgrid(*[u] * dims, indexing="ij"), axis=-1).reshape(-1, dims)
+    log_w = np.log(np.stack(np.meshgrid(*[w] * dims, indexing="ij"), axis=-1)).sum(axis=-1).reshape(-1)
+    return grid, log_w
 
 
 @lru_cache(maxsize=None)
-def _map_program(model: Callable, restarts: int, laplace_samples: int) -> _MapProgram:
+def _map_program(model: Callable, restarts: int, laplace_samples: int, quadrature_nodes: int = 0) -> _MapProgram:
     """Jitted pieces of a MAP fit; compiled once per model and padded data shape."""
 
     def unravel_for(data):
@@ -89,13 +116,23 @@ def _map_program(model: Callable, restarts: int, laplace_samples: int) -> _MapPr
         unravel = unravel_for(data)
         flats = best[None, :]
         if laplace_samples:
-            hess = jax.hessian(objective)(best, data)
-            hess = 0.5 * (hess + hess.T)
-            evals, evecs = jnp.linalg.eigh(hess)
-            evals = jnp.maximum(jnp.where(jnp.isfinite(evals), evals, MIN_CURVATURE), MIN_CURVATURE)
+            evals, evecs = _eigen_curvature(objective, best, data)
             z = jax.random.normal(key, (laplace_samples, best.shape[0]))
             flats = jnp.concatenate([flats, best + (z / jnp.sqrt(evals)) @ evecs.T], axis=0)
         return jax.vmap(lambda f: constrain_fn(model, (data,), {}, unravel(f)))(flats)
+
+    def quadrature(best, data):
+        # The integral over unconstrained space needs the transform's Jacobian: potential_energy
+        # has it, the MAP objective (a mode in constrained space) does not.
+        unravel = unravel_for(data)
+        evals, evecs = _eigen_curvature(objective, best, data)
+        u, log_w = _hermite_grid(quadrature_nodes, best.shape[0])
+        flats = best + (QUADRATURE_WIDTH * jnp.asarray(u) / jnp.sqrt(evals)) @ evecs.T
+        energy = jax.vmap(lambda f: potential_energy(model, (data,), {}, unravel(f)))(flats)
+        log_q = -0.5 * jnp.sum(jnp.asarray(u) ** 2, axis=1)  # the Gaussian the nodes stand for
+        log_weights = jnp.asarray(log_w) - jnp.where(jnp.isfinite(energy), energy, jnp.inf) - log_q
+        params = jax.vmap(lambda f: constrain_fn(model, (data,), {}, unravel(f)))(flats)
+        return params, jax.nn.softmax(log_weights)
 
     def flatten(params, data):
         return ravel_pytree(unconstrain_fn(model, (data,), {}, params))[0]
@@ -105,6 +142,7 @@ def _map_program(model: Callable, restarts: int, laplace_samples: int) -> _MapPr
         jax.jit(_traced(flatten)),
         jax.jit(_traced(jax.value_and_grad(objective))),
         jax.jit(_traced(laplace)),
+        jax.jit(_traced(quadrature)),
     )
 
 
@@ -127,10 +165,14 @@ def nuts_runner(model: Callable, warmup: int, samples: int, thread: int) -> MCMC
     return MCMC(NUTS(model), num_warmup=warmup, num_samples=samples, progress_bar=True, jit_model_args=True)
 
 
-def fit_map(model, data, key, restarts: int, laplace_samples: int = 0, guess: dict | None = None) -> Samples:
-    """MAP (+ optional Laplace draws) of ``model(data)``: L-BFGS-B from ``restarts`` prior draws,
-    plus one start at ``guess`` (constrained values of every latent site) when given."""
-    program = _map_program(model, restarts, laplace_samples)
+def fit_map(
+    model, data, key, restarts: int, laplace_samples: int = 0, guess: dict | None = None, quadrature_nodes: int = 0
+) -> Samples:
+    """MAP of ``model(data)``: L-BFGS-B from ``restarts`` prior draws, plus one start at ``guess``
+    (constrained values of every latent site) when given. Then, if ``quadrature_nodes`` > 0, a
+    weighted quadrature of the posterior around the mode (nodes per dimension); else the MAP
+    point with ``laplace_samples`` Laplace draws."""
+    program = _map_program(model, restarts, laplace_samples, quadrature_nodes)
     k_start, k_laplace = jax.random.split(key)
     starts = list(np.asarray(program.starts(k_start, data)))
     if guess is not None:
@@ -142,6 +184,9 @@ def fit_map(model, data, key, restarts: int, laplace_samples: int = 0, guess: di
             best, best_value = x, value
     if best is None:
         raise FloatingPointError("every MAP restart ended at a non-finite objective")
+    if quadrature_nodes:
+        params, weights = program.quadrature(jnp.asarray(best), data)
+        return Samples(params, map_first=False, weights=weights)
     return Samples(program.laplace(jnp.asarray(best), k_laplace, data), map_first=True)
 
 
@@ -155,13 +200,19 @@ def fit_nuts(model, data, key, warmup: int, samples: int, keep: int) -> Samples:
     return Samples({k: v[idx] for k, v in draws.items()}, map_first=False)
 
 
-def combine(mean: jnp.ndarray, var: jnp.ndarray, map_first: bool) -> tuple[jnp.ndarray, jnp.ndarray]:
+def combine(
+    mean: jnp.ndarray, var: jnp.ndarray, map_first: bool, weights: jnp.ndarray | None = None
+) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Combine per-sample predictions (S, m) into one mean and variance (m,).
 
     MAP: the MAP prediction, its variance widened by the spread of the Laplace draws' means.
-    Posterior draws: the mixture's mean and variance (law of total variance).
+    Posterior draws: the mixture's mean and variance (law of total variance), weighted by
+    ``weights`` (S,) when given.
     """
     if map_first:
         spread = jnp.var(mean[1:], axis=0) if mean.shape[0] > 1 else 0.0
         return mean[0], var[0] + spread
-    return jnp.mean(mean, axis=0), jnp.mean(var, axis=0) + jnp.var(mean, axis=0)
+    if weights is None:
+        weights = jnp.full(mean.shape[0], 1.0 / mean.shape[0])
+    mixture_mean = weights @ mean
+    return mixture_mean, weights @ (var + (mean - mixture_mean) ** 2)

@@ -1,6 +1,8 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import numpyro
+import numpyro.distributions as dist
 import pytest
 
 from noisebo import inference, noise_model
@@ -56,3 +58,29 @@ def test_nuts_posterior_covers_the_truth():
     assert a1.shape == (100,) and not samples.map_first
     lo, hi = np.percentile(a1, [1, 99])
     assert lo < 2.0 < hi
+
+
+def test_combine_weighted_draws_is_the_weighted_mixture():
+    mean = jnp.array([[0.0], [4.0]])
+    var = jnp.array([[1.0], [2.0]])
+    m, v = combine(mean, var, map_first=False, weights=jnp.array([0.75, 0.25]))
+    # mean 0.75*0 + 0.25*4 = 1; variance 0.75*(1 + 1) + 0.25*(2 + 9) = 4.25
+    np.testing.assert_allclose([float(m[0]), float(v[0])], [1.0, 4.25], rtol=1e-6)
+
+
+def _lognormal_only():
+    def model(data):
+        numpyro.sample("s", dist.LogNormal(0.0, 0.5))
+
+    return model
+
+
+def test_quadrature_integrates_a_known_posterior():
+    # No data: the posterior is the LogNormal(0, 0.5) prior, whose mean is exp(0.5^2 / 2) and whose
+    # mode (where the nodes are centred) is exp(-0.25); the weights must correct for the difference.
+    samples = inference.fit_map(_lognormal_only(), jnp.zeros(1), jax.random.PRNGKey(0), 2, quadrature_nodes=9)
+    s, w = np.asarray(samples.params["s"]), np.asarray(samples.weights)
+    assert s.shape == w.shape == (9,) and not samples.map_first
+    assert abs(w.sum() - 1.0) < 1e-9
+    assert abs(np.sum(w * s) - np.exp(0.125)) < 2e-3
+    assert abs(np.sum(w * np.log(s) ** 2) - 0.25) < 2e-3
