@@ -67,7 +67,8 @@ def main(argv=None) -> int:
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "pfm.yaml"))
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0)
-    parser.add_argument("--baseline-seeds", type=int, default=None, help="seeds per fixed-t baseline (default: --seeds)")
+    parser.add_argument("--baseline-seeds", type=int, default=None,
+                        help="seeds per fixed-t baseline (default: --seeds; 0 skips the baselines)")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
 
@@ -81,6 +82,8 @@ def main(argv=None) -> int:
     for name, config in variants.items():
         mine = []
         n = args.seeds if "optimised" in name or args.baseline_seeds is None else args.baseline_seeds
+        if n == 0:
+            continue
         for seed in range(args.first_seed, args.first_seed + n):
             rec = run_one(config, instrument, seed) | {"variant": name}
             mine.append(rec)
