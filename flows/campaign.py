@@ -8,6 +8,7 @@ Prefect then skips walking them for futures, which otherwise costs milliseconds 
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Literal
 
@@ -21,6 +22,7 @@ from noisebo.storage.recorder import Recorder
 from tasks import campaign as ops
 
 Progress = Callable[[str], None]
+Observer = Callable[[records.Progress], None]
 
 
 def campaign_path(config: CampaignConfig, seed: int, out_dir: str | Path) -> Path:
@@ -34,7 +36,8 @@ def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> C
     return cfg.with_overrides(acquisition={"policy": policy}) if policy else cfg
 
 
-def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, step, say: Progress) -> None:
+def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, step, say: Progress,
+                   observe: Observer) -> None:
     progress = recorder.progress
     index = len(progress.state.points)
     readings = ops.measure(quote(instrument), x, t, shots, progress.seed, index, quote(recorder))
@@ -42,18 +45,22 @@ def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, ste
     ops.record(quote(recorder), quote(records.point_record(index, step, point, shot_values)))
     label = "seed point" if step < 0 else f"step {step + 1}/{progress.config.schedule.n_steps}"
     say(f"{label}: x={x:.4g} t={t:.4g} s shots={shots} value={point.value:.4g} noise={point.noise:.3g}")
+    observe(recorder.progress)
 
 
-def run(recorder: Recorder, say: Progress = lambda line: None) -> Path:
-    """Drive a campaign from wherever its journal stands to the end."""
+def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda progress: None,
+        instrument=None) -> Path:
+    """Drive a campaign from wherever its journal stands to the end. ``observe`` sees the
+    campaign after every committed point and at the end (the live view)."""
     progress = recorder.progress
     config, seed = progress.config, progress.seed
     sched = config.schedule
-    instrument = build(config.instrument)
+    instrument = instrument if instrument is not None else build(config.instrument)
+    observe(progress)
     seeds = ops.seed_points(quote(config), seed)
     for i in range(len(progress.state.points), sched.n_seed):
         x, t = (float(v) for v in seeds[i])
-        _measure_point(recorder, instrument, x, t, sched.shots_before, None, -1, say)
+        _measure_point(recorder, instrument, x, t, sched.shots_before, None, -1, say, observe)
     while recorder.progress.next_step < sched.n_steps or recorder.progress.pending is not None:
         progress = recorder.progress
         pending = progress.pending
@@ -68,12 +75,35 @@ def run(recorder: Recorder, say: Progress = lambda line: None) -> Path:
             say(f"noise model converged at step {f['step'] + 1}: t_opt = {f['t_opt']:.4g} s")
         _measure_point(
             recorder, instrument, f["x"], f["t"], f["shots"], None if f["measure_noise"] else f["noise_at_t"],
-            f["step"], say,
+            f["step"], say, observe,
         )
     if recorder.progress.status != "completed":
         summary = ops.summarize(quote(config), quote(recorder.progress.state), seed)
         ops.record(quote(recorder), quote(records.summary_record(summary)), quote(records.status_record("completed")))
+    observe(recorder.progress)
     return recorder.h5_path
+
+
+@contextmanager
+def _viewed(recorder: Recorder, record_rrd: bool, live: str | None, warn: Progress):
+    """(instrument, observer) for a campaign: a Rerun recording beside its file and/or a live
+    viewer, or no observer at all when neither is asked for."""
+    config = recorder.progress.config
+    instrument = build(config.instrument)
+    if not record_rrd and live is None:
+        yield instrument, lambda progress: None
+        return
+    from noisebo.view.recording import CampaignRecording, instrument_curves, rrd_path_for
+    from noisebo.view.rerun_view import RerunView
+
+    truth, law = instrument_curves(config, instrument)
+    rrd = rrd_path_for(recorder.h5_path) if record_rrd else None
+    view = RerunView(config, recorder.h5_path.stem, rrd=rrd, live=live, truth=truth, noise_law=law, warn=warn)
+    recording = CampaignRecording(view, config)
+    try:
+        yield instrument, recording.update
+    finally:
+        recording.close()
 
 
 @flow(name="campaign")
@@ -83,18 +113,24 @@ def campaign(
     policy: Literal["reward", "double"] | None = None,
     out_dir: str = "data/runs",
     show_progress: bool = True,
+    record_rrd: bool = True,
+    live: str | None = None,
 ) -> str:
-    """Run one campaign and return the path of its HDF5 file."""
+    """Run one campaign and return the path of its HDF5 file. ``record_rrd``: also write a Rerun
+    recording beside it; ``live``: stream to a Rerun viewer ("spawn" or a gRPC url)."""
     cfg = resolve_config(config, policy)
     with Recorder.create(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
-        return str(run(recorder, print if show_progress else _silent))
+        with _viewed(recorder, record_rrd, live, print) as (instrument, observe):
+            return str(run(recorder, print if show_progress else _silent, observe, instrument))
 
 
 @flow(name="resume")
-def resume(path: str, show_progress: bool = True) -> str:
-    """Continue a campaign from its file (after a crash, a kill or an abort)."""
+def resume(path: str, show_progress: bool = True, record_rrd: bool = True, live: str | None = None) -> str:
+    """Continue a campaign from its file (after a crash, a kill or an abort); its recording is
+    rebuilt from the journal first, then continues."""
     with Recorder.resume(Path(path)) as recorder:
-        return str(run(recorder, print if show_progress else _silent))
+        with _viewed(recorder, record_rrd, live, print) as (instrument, observe):
+            return str(run(recorder, print if show_progress else _silent, observe, instrument))
 
 
 def _silent(line: str) -> None:

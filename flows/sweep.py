@@ -18,10 +18,8 @@ from prefect.exceptions import PrefectHTTPStatusError
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows.campaign import campaign, campaign_path, resolve_config, resume
-from instruments import build
 from noisebo.config import CampaignConfig
-from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.view.report import convergence_figure, write_summary
 
 
 def _orchestration_failed(task, task_run, state) -> bool:
@@ -53,32 +51,6 @@ def sweep_campaign(config: CampaignConfig, seed: int, out_dir: str) -> str:
     return done
 
 
-def figures_from_file(path: str | Path) -> dict:
-    """Benchmark figures of one finished campaign, from its HDF5 file alone."""
-    data = read_campaign(path)
-    config = resolve_config(CampaignConfig.model_validate(data["attrs"]["config"]), None)
-    if data["summary"] is None:
-        raise ValueError(f"{path}: campaign not finished (status {data['attrs']['status']})")
-    record = campaign_figures(
-        config, build(config.instrument), data["steps"]["t_opt"], data["summary"]["t_opt"], data["grid"]["x"],
-        data["summary"]["f_mean"], data["shots"]["t"], data["steps"]["latency_s"],
-    )
-    record.update(seed=int(data["attrs"]["seed"]), file=str(path))
-    return record
-
-
-def write_summary(paths: list[str], out_dir: str | Path) -> Path:
-    """sweep_summary.md (a table per policy) and sweep_summary.json (one record per campaign)."""
-    records = [figures_from_file(p) for p in paths]
-    policies = sorted({r["policy"] for r in records})
-    rows = {p: summarise_campaigns([r for r in records if r["policy"] == p]) for p in policies}
-    out = Path(out_dir)
-    (out / "sweep_summary.json").write_text(json.dumps({"records": records, "summary": rows}, indent=1))
-    table = out / "sweep_summary.md"
-    table.write_text("Median [IQR] over campaigns.\n\n" + summary_table(rows) + "\n")
-    return table
-
-
 @flow(name="sweep", task_runner=ThreadPoolTaskRunner(max_workers=2))
 def sweep(
     config: str | CampaignConfig = "data/configs/forrester.yaml",
@@ -102,6 +74,9 @@ def sweep(
         else:
             paths.append(outcome)
     table = write_summary(paths, out_dir) if paths else None
+    if table is not None:
+        convergence_figure(json.loads((Path(out_dir) / "sweep_summary.json").read_text())["records"],
+                            Path(out_dir) / "convergence_steps.png")
     if failures:
         raise SweepError(f"{len(failures)} of {len(futures)} campaigns failed (summary of the rest: {table}): "
                          + "; ".join(failures))

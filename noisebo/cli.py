@@ -1,4 +1,4 @@
-"""The ``noisebo`` command line: run, resume, sweep and inspect campaigns.
+"""The ``noisebo`` command line: run, resume, sweep, inspect, replay and report campaigns.
 
 Every command validates its input before it creates anything; a problem is reported as one line
 ``noisebo: error: ...`` with exit code 2.
@@ -64,7 +64,8 @@ def _run(args) -> int:
     print(f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}: "
           f"{config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}", flush=True)
     with flow_settings():
-        path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out))
+        path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd,
+                                       live=args.live)
     print(path)
     return 0
 
@@ -76,8 +77,25 @@ def _resume(args) -> int:
     campaign_flows, _ = _prefect()
     print(f"resuming {path}", flush=True)
     with flow_settings():
-        done = campaign_flows.resume(str(path))
+        done = campaign_flows.resume(str(path), record_rrd=not args.no_rrd, live=args.live)
     print(done)
+    return 0
+
+
+def _replay(args) -> int:
+    from noisebo.view.recording import replay
+
+    path = Path(args.file)
+    out = replay(path, args.out, warn=lambda line: print(line, file=sys.stderr))
+    print(f"{out}  (view it with: rerun {out})")
+    return 0
+
+
+def _report(args) -> int:
+    from noisebo.view.report import report
+
+    for written in report(Path(args.target), args.out):
+        print(written)
     return 0
 
 
@@ -164,6 +182,13 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"noisebo: error: {message} (see `{self.prog} --help`)\n")
 
 
+def _view_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--live", nargs="?", const="spawn", default=None, metavar="URL",
+                        help="stream to a Rerun viewer: spawn one (no URL) or connect to URL, "
+                             "e.g. rerun+http://127.0.0.1:9876/proxy")
+    parser.add_argument("--no-rrd", action="store_true", help="do not write the FILE.rrd recording")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="noisebo", description="Bayesian optimisation of where and how long to measure.")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -173,11 +198,23 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, default=0)
     run.add_argument("--policy", choices=["reward", "double"], default=None)
     run.add_argument("--out", type=Path, default=Path("data/runs"))
+    _view_options(run)
     run.set_defaults(handler=_run)
 
     resume = commands.add_parser("resume", help="continue an interrupted campaign")
     resume.add_argument("file", help="the campaign's .h5 file")
+    _view_options(resume)
     resume.set_defaults(handler=_resume)
+
+    replay = commands.add_parser("replay", help="rebuild a campaign's Rerun recording from its .h5 file")
+    replay.add_argument("file", help="the campaign's .h5 file")
+    replay.add_argument("--out", type=Path, default=None, help="recording to write (default: FILE.rrd beside it)")
+    replay.set_defaults(handler=_replay)
+
+    report = commands.add_parser("report", help="figures (PNG) of a campaign file, or of a sweep directory")
+    report.add_argument("target", help="a campaign .h5 file, or a directory of them (a sweep)")
+    report.add_argument("--out", type=Path, default=None, help="where the PNGs go (default: beside the input)")
+    report.set_defaults(handler=_report)
 
     sweep = commands.add_parser("sweep", help="run campaigns over seeds and policies in parallel")
     sweep.add_argument("config")

@@ -53,6 +53,47 @@ def _put(group: h5py.Group, name: str, data, units: str, description: str) -> No
     ds.attrs["description"] = description
 
 
+ARRAY_COLUMNS = {
+    "acq_map": ("1", "acquisition over the (x, t) grid, axes (step, x, t)"),
+    "f_mean": ("f units", "predicted f on the x grid"),
+    "f_var": ("f units^2", "variance of predicted f on the x grid"),
+    "noise_mean": ("f units", "predicted single-shot noise sd on the t grid"),
+    "noise_var": ("f units^2", "variance of the predicted noise sd on the t grid"),
+}
+
+
+def campaign_tables(progress: Progress) -> dict:
+    """The campaign as plain columns, in the shape ``read_campaign`` returns (without "attrs"):
+    "grid", "points", "steps" (with "hyperparameters" and the per-step arrays), "shots" and
+    "summary" (None until done)."""
+    g = grids(progress.config)
+    state, decisions = progress.state, [d.fields for d in progress.decisions]
+    points = {}
+    for name, (units, _) in POINT_COLUMNS.items():
+        dtype = bool if units == "bool" else (np.int32 if name == "n_shots" else np.float64)
+        points[name] = np.asarray([getattr(p, name) for p in state.points], dtype=dtype)
+    points["step"] = np.asarray(progress.point_steps, dtype=np.int32)
+    steps = {}
+    for name, (units, _) in STEP_COLUMNS.items():
+        dtype = bool if units == "bool" else (np.int32 if name in ("step", "shots") else np.float64)
+        steps[name] = np.asarray([d[name] for d in decisions], dtype=dtype)
+    names = sorted({k for d in decisions for k in d["hyperparameters"]})
+    steps["hyperparameters"] = {
+        name: np.asarray([d["hyperparameters"].get(name, np.nan) for d in decisions], dtype=np.float64) for name in names
+    }
+    shapes = {"acq_map": (g.x.size, g.t.size), "f_mean": (g.x.size,), "f_var": (g.x.size,),
+              "noise_mean": (g.t.size,), "noise_var": (g.t.size,)}
+    for name, shape in shapes.items():
+        steps[name] = np.stack([d.arrays[name] for d in progress.decisions]) if decisions else np.zeros((0, *shape))
+    summary = None
+    if progress.summary is not None:
+        summary = {k: progress.summary.arrays[k] for k in ("f_mean", "f_var", "noise_fine")}
+        summary |= {"t_opt": float(progress.summary.fields["t_opt"]),
+                    "hyperparameters": dict(progress.summary.fields["hyperparameters"])}
+    return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": points, "steps": steps,
+            "shots": _shot_columns(progress.shot_rows), "summary": summary}
+
+
 def _fill(f: h5py.File, progress: Progress) -> None:
     config = progress.config
     f.attrs.update(
@@ -72,49 +113,36 @@ def _fill(f: h5py.File, progress: Progress) -> None:
         config_json=json.dumps(config.model_dump(mode="json")),
         versions_json=json.dumps(progress.versions),
     )
-    g = grids(config)
+    tables = campaign_tables(progress)
     grid = f.create_group("grid")
-    _put(grid, "x", g.x, "x units", "candidate x grid")
-    _put(grid, "t", g.t, "s", "candidate t grid")
-    _put(grid, "t_fine", g.t_fine, "s", "t grid of the predicted optimal t")
+    _put(grid, "x", tables["grid"]["x"], "x units", "candidate x grid")
+    _put(grid, "t", tables["grid"]["t"], "s", "candidate t grid")
+    _put(grid, "t_fine", tables["grid"]["t_fine"], "s", "t grid of the predicted optimal t")
 
-    _fill_shots(f, progress)
+    _fill_shots(f, progress, tables["shots"])
 
     points = f.create_group("points")
-    state = progress.state
     for name, (units, description) in POINT_COLUMNS.items():
-        dtype = bool if units == "bool" else (np.int32 if name == "n_shots" else np.float64)
-        _put(points, name, np.asarray([getattr(p, name) for p in state.points], dtype=dtype), units, description)
-    _put(points, "step", np.asarray(progress.point_steps, dtype=np.int32), "1", "BO step that proposed it (-1: seed)")
+        _put(points, name, tables["points"][name], units, description)
+    _put(points, "step", tables["points"]["step"], "1", "BO step that proposed it (-1: seed)")
 
     steps = f.create_group("steps")
-    decisions = [d.fields for d in progress.decisions]
     for name, (units, description) in STEP_COLUMNS.items():
-        dtype = bool if units == "bool" else (np.int32 if name in ("step", "shots") else np.float64)
-        _put(steps, name, np.asarray([d[name] for d in decisions], dtype=dtype), units, description)
+        _put(steps, name, tables["steps"][name], units, description)
     hyper = steps.create_group("hyperparameters")
-    names = sorted({k for d in decisions for k in d["hyperparameters"]})
-    for name in names:
-        values = [d["hyperparameters"].get(name, np.nan) for d in decisions]
-        _put(hyper, name, np.asarray(values, dtype=np.float64), "model units", f"fitted {name} per step (MAP or posterior mean)")
-    n_x, n_t = g.x.size, g.t.size
-    for name, shape, units, description in (
-        ("acq_map", (n_x, n_t), "1", "acquisition over the (x, t) grid, axes (step, x, t)"),
-        ("f_mean", (n_x,), "f units", "predicted f on the x grid"),
-        ("f_var", (n_x,), "f units^2", "variance of predicted f on the x grid"),
-        ("noise_mean", (n_t,), "f units", "predicted single-shot noise sd on the t grid"),
-        ("noise_var", (n_t,), "f units^2", "variance of the predicted noise sd on the t grid"),
-    ):
-        data = np.stack([d.arrays[name] for d in progress.decisions]) if decisions else np.zeros((0, *shape))
-        _put(steps, name, data, units, description)
+    for name, values in tables["steps"]["hyperparameters"].items():
+        _put(hyper, name, values, "model units", f"fitted {name} per step (MAP or posterior mean)")
+    for name, (units, description) in ARRAY_COLUMNS.items():
+        _put(steps, name, tables["steps"][name], units, description)
 
-    if progress.summary is not None:
+    if tables["summary"] is not None:
+        s = tables["summary"]
         summary = f.create_group("summary")
-        summary.attrs["t_opt"] = progress.summary.fields["t_opt"]
-        summary.attrs["hyperparameters_json"] = json.dumps(progress.summary.fields["hyperparameters"])
-        _put(summary, "f_mean", progress.summary.arrays["f_mean"], "f units", "final predicted f on grid/x")
-        _put(summary, "f_var", progress.summary.arrays["f_var"], "f units^2", "its variance")
-        _put(summary, "noise_fine", progress.summary.arrays["noise_fine"], "f units", "final noise sd on grid/t_fine")
+        summary.attrs["t_opt"] = s["t_opt"]
+        summary.attrs["hyperparameters_json"] = json.dumps(s["hyperparameters"])
+        _put(summary, "f_mean", s["f_mean"], "f units", "final predicted f on grid/x")
+        _put(summary, "f_var", s["f_var"], "f units^2", "its variance")
+        _put(summary, "noise_fine", s["noise_fine"], "f units", "final noise sd on grid/t_fine")
 
 
 SHOT_COLUMNS = (
@@ -144,17 +172,24 @@ def _shot_value(row: dict) -> float:
     return float("nan") if row["value"] is None else float(row["value"])
 
 
-def _fill_shots(f: h5py.File, progress: Progress) -> None:
-    shots = f.create_group("shots")
-    rows = progress.shot_rows
+def _shot_columns(rows: list[dict]) -> dict:
     getters = {
         "value": _shot_value,
         "committed": lambda r: "reduced" in r,
         "ok": lambda r: bool(r.get("ok", False)),
     }
-    for name, dtype, units, description in SHOT_COLUMNS:
+    out = {}
+    for name, dtype, _, _ in SHOT_COLUMNS:
         get = getters.get(name, lambda r, n=name: r[n])
-        _put(shots, name, np.asarray([get(r) for r in rows], dtype=dtype), units, description)
+        out[name] = np.asarray([get(r) for r in rows], dtype=dtype)
+    return out
+
+
+def _fill_shots(f: h5py.File, progress: Progress, columns: dict) -> None:
+    shots = f.create_group("shots")
+    rows = progress.shot_rows
+    for name, _, units, description in SHOT_COLUMNS:
+        _put(shots, name, columns[name], units, description)
     strings = h5py.string_dtype()
     _put(shots, "reason", np.asarray([r.get("reason", "") for r in rows], dtype=object).astype(strings),
          "text", "why the shot was rejected (empty if ok)")
@@ -244,8 +279,18 @@ def read_campaign(path: Path) -> dict:
             out["steps"]["hyperparameters"] = {k: v[()] for k, v in f["steps/hyperparameters"].items()}
             if "summary" in f:
                 s = f["summary"]
-                out["summary"] = {k: v[()] for k, v in s.items()} | {"t_opt": float(s.attrs["t_opt"])}
+                out["summary"] = {k: v[()] for k, v in s.items()} | {
+                    "t_opt": float(s.attrs["t_opt"]), "hyperparameters": json.loads(s.attrs["hyperparameters_json"])}
             out["attrs"]["config"] = json.loads(out["attrs"]["config_json"])
         except (KeyError, ValueError, OSError) as error:
             raise CampaignFileError(f"{path}: damaged campaign file ({error})") from None
     return out
+
+
+def read_shot_fits(path: Path) -> dict | None:
+    """Per-shot SHO fit columns (``/shots/fit``, see FIT_UNITS) of a campaign file, None if its
+    shots are not sweeps."""
+    with h5py.File(path, "r") as f:
+        if "shots/fit" not in f:
+            return None
+        return {k: v[()] for k, v in f["shots/fit"].items() if k in FIT_UNITS}

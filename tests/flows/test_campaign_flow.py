@@ -85,3 +85,10 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
     np.testing.assert_array_equal(alone["value"], swept["value"])
     summary = json.loads((tmp_path / "sweep_summary.json").read_text())
     assert len(summary["records"]) == 4
+    assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000
+    # `noisebo report DIR` redraws the same from the files alone
+    from noisebo.view.report import report
+
+    written = report(tmp_path, tmp_path / "report")
+    assert [p.name for p in written] == ["convergence_steps.png", "sweep_summary.md"]
+    assert written[1].read_text() == Path(table).read_text()

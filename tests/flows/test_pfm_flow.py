@@ -61,3 +61,18 @@ def test_resumed_pfm_campaign_refits_journaled_sweeps_identically(pfm_file, tmp_
     a, b = read_campaign(pfm_file), read_campaign(resumed)
     np.testing.assert_array_equal(a["points"]["value"], b["points"]["value"])
     np.testing.assert_array_equal(a["shots"]["value"], b["shots"]["value"])
+
+
+def test_pfm_report_draws_the_campaign_and_its_last_sweep(pfm_file, tmp_path):
+    from noisebo.view.report import report
+
+    written = report(Path(pfm_file), tmp_path)
+    assert [p.name for p in written] == ["pfm-tiny_double_s0002_report.png", "pfm-tiny_double_s0002_sweep.png"]
+    assert all(p.stat().st_size > 20_000 for p in written)
+
+
+def test_pfm_recording_holds_the_latest_sweep_and_its_fit(pfm_file):
+    import rerun.chunk
+
+    paths = {str(c.entity_path) for c in rerun.chunk.RrdReader(pfm_file.replace(".h5", ".rrd")).stream()}
+    assert {"/spectrum/data", "/spectrum/fit"} <= paths

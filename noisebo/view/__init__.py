@@ -1,0 +1,1 @@
+"""Campaign views: frames (pure), the Rerun recording and the report figures."""

@@ -1,0 +1,38 @@
+"""The viewer layout of a campaign recording: maps and curves on top, traces and the log below."""
+
+from __future__ import annotations
+
+import rerun.blueprint as rrb
+
+from noisebo.config import CampaignConfig
+
+
+def blueprint(config: CampaignConfig) -> rrb.Blueprint:
+    """Acquisition map with the measured points, f with its band and the truth, the noise model
+    with its data, the normalised reward with t_opt (and the latest sweep for PFM); below them
+    the scalar traces and the decision log."""
+    top = [
+        rrb.Spatial2DView(origin="acquisition", name="acquisition over (x, t); points by step"),
+        rrb.Spatial2DView(origin="f", name="f(x): mean, +-2 sd band, truth, points"),
+    ]
+    middle = [
+        rrb.Spatial2DView(origin="noise", name="Noise(t): model, +-2 sd band, law, measured"),
+        rrb.Spatial2DView(origin="reward", name="normalised reward and predicted optimal t"),
+    ]
+    if config.instrument.kind == "pfm":
+        middle.append(rrb.Spatial2DView(origin="spectrum", name="latest sweep and its SHO fit"))
+    traces = rrb.Vertical(
+        rrb.TimeSeriesView(origin="traces/t_opt_s", name="predicted optimal t (s)"),
+        rrb.TimeSeriesView(contents=["traces/a0", "traces/a1"], name="noise model A0, A1"),
+        rrb.TimeSeriesView(contents=["traces/latency_s", "traces/measurement_time_s"],
+                           name="decision latency, cumulative measurement time (s)"),
+    )
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Horizontal(*top),
+            rrb.Horizontal(*middle),
+            rrb.Horizontal(traces, rrb.TextLogView(origin="log", name="decisions")),
+            row_shares=[3, 2, 2],
+        ),
+        collapse_panels=True,
+    )

@@ -1,0 +1,131 @@
+"""What a campaign looks like at each step: pure frames built from its tables.
+
+A frame is everything the live view and the report draw at one moment of a campaign, in raw
+units. The input is the table dict of ``noisebo.storage.hdf5.campaign_tables`` (a running
+campaign) or ``read_campaign`` (a file): the same frames come out of both, so a replayed
+recording equals the live one.
+
+Frame numbering (the ``step`` timeline): 0 holds the seed points; k (1..n_steps) the decision of
+BO step k and the point it measured (1-based, as the progress lines print it); n_steps + 1 the
+final models after the last point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from noisebo.config import CampaignConfig
+
+POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured")
+
+
+@dataclass(frozen=True)
+class Curve:
+    """A model prediction along one axis: grid (m,), mean (m,) and standard deviation (m,)."""
+
+    grid: np.ndarray
+    mean: np.ndarray
+    sd: np.ndarray
+
+
+@dataclass(frozen=True)
+class Frame:
+    """The campaign at one frame. ``points``: columns of POINT_FIELDS plus "frame" (the frame
+    that measured each point) for every point committed by then; ``f``, ``noise`` (single-shot
+    sd) and ``reward`` (normalised to [0, 1] on the noise grid, sd 0) are None where no model
+    exists yet (frame 0); ``acq_map`` (n_x, n_t) only for BO steps; ``scalars`` the traces."""
+
+    step: int
+    points: dict
+    f: Curve | None
+    noise: Curve | None
+    reward: Curve | None
+    acq_map: np.ndarray | None
+    t_opt: float | None
+    proposal: tuple[float, float] | None
+    scalars: dict
+    text: str
+    latest_point: int | None
+
+
+def normalised_reward(t: np.ndarray, noise: np.ndarray, alpha: float, beta: float) -> np.ndarray:
+    """R = -alpha t^2 - beta Noise on the grid t, min-max normalised to [0, 1]."""
+    r = -alpha * t**2 - beta * noise
+    span = r.max() - r.min()
+    return (r - r.min()) / span if span > 0 else np.zeros_like(r)
+
+
+def n_frames(tables: dict, config: CampaignConfig) -> int:
+    """Frames a campaign holds so far: seeds, one per committed BO point, the final one if done."""
+    steps = np.asarray(tables["points"]["step"])
+    return 1 + int(np.sum(steps >= 0)) + (tables["summary"] is not None)
+
+
+def frame_at(tables: dict, config: CampaignConfig, k: int) -> Frame:
+    """Frame ``k`` (see the module docstring) of a campaign's tables."""
+    n_steps = len(tables["steps"]["step"])
+    final = tables["summary"] is not None and k == int(np.sum(np.asarray(tables["points"]["step"]) >= 0)) + 1
+    bo = min(k, n_steps) - 1  # index of the latest decision shown, -1 for none
+    points = _points_until(tables["points"], k)
+    shots_t = _measurement_time(tables, points)
+    scalars = {"measurement_time_s": shots_t}
+    if final:
+        return _final_frame(tables, config, k, points, scalars)
+    if bo < 0:
+        n = len(points["x"])
+        return Frame(0, points, None, None, None, None, None, None, scalars,
+                     f"{n} seed points measured", n - 1 if n else None)
+    steps, grid = tables["steps"], tables["grid"]
+    f = Curve(grid["x"], steps["f_mean"][bo], np.sqrt(np.maximum(steps["f_var"][bo], 0.0)))
+    noise = Curve(grid["t"], steps["noise_mean"][bo], np.sqrt(np.maximum(steps["noise_var"][bo], 0.0)))
+    t_opt = float(steps["t_opt"][bo])
+    hyper = {name: float(v[bo]) for name, v in steps["hyperparameters"].items()}
+    scalars |= {"t_opt_s": t_opt, "latency_s": float(steps["latency_s"][bo])}
+    scalars |= {name: hyper[f"noise.{name}"] for name in ("a0", "a1") if f"noise.{name}" in hyper}
+    x, t = float(steps["x"][bo]), float(steps["t"][bo])
+    text = (f"step {bo + 1}: measure x={x:.4g} at t={t:.4g} s with {int(steps['shots'][bo])} shots; "
+            f"predicted optimal t {t_opt:.4g} s{' (noise model converged)' if steps['converged'][bo] else ''}; "
+            f"decision {float(steps['latency_s'][bo]):.3f} s")
+    return Frame(
+        bo + 1, points, f, noise, _reward(noise, config), np.asarray(steps["acq_map"][bo]), t_opt, (x, t),
+        scalars, text, len(points["x"]) - 1,
+    )
+
+
+def frames(tables: dict, config: CampaignConfig) -> list[Frame]:
+    """Every frame of a campaign's tables, in order."""
+    return [frame_at(tables, config, k) for k in range(n_frames(tables, config))]
+
+
+def _points_until(points: dict, k: int) -> dict:
+    step = np.asarray(points["step"])
+    keep = step < k  # a point of BO step s (0-based) belongs to frame s + 1
+    out = {name: np.asarray(points[name])[keep] for name in POINT_FIELDS}
+    out["frame"] = step[keep] + 1
+    return out
+
+
+def _measurement_time(tables: dict, points: dict) -> float:
+    """Total sweep/exposure time (s) of the shots of the points shown."""
+    shots = tables["shots"]
+    mine = np.asarray(shots["point"]) < len(points["x"])
+    return float(np.sum(np.asarray(shots["t"])[mine]))
+
+
+def _reward(noise: Curve, config: CampaignConfig) -> Curve:
+    r = config.reward
+    return Curve(noise.grid, normalised_reward(noise.grid, noise.mean, r.alpha, r.beta), np.zeros_like(noise.grid))
+
+
+def _final_frame(tables: dict, config: CampaignConfig, k: int, points: dict, scalars: dict) -> Frame:
+    s, grid = tables["summary"], tables["grid"]
+    f = Curve(grid["x"], s["f_mean"], np.sqrt(np.maximum(s["f_var"], 0.0)))
+    noise = Curve(grid["t_fine"], s["noise_fine"], np.zeros_like(s["noise_fine"]))
+    hyper = s["hyperparameters"]
+    scalars = scalars | {"t_opt_s": float(s["t_opt"])}
+    scalars |= {name: float(hyper[f"noise.{name}"]) for name in ("a0", "a1") if f"noise.{name}" in hyper}
+    text = (f"final models on all {len(points['x'])} points: predicted optimal t {float(s['t_opt']):.4g} s, "
+            f"{scalars['measurement_time_s']:.1f} s of measurement")
+    return Frame(k, points, f, noise, _reward(noise, config), None, float(s["t_opt"]), None, scalars, text, None)

@@ -1,0 +1,104 @@
+"""A campaign's Rerun recording, live (frame by frame as the journal grows) or rebuilt from a file.
+
+``CampaignRecording.update(progress)`` is the campaign flow's observer: it logs every frame the
+campaign has reached and not logged yet, so a resumed campaign first replays its history into a
+fresh recording. ``replay(h5_path, rrd_path)`` rebuilds the same frames from the HDF5 file alone.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from noisebo.config import CampaignConfig, parse_config
+from noisebo.decision import grids
+from noisebo.view.frames import Frame, frame_at, frames, n_frames
+from noisebo.view.rerun_view import RerunView
+
+FIT_KEYS = ("amplitude", "resonance_hz", "q", "sign")
+
+
+def rrd_path_for(h5_path: Path) -> Path:
+    """The recording beside a campaign file: NAME.rrd next to NAME.h5."""
+    return Path(h5_path).with_suffix(".rrd")
+
+
+def instrument_curves(config: CampaignConfig, instrument=None) -> tuple[np.ndarray | None, Callable | None]:
+    """The instrument's truth on the x grid and its noise law, where it knows them (else None)."""
+    try:
+        if instrument is None:
+            from instruments import build
+
+            instrument = build(config.instrument)
+        truth = instrument.truth(grids(config).x)
+        law = instrument.noise_law
+        law = law if law(np.asarray([config.space.t_min])) is not None else None
+        return (None if truth is None else np.asarray(truth, dtype=np.float64)), law
+    except Exception:  # noqa: BLE001 - e.g. a replayed PFM file whose scan is not on this machine
+        return None, None
+
+
+class CampaignRecording:
+    """Observer of a running campaign: logs each new frame to a RerunView."""
+
+    def __init__(self, view: RerunView, config: CampaignConfig):
+        self.view, self.config = view, config
+        self.logged = 0
+
+    def update(self, progress) -> None:
+        from noisebo.storage.hdf5 import campaign_tables
+
+        if not self.view.enabled:
+            return
+        tables = campaign_tables(progress)
+        seeded = len(progress.state.points) >= self.config.schedule.n_seed
+        ready = n_frames(tables, self.config) if seeded else 0  # frame 0 waits for the last seed point
+        for k in range(self.logged, ready):
+            frame = frame_at(tables, self.config, k)
+            self.view.log(frame, *_latest_sweep(frame, progress.shots, progress.shot_rows))
+        self.logged = max(self.logged, ready)
+
+    def close(self) -> None:
+        self.view.close()
+
+
+def _latest_sweep(frame: Frame, shots: dict, shot_rows: list[dict]) -> tuple[np.ndarray | None, dict | None]:
+    """The last sweep of the frame's latest point and its fit, from a running campaign."""
+    if frame.latest_point is None or frame.latest_point not in shots or not shots[frame.latest_point]:
+        return None, None
+    reading = shots[frame.latest_point][-1]
+    if reading.spectrum is None:
+        return None, None
+    rows = [r for r in shot_rows if r["point"] == frame.latest_point and "amplitude" in r]
+    fit = {k: float(rows[-1][k]) for k in FIT_KEYS} if rows else None
+    return np.asarray(reading.spectrum), fit
+
+
+def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], None] = print) -> Path:
+    """Rebuild a campaign's recording from its HDF5 file alone; returns the .rrd path."""
+    from noisebo.storage.hdf5 import read_campaign, read_shot_fits, read_spectra
+
+    h5_path = Path(h5_path)
+    data = read_campaign(h5_path)
+    config = parse_config(data["attrs"]["config"])
+    rrd_path = Path(rrd_path) if rrd_path is not None else rrd_path_for(h5_path)
+    truth, law = instrument_curves(config)
+    name = f"{h5_path.stem}"
+    view = RerunView(config, name, rrd=rrd_path, truth=truth, noise_law=law, warn=warn, wall_clock=False)
+    all_frames = frames(data, config)
+    view.fit_ranges(all_frames)
+    fits = read_shot_fits(h5_path)
+    for frame in all_frames:
+        spectrum, fit = None, None
+        if fits is not None and frame.latest_point is not None:
+            sweeps = read_spectra(h5_path, frame.latest_point)
+            mine = np.flatnonzero(np.asarray(data["shots"]["point"]) == frame.latest_point)
+            spectrum = sweeps[-1]
+            fit = {k: float(fits[k][mine[-1]]) for k in FIT_KEYS} if mine.size else None
+        view.log(frame, spectrum, fit)
+    view.close()
+    if not view.enabled:
+        raise RuntimeError(f"could not write the recording {rrd_path}")
+    return rrd_path

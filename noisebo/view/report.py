@@ -1,0 +1,245 @@
+"""Static figures for papers and reports, from campaign files alone (matplotlib, no display).
+
+``report(FILE.h5)``: FILE_report.png in the spirit of the paper's Figure 5 (the trajectory over
+the last acquisition map, the predicted optimal t per step, f against the truth, the noise model
+with its data) and, for PFM, FILE_sweep.png (the last sweep with its SHO fit).
+``report(DIR)``: over a sweep's files, convergence_steps.png (Figure S1: distribution of the first
+converged step per policy) and sweep_summary.md / .json (the benchmark table).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.figure import Figure
+
+from noisebo.config import CampaignConfig, parse_config
+from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
+from noisebo.reward import true_optimal_t
+from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits, read_spectra
+from noisebo.view.recording import instrument_curves
+
+DPI = 130
+
+
+def report(target: Path, out_dir: Path | None = None) -> list[Path]:
+    """Write the figures of a campaign file or a sweep directory; returns the files written."""
+    target = Path(target)
+    if target.is_dir():
+        files = sorted(target.glob("*.h5"))
+        if not files:
+            raise CampaignFileError(f"{target}: no campaign files (*.h5) in this directory")
+        return sweep_report(files, Path(out_dir) if out_dir else target)
+    return campaign_report(target, Path(out_dir) if out_dir else target.parent)
+
+
+def _units(config: CampaignConfig) -> tuple[str, str]:
+    return ("x (um)", "PFM response (pm)") if config.instrument.kind == "pfm" else ("x", "f(x)")
+
+
+def campaign_report(path: Path, out_dir: Path) -> list[Path]:
+    data = read_campaign(path)
+    config = parse_config(data["attrs"]["config"])
+    truth, law = instrument_curves(config)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fig = Figure(figsize=(12, 8.5), layout="constrained")
+    (ax_map, ax_t), (ax_f, ax_noise) = fig.subplots(2, 2)
+    steps = np.asarray(data["points"]["step"]) + 1  # 0 = seed point
+    colours = _step_colours(steps, config.schedule.n_steps)
+    _trajectory(ax_map, data, config, colours)
+    _t_opt(ax_t, data, config, law)
+    _f(ax_f, data, config, truth, colours)
+    _noise(ax_noise, data, config, law, colours)
+    a = data["attrs"]
+    fig.suptitle(f"{a['name']}: seed {a['seed']}, {a['policy']} policy, {a['n_points']} points "
+                 f"({a['status']})", fontsize=13)
+    written = [out_dir / f"{path.stem}_report.png"]
+    fig.savefig(written[0], dpi=DPI)
+    fits = read_shot_fits(path)
+    if fits is not None and len(data["points"]["x"]):
+        written.append(_sweep_figure(path, data, fits, out_dir))
+    return written
+
+
+def _step_colours(steps: np.ndarray, n_steps: int) -> np.ndarray:
+    rgba = colormaps["viridis"](np.clip(steps - 1, 0, None) / max(n_steps - 1, 1))
+    rgba[steps == 0] = (0.55, 0.55, 0.55, 1.0)
+    return rgba
+
+
+def _step_colourbar(fig_ax, n_steps: int) -> None:
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    from matplotlib.ticker import MaxNLocator
+
+    sm = ScalarMappable(norm=Normalize(1, max(n_steps, 2)), cmap="viridis")
+    bar = fig_ax.figure.colorbar(sm, ax=fig_ax, label="BO step (grey: seed points)", fraction=0.05)
+    bar.locator = MaxNLocator(integer=True)
+    bar.update_ticks()
+
+
+def _trajectory(ax, data: dict, config: CampaignConfig, colours) -> None:
+    s, p, steps = config.space, data["points"], data["steps"]
+    x_label, _ = _units(config)
+    if len(steps["acq_map"]):
+        acq = np.asarray(steps["acq_map"][-1], dtype=np.float64).T
+        shown = np.where(np.isfinite(acq), acq, np.nan)
+        image = ax.imshow(shown, origin="lower", aspect="auto", cmap="Greys",
+                          extent=(s.x_min, s.x_max, s.t_min, s.t_max), alpha=0.8)
+        ax.figure.colorbar(image, ax=ax, label=f"acquisition at step {len(steps['acq_map'])}", fraction=0.05)
+    ax.plot(p["x"], p["t"], color="0.3", lw=0.7, zorder=2)
+    ax.scatter(p["x"], p["t"], c=colours, s=36, edgecolor="k", linewidth=0.5, zorder=3)
+    ax.set(xlabel=x_label, ylabel="exposure / sweep time t (s)", title="measured points over the acquisition map",
+           xlim=(s.x_min, s.x_max), ylim=(s.t_min, s.t_max))
+    _step_colourbar(ax, config.schedule.n_steps)
+
+
+def _t_opt(ax, data: dict, config: CampaignConfig, law) -> None:
+    steps, s, r = data["steps"], config.space, config.reward
+    k = np.asarray(steps["step"]) + 1
+    ax.plot(k, steps["t_opt"], "o-", color="tab:blue", label="predicted optimal t")
+    if law is not None:
+        t_star = true_optimal_t(law, s.t_min, s.t_max, r.alpha, r.beta)
+        ax.axhline(t_star, color="k", ls="--", lw=1, label=f"true t* = {t_star:.3g} s")
+    converged = int(data["attrs"]["converged_step"])
+    if converged >= 0:
+        ax.axvline(converged + 1, color="tab:green", ls=":", label=f"noise model converged (step {converged + 1})")
+    if data["summary"] is not None:
+        ax.plot([k[-1] + 1 if len(k) else 1], [data["summary"]["t_opt"]], "s", color="tab:red", label="final model")
+    ax.set(xlabel="BO step", ylabel="predicted optimal t (s)", title="evolution of the predicted optimal t")
+    ax.legend(fontsize=8)
+
+
+def _f(ax, data: dict, config: CampaignConfig, truth, colours) -> None:
+    x_label, f_label = _units(config)
+    x, p = data["grid"]["x"], data["points"]
+    final = data["summary"] if data["summary"] is not None else (
+        {"f_mean": data["steps"]["f_mean"][-1], "f_var": data["steps"]["f_var"][-1]} if len(data["steps"]["f_mean"]) else None)
+    if truth is not None:
+        ax.plot(x, truth, color="k", lw=1.2, label="truth")
+    if final is not None:
+        mean, sd = final["f_mean"], np.sqrt(np.maximum(final["f_var"], 0.0))
+        ax.plot(x, mean, color="tab:blue", label="GP mean")
+        ax.fill_between(x, mean - 2 * sd, mean + 2 * sd, color="tab:blue", alpha=0.2, label="+-2 sd")
+    err = p["noise"] / np.sqrt(np.maximum(p["n_shots"], 1))
+    ax.errorbar(p["x"], p["value"], yerr=err, fmt="none", ecolor="0.4", elinewidth=0.8, zorder=2)
+    ax.scatter(p["x"], p["value"], c=colours, s=30, edgecolor="k", linewidth=0.5, zorder=3, label="measured (mean +- se)")
+    ax.set(xlabel=x_label, ylabel=f_label, title="f: final prediction against the truth")
+    ax.legend(fontsize=8)
+
+
+def _noise(ax, data: dict, config: CampaignConfig, law, colours) -> None:
+    _, f_label = _units(config)
+    p, grid, steps = data["points"], data["grid"], data["steps"]
+    if law is not None:
+        t = grid["t_fine"]
+        ax.plot(t, law(t), color="k", lw=1.2, label="true noise law")
+    if len(steps["noise_mean"]):
+        mean, sd = steps["noise_mean"][-1], np.sqrt(np.maximum(steps["noise_var"][-1], 0.0))
+        ax.plot(grid["t"], mean, color="tab:red", label=f"noise model (step {len(steps['noise_mean'])})")
+        ax.fill_between(grid["t"], mean - 2 * sd, mean + 2 * sd, color="tab:red", alpha=0.2, label="+-2 sd")
+    measured = np.asarray(p["noise_measured"], dtype=bool) & np.isfinite(p["shot_std"])
+    ax.scatter(p["t"][measured], p["shot_std"][measured], c=colours[measured], s=30, edgecolor="k", linewidth=0.5,
+               zorder=3, label="measured single-shot sd")
+    few = ~np.asarray(p["noise_measured"], dtype=bool) & np.isfinite(p["shot_std"])
+    if few.any():
+        ax.scatter(p["t"][few], p["shot_std"][few], facecolor="none", edgecolor="0.5", s=22, zorder=2,
+                   label="sd of few-shot points")
+    ax.set(xlabel="exposure / sweep time t (s)", ylabel=f"single-shot noise sd ({f_label})",
+           title="noise model with its data", ylim=(0, None))
+    ax.legend(fontsize=8)
+
+
+def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
+    from noisebo.sho import sho_amplitude
+
+    last = len(data["points"]["x"]) - 1
+    sweeps = read_spectra(path, last)
+    mine = np.flatnonzero(np.asarray(data["shots"]["point"]) == last)
+    freq, amp = sweeps[-1][0].astype(np.float64), sweeps[-1][1].astype(np.float64)
+    fig = Figure(figsize=(7, 4.2), layout="constrained")
+    ax = fig.subplots()
+    ax.plot(freq / 1e3, amp / 1e3, ".", ms=1.5, color="0.5", label=f"sweep ({freq.size} samples)")
+    fit = {k: float(fits[k][mine[-1]]) for k in ("amplitude", "resonance_hz", "q", "amplitude_se")}
+    if np.isfinite(fit["amplitude"]):
+        ax.plot(freq / 1e3, sho_amplitude(freq, fit["amplitude"], fit["resonance_hz"], fit["q"]) / 1e3, color="tab:red",
+                label=f"SHO fit: r = {fit['amplitude']:.3g} +- {fit['amplitude_se']:.2g} pm, "
+                      f"f0 = {fit['resonance_hz'] / 1e3:.2f} kHz, Q = {fit['q']:.0f}")
+    t = float(data["points"]["t"][last])
+    ax.set(xlabel="drive frequency (kHz)", ylabel="amplitude (nm)",
+           title=f"last sweep of point {last} (x = {data['points']['x'][last]:.3g} um, t = {t:.3g} s)")
+    ax.legend(fontsize=8)
+    out = out_dir / f"{path.stem}_sweep.png"
+    fig.savefig(out, dpi=DPI)
+    return out
+
+
+def figures_from_file(path: str | Path) -> dict:
+    """Benchmark figures of one finished campaign, from its HDF5 file alone."""
+    from instruments import build
+
+    data = read_campaign(path)
+    config = parse_config(data["attrs"]["config"])
+    if data["summary"] is None:
+        raise CampaignFileError(f"{path}: campaign not finished (status {data['attrs']['status']})")
+    record = campaign_figures(
+        config, build(config.instrument), data["steps"]["t_opt"], data["summary"]["t_opt"], data["grid"]["x"],
+        data["summary"]["f_mean"], data["shots"]["t"], data["steps"]["latency_s"],
+    )
+    record.update(seed=int(data["attrs"]["seed"]), file=str(path))
+    return record
+
+
+def write_summary(paths: list, out_dir: str | Path) -> Path:
+    """sweep_summary.md (a table per policy) and sweep_summary.json (one record per campaign)."""
+    records = [figures_from_file(p) for p in paths]
+    policies = sorted({r["policy"] for r in records})
+    rows = {p: summarise_campaigns([r for r in records if r["policy"] == p]) for p in policies}
+    out = Path(out_dir)
+    (out / "sweep_summary.json").write_text(json.dumps({"records": records, "summary": rows}, indent=1))
+    table = out / "sweep_summary.md"
+    table.write_text("Median [IQR] over campaigns.\n\n" + summary_table(rows) + "\n")
+    return table
+
+
+def sweep_report(files: list[Path], out_dir: Path) -> list[Path]:
+    """Figure S1 (first converged step per policy) and the summary table of finished campaigns;
+    unfinished files are left out and named."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    finished, skipped = [], []
+    for f in files:
+        (finished if read_campaign(f)["summary"] is not None else skipped).append(f)
+    if not finished:
+        raise CampaignFileError(f"none of the {len(files)} campaign files has finished")
+    table = write_summary(finished, out_dir)
+    records = json.loads((out_dir / "sweep_summary.json").read_text())["records"]
+    figure = out_dir / "convergence_steps.png"
+    convergence_figure(records, figure)
+    if skipped:
+        print(f"left out {len(skipped)} unfinished campaign(s): " + ", ".join(p.name for p in skipped))
+    return [figure, table]
+
+
+def convergence_figure(records: list[dict], out: Path) -> None:
+    policies = sorted({r["policy"] for r in records})
+    n_steps = max(len(r["t_opt_pred"]) for r in records)
+    bins = np.arange(1, n_steps + 2)  # first converged step, 1-based; n_steps + 1 = never
+    fig = Figure(figsize=(8, 4.2), layout="constrained")
+    ax = fig.subplots()
+    width = 0.8 / len(policies)
+    for i, policy in enumerate(policies):
+        steps = [r["converged_step"] for r in records if r["policy"] == policy]
+        k = np.asarray([n_steps + 1 if s is None else s + 1 for s in steps])
+        counts = np.asarray([np.sum(k == b) for b in bins])
+        ax.bar(bins + (i - (len(policies) - 1) / 2) * width, counts, width=width,
+               label=f"{policy} ({len(steps)} campaigns, median {np.median(k):.0f})")
+    ax.set_xticks(bins, [str(b) for b in bins[:-1]] + ["never"])
+    ax.set(xlabel="first BO step at which the noise model counts as converged", ylabel="campaigns",
+           title="convergence of the noise model across seeds")
+    ax.yaxis.get_major_locator().set_params(integer=True)
+    ax.legend(fontsize=9)
+    fig.savefig(out, dpi=DPI)

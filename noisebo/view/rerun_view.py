@@ -1,0 +1,269 @@
+"""Rerun adapter: a campaign's frames logged to a recording (an .rrd file, a live viewer, or both).
+
+Visualisation is a non-critical sink: it never stops or slows a campaign. Every logging call is
+guarded; the first failure is reported once (through ``warn``) and the view switches itself off.
+A live viewer is streamed to only if its address answers a TCP connect within half a second, so an
+absent viewer costs at most that, once.
+
+Entities (timeline ``step``, see ``noisebo.view.frames``; live campaigns also carry ``wall``):
+    acquisition/map      the acquisition over the (x, t) grid as an image (t upwards)
+    acquisition/points   measured points on that image, coloured by the step that measured them
+    f/{mean,band,truth,points}, noise/{mean,band,law,points}, reward/{curve,t_opt}
+                         curves in plot boxes (Rerun's 2D views have no axes: corner labels
+                         give the ranges)
+    spectrum/{data,fit}  PFM: the latest sweep and its SHO fit
+    traces/*             t_opt_s, a0, a1, latency_s, measurement_time_s as scalars
+    campaign/points      the measured points in raw units (columns x, t, value, noise, from_step)
+    log                  one text line per decision
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from pathlib import Path
+from typing import Callable
+from urllib.parse import urlparse
+
+import numpy as np
+
+from noisebo.config import CampaignConfig
+from noisebo.view.frames import Curve, Frame
+
+BOX_W, BOX_H = 300.0, 150.0
+TRACES = ("t_opt_s", "a0", "a1", "latency_s", "measurement_time_s")
+DEFAULT_LIVE = "rerun+http://127.0.0.1:9876/proxy"
+
+
+def colour_by_step(steps: np.ndarray, n_steps: int) -> np.ndarray:
+    """RGB uint8 (n, 3): seed points (step 0) grey, BO steps along viridis from dark to yellow."""
+    from matplotlib import colormaps
+
+    steps = np.asarray(steps)
+    rgb = (colormaps["viridis"](np.clip(steps - 1, 0, None) / max(n_steps - 1, 1))[:, :3] * 255).astype(np.uint8)
+    rgb[steps == 0] = (150, 150, 150)
+    return rgb
+
+
+def acquisition_image(acq_map: np.ndarray) -> np.ndarray:
+    """(n_t, n_x, 3) uint8 viridis image of an (n_x, n_t) map, row 0 = longest t (t upwards)."""
+    from matplotlib import colormaps
+
+    a = np.asarray(acq_map, dtype=np.float64).T[::-1]
+    finite = np.isfinite(a)
+    lo, hi = (a[finite].min(), a[finite].max()) if finite.any() else (0.0, 1.0)
+    scaled = np.where(finite, (a - lo) / (hi - lo if hi > lo else 1.0), 0.0)
+    return (colormaps["viridis"](scaled)[..., :3] * 255).astype(np.uint8)
+
+
+class Box:
+    """Maps data (u, v) into a BOX_W x BOX_H plot box, v upwards (2D views draw y downwards)."""
+
+    def __init__(self, u_range: tuple[float, float], v_range: tuple[float, float]):
+        self.u0, self.u1 = u_range
+        lo, hi = v_range
+        pad = 0.05 * (hi - lo if hi > lo else 1.0)
+        self.v0, self.v1 = lo - pad, hi + pad
+
+    def __call__(self, u, v) -> np.ndarray:
+        u = (np.asarray(u, dtype=np.float64) - self.u0) / (self.u1 - self.u0 or 1.0) * BOX_W
+        v = (1.0 - (np.asarray(v, dtype=np.float64) - self.v0) / (self.v1 - self.v0 or 1.0)) * BOX_H
+        return np.stack(np.broadcast_arrays(u, v), axis=-1)
+
+
+def reachable(url: str, timeout_s: float = 0.5) -> bool:
+    """Whether something accepts TCP connections at the url's host and port."""
+    parsed = urlparse(url)
+    try:
+        with socket.create_connection((parsed.hostname or "127.0.0.1", parsed.port or 9876), timeout=timeout_s):
+            return True
+    except OSError:
+        return False
+
+
+class RerunView:
+    """Logs frames of one campaign to a Rerun recording.
+
+    ``rrd``: file to record to (None: none); ``live``: None, "spawn" (start a local viewer) or a
+    gRPC url such as ``rerun+http://127.0.0.1:9876/proxy``; ``truth`` (x grid values) and
+    ``noise_law`` (t grid values) are drawn when the instrument knows them; ``wall_clock`` also
+    stamps each frame with the time it was logged."""
+
+    def __init__(self, config: CampaignConfig, name: str, rrd: Path | None = None, live: str | None = None,
+                 truth: np.ndarray | None = None, noise_law: Callable | None = None,
+                 warn: Callable[[str], None] = print, wall_clock: bool = True):
+        self.config, self.warn, self.wall_clock = config, warn, wall_clock
+        self.truth, self.noise_law = truth, noise_law
+        self.enabled = True
+        self._f_range: tuple[float, float] | None = None
+        self._noise_range: tuple[float, float] | None = None
+        self.stream = None
+        self._guard(lambda: self._open(name, rrd, live), "could not start the Rerun recording")
+
+    def _open(self, name: str, rrd: Path | None, live: str | None) -> None:
+        import rerun as rr
+
+        from noisebo.view.blueprint import blueprint
+
+        self.rr = rr
+        self.stream = rr.RecordingStream("noisebo", recording_id=name, send_properties=False)
+        sinks = []
+        if rrd is not None:
+            Path(rrd).parent.mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(str(rrd)))
+        if live == "spawn":
+            self.stream.spawn(connect=False, hide_welcome_screen=True)
+            live = DEFAULT_LIVE
+        if live is not None:
+            if reachable(live):
+                sinks.append(rr.GrpcSink(live))
+            else:
+                self.warn(f"noisebo: no Rerun viewer answers at {live}; recording to file only")
+        if not sinks:
+            self.enabled = False
+            return
+        self.stream.set_sinks(*sinks, default_blueprint=blueprint(self.config))
+        self._log_static()
+
+    def _guard(self, action: Callable[[], None], what: str) -> None:
+        if not self.enabled:
+            return
+        try:
+            action()
+        except Exception as error:  # noqa: BLE001 - visualisation must never stop a campaign
+            self.enabled = False
+            self.warn(f"noisebo: {what} ({type(error).__name__}: {error}); visualisation is off for this campaign")
+
+    def fit_ranges(self, frames: list[Frame]) -> None:
+        """Size the plot boxes for all of ``frames`` at once (a replay), so they do not rescale
+        from frame to frame as they do while a campaign runs."""
+        for frame in frames:
+            self._ranges(frame)
+
+    def log(self, frame: Frame, spectrum: np.ndarray | None = None, fit: dict | None = None) -> None:
+        """Log one frame; ``spectrum`` (3, N) and its ``fit`` (amplitude, resonance_hz, q,
+        sign) for PFM's latest sweep."""
+        self._guard(lambda: self._log(frame, spectrum, fit), "Rerun logging failed")
+
+    def close(self) -> None:
+        def finish():
+            self.stream.flush(timeout_sec=2.0)
+            self.stream.disconnect()
+
+        if self.stream is not None:
+            self._guard(finish, "could not finish the Rerun recording")
+
+    # -- drawing -------------------------------------------------------------------------------
+
+    def _log_static(self) -> None:
+        rr, s = self.rr, self.config.space
+        f_label = "f (pm)" if self.config.instrument.kind == "pfm" else "f"
+        self.stream.log("f/axes", rr.TextDocument(f"x in [{s.x_min:g}, {s.x_max:g}], {f_label}"), static=True)
+
+    def _ranges(self, frame: Frame) -> tuple[Box, Box]:
+        s = self.config.space
+        values = [frame.points["value"]]
+        if frame.f is not None:
+            values += [frame.f.mean - 2 * frame.f.sd, frame.f.mean + 2 * frame.f.sd]
+        if self.truth is not None:
+            values.append(self.truth)
+        self._f_range = _grow(self._f_range, np.concatenate([np.ravel(v) for v in values]))
+        noise = [frame.points["shot_std"][frame.points["noise_measured"]]]
+        if frame.noise is not None:
+            noise += [frame.noise.mean + 2 * frame.noise.sd, frame.noise.mean - 2 * frame.noise.sd]
+        self._noise_range = _grow(self._noise_range, np.concatenate([np.ravel(v) for v in noise] + [[0.0]]))
+        return Box((s.x_min, s.x_max), self._f_range), Box((s.t_min, s.t_max), self._noise_range)
+
+    def _log(self, frame: Frame, spectrum, fit) -> None:
+        rr, st = self.rr, self.stream
+        st.set_time("step", sequence=frame.step)
+        if self.wall_clock:
+            st.set_time("wall", timestamp=time.time())
+        f_box, n_box = self._ranges(frame)
+        self._log_points_on_map(frame)
+        if frame.acq_map is not None:
+            st.log("acquisition/map", rr.Image(acquisition_image(frame.acq_map)))
+        self._log_f(frame, f_box)
+        self._log_noise(frame, n_box)
+        for name in TRACES:
+            if name in frame.scalars:
+                st.log(f"traces/{name}", rr.Scalars([frame.scalars[name]]))
+        st.log("log", rr.TextLog(frame.text, level="INFO"))
+        p = frame.points
+        st.log("campaign/points", rr.AnyValues(x=p["x"], t=p["t"], value=p["value"], noise=p["noise"],
+                                               from_step=p["frame"].astype(np.int64)))
+        if spectrum is not None:
+            self._log_spectrum(spectrum, fit)
+
+    def _log_points_on_map(self, frame: Frame) -> None:
+        s, p = self.config.space, frame.points
+        px = (p["x"] - s.x_min) / (s.x_max - s.x_min) * (s.n_x - 1) + 0.5
+        py = (s.t_max - p["t"]) / (s.t_max - s.t_min) * (s.n_t - 1) + 0.5
+        labels = [f"{'seed' if k == 0 else f'step {k}'}: x={x:.4g}, t={t:.3g} s" for k, x, t in zip(p["frame"], p["x"], p["t"])]
+        colours = colour_by_step(p["frame"], self.config.schedule.n_steps)
+        self.stream.log("acquisition/points", self.rr.Points2D(np.stack([px, py], axis=-1), colors=colours,
+                                                               radii=np.where(p["frame"] == frame.step, 2.5, 1.5),
+                                                               labels=labels, show_labels=False))
+
+    def _log_curve(self, path: str, box: Box, curve: Curve, colour, band: bool = True) -> None:
+        rr, st = self.rr, self.stream
+        st.log(f"{path}/mean", rr.LineStrips2D([box(curve.grid, curve.mean)], colors=[colour], radii=0.6))
+        if band:
+            upper, lower = box(curve.grid, curve.mean + 2 * curve.sd), box(curve.grid, curve.mean - 2 * curve.sd)
+            st.log(f"{path}/band", rr.LineStrips2D([upper, lower], colors=[colour], radii=0.25))
+
+    def _log_f(self, frame: Frame, box: Box) -> None:
+        rr, st, s, p = self.rr, self.stream, self.config.space, frame.points
+        if self.truth is not None:
+            grid = np.linspace(s.x_min, s.x_max, self.truth.size)
+            st.log("f/truth", rr.LineStrips2D([box(grid, self.truth)], colors=[(40, 40, 40)], radii=0.4))
+        if frame.f is not None:
+            self._log_curve("f", box, frame.f, (31, 119, 180))
+        st.log("f/points", rr.Points2D(box(p["x"], p["value"]), colors=colour_by_step(p["frame"], self.config.schedule.n_steps),
+                                       radii=2.0, labels=[f"f={v:.4g} +- {n / np.sqrt(k):.2g}" for v, n, k in
+                                                          zip(p["value"], p["noise"], p["n_shots"])], show_labels=False))
+        st.log("f/corners", rr.Points2D(box([s.x_min, s.x_max], [box.v0, box.v1]), radii=0.1, show_labels=True,
+                                        labels=[f"x={s.x_min:g}, f={box.v0:.3g}", f"x={s.x_max:g}, f={box.v1:.3g}"]))
+
+    def _log_noise(self, frame: Frame, box: Box) -> None:
+        rr, st, s, p = self.rr, self.stream, self.config.space, frame.points
+        if self.noise_law is not None:
+            grid = np.linspace(s.t_min, s.t_max, 200)
+            st.log("noise/law", rr.LineStrips2D([box(grid, self.noise_law(grid))], colors=[(40, 40, 40)], radii=0.4))
+        measured = p["noise_measured"]
+        st.log("noise/points", rr.Points2D(box(p["t"][measured], p["shot_std"][measured]), radii=2.0,
+                                           colors=colour_by_step(p["frame"][measured], self.config.schedule.n_steps)))
+        st.log("noise/corners", rr.Points2D(box([s.t_min, s.t_max], [box.v0, box.v1]), radii=0.1, show_labels=True,
+                                            labels=[f"t={s.t_min:g} s, sd={box.v0:.3g}", f"t={s.t_max:g} s, sd={box.v1:.3g}"]))
+        if frame.noise is None:
+            return
+        self._log_curve("noise", box, frame.noise, (214, 39, 40), band=bool(np.any(frame.noise.sd > 0)))
+        reward_box = Box((s.t_min, s.t_max), (0.0, 1.0))
+        st.log("reward/curve", rr.LineStrips2D([reward_box(frame.reward.grid, frame.reward.mean)],
+                                               colors=[(44, 160, 44)], radii=0.6))
+        st.log("reward/t_opt", rr.LineStrips2D([reward_box([frame.t_opt, frame.t_opt], [0.0, 1.0])], colors=[(0, 0, 0)],
+                                               radii=0.4, labels=[f"t_opt = {frame.t_opt:.4g} s"], show_labels=True))
+
+    def _log_spectrum(self, spectrum: np.ndarray, fit: dict | None) -> None:
+        from noisebo.sho import sho_amplitude
+
+        rr, st = self.rr, self.stream
+        freq, amp = np.asarray(spectrum[0], dtype=np.float64), np.asarray(spectrum[1], dtype=np.float64)
+        box = Box((freq[0], freq[-1]), (min(0.0, amp.min()), amp.max()))
+        st.log("spectrum/data", rr.Points2D(box(freq, amp), radii=0.4, colors=[(120, 120, 120)]))
+        if fit is not None and np.isfinite(fit.get("amplitude", np.nan)):
+            model = sho_amplitude(freq, fit["amplitude"], fit["resonance_hz"], fit["q"])
+            st.log("spectrum/fit", rr.LineStrips2D([box(freq, model)], colors=[(214, 39, 40)], radii=0.6,
+                                                   labels=[f"SHO fit: r={fit['amplitude']:.3g} pm, "
+                                                           f"f0={fit['resonance_hz'] / 1e3:.2f} kHz, Q={fit['q']:.0f}"],
+                                                   show_labels=True))
+        else:
+            st.log("spectrum/fit", rr.Clear(recursive=False))
+
+
+def _grow(current: tuple[float, float] | None, values: np.ndarray) -> tuple[float, float]:
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return current or (0.0, 1.0)
+    lo, hi = float(values.min()), float(values.max())
+    return (lo, hi) if current is None else (min(current[0], lo), max(current[1], hi))

@@ -1,0 +1,65 @@
+"""Frames are pure functions of a campaign's tables; checked on a hand-made two-step campaign."""
+
+import numpy as np
+import pytest
+
+from noisebo.config import CampaignConfig
+from noisebo.view.frames import frame_at, frames, n_frames, normalised_reward
+
+CONFIG = CampaignConfig().with_overrides(space={"n_x": 3, "n_t": 2, "t_min": 1.0, "t_max": 2.0},
+                                         schedule={"n_seed": 2, "n_steps": 2})
+
+
+def tables(with_summary: bool) -> dict:
+    points = {"x": np.array([0.1, 0.9, 0.5]), "t": np.array([1.0, 2.0, 1.5]), "value": np.array([1.0, 2.0, 3.0]),
+              "noise": np.array([0.3, 0.2, 0.25]), "shot_std": np.array([0.3, 0.2, 0.25]),
+              "n_shots": np.array([2, 2, 1]), "noise_measured": np.array([True, True, False]),
+              "step": np.array([-1, -1, 0])}
+    steps = {"step": np.array([0, 1]), "x": np.array([0.5, 0.0]), "t": np.array([1.5, 1.0]),
+             "shots": np.array([1, 1]), "t_opt": np.array([1.2, 1.3]), "latency_s": np.array([0.5, 0.1]),
+             "converged": np.array([False, True]), "acq_map": np.zeros((2, 3, 2)),
+             "f_mean": np.array([[0.0, 1.0, 2.0]] * 2), "f_var": np.array([[4.0, 1.0, 0.0]] * 2),
+             "noise_mean": np.array([[0.4, 0.2]] * 2), "noise_var": np.array([[0.01, 0.04]] * 2),
+             "hyperparameters": {"noise.a0": np.array([0.1, 0.2]), "noise.a1": np.array([1.0, 2.0])}}
+    shots = {"point": np.array([0, 0, 1, 1, 2]), "t": np.array([1.0, 1.0, 2.0, 2.0, 1.5])}
+    summary = {"f_mean": np.zeros(3), "f_var": np.ones(3), "noise_fine": np.array([0.5, 0.4]), "t_opt": 1.25,
+               "hyperparameters": {"noise.a0": 0.3}} if with_summary else None
+    grid = {"x": np.array([0.0, 0.5, 1.0]), "t": np.array([1.0, 2.0]), "t_fine": np.array([1.0, 2.0])}
+    return {"grid": grid, "points": points, "steps": steps, "shots": shots, "summary": summary}
+
+
+def test_seed_frame_has_the_seed_points_and_no_model():
+    frame = frame_at(tables(False), CONFIG, 0)
+    assert frame.step == 0 and frame.f is None and frame.acq_map is None and frame.latest_point == 1
+    np.testing.assert_array_equal(frame.points["x"], [0.1, 0.9])
+    assert frame.scalars == {"measurement_time_s": 6.0}  # 2 x 1 s + 2 x 2 s
+
+
+def test_bo_frame_shows_its_decision_and_point():
+    frame = frame_at(tables(False), CONFIG, 1)
+    assert frame.step == 1 and frame.proposal == (0.5, 1.5) and frame.t_opt == 1.2
+    np.testing.assert_array_equal(frame.points["frame"], [0, 0, 1])
+    np.testing.assert_allclose(frame.f.sd, [2.0, 1.0, 0.0])
+    np.testing.assert_allclose(frame.noise.sd, [0.1, 0.2])
+    assert frame.scalars == {"measurement_time_s": 7.5, "t_opt_s": 1.2, "latency_s": 0.5, "a0": 0.1, "a1": 1.0}
+    assert frame.text.startswith("step 1: measure x=0.5 at t=1.5 s with 1 shots")
+
+
+@pytest.mark.parametrize("with_summary, expected", [(False, 2), (True, 3)])
+def test_frame_count_is_seeds_plus_committed_points_plus_final(with_summary, expected):
+    # the second decision's point is not committed: it has no frame yet
+    assert n_frames(tables(with_summary), CONFIG) == expected
+    assert [f.step for f in frames(tables(with_summary), CONFIG)] == list(range(expected))
+
+
+def test_final_frame_uses_the_summary():
+    final = frames(tables(True), CONFIG)[-1]
+    assert final.t_opt == 1.25 and final.acq_map is None and final.scalars["a0"] == 0.3
+    # R = -0.1 t^2 - 2 Noise: (1 s, 0.5) -> -1.1, (2 s, 0.4) -> -1.2
+    np.testing.assert_allclose(final.reward.mean, [1.0, 0.0])
+
+
+def test_normalised_reward_by_hand():
+    # alpha 1, beta 2: R(1, 0.5) = -2, R(2, 0) = -4, R(3, 0) = -9 -> (1, 5/7, 0)
+    np.testing.assert_allclose(normalised_reward(np.array([1.0, 2.0, 3.0]), np.array([0.5, 0.0, 0.0]), 1.0, 2.0),
+                               [1.0, 5 / 7, 0.0])
