@@ -209,12 +209,12 @@ def write_summary(paths: list, out_dir: str | Path) -> Path:
 def sweep_report(files: list[Path], out_dir: Path) -> list[Path]:
     """Figure S1 (first converged step per policy) and the summary table of finished campaigns;
     unfinished files are left out and named."""
-    out_dir.mkdir(parents=True, exist_ok=True)
     finished, skipped = [], []
     for f in files:
         (finished if read_campaign(f)["summary"] is not None else skipped).append(f)
     if not finished:
         raise CampaignFileError(f"none of the {len(files)} campaign files has finished")
+    out_dir.mkdir(parents=True, exist_ok=True)
     table = write_summary(finished, out_dir)
     records = json.loads((out_dir / "sweep_summary.json").read_text())["records"]
     figure = out_dir / "convergence_steps.png"

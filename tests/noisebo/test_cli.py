@@ -1,6 +1,7 @@
 """Bad input on the command line: one clear line, exit code 2, no file created or changed."""
 
 import json
+import shutil
 
 import h5py
 import pytest
@@ -24,6 +25,7 @@ def setup_files(tmp_path, tiny_yaml):
     with h5py.File(tmp_path / "future.h5", "w") as f:
         f.attrs["schema"] = "noisebo.campaign"
         f.attrs["schema_version"] = 99
+    (tmp_path / "nothing").mkdir()
     runs = tmp_path / "runs"
     runs.mkdir()
     (runs / "tiny_reward_s0000.h5").write_bytes(b"existing results")
@@ -47,6 +49,11 @@ CASES = [
     (["inspect", "future.h5"], "schema version 99"),
     (["sweep", "TINY", "--seeds", "a-b"], "--seeds 'a-b'"),
     (["sweep", "TINY", "--seeds", "1", "--workers", "0"], "--workers must be at least 1"),
+    (["replay", "absent.h5"], "no such file"),
+    (["replay", "other.h5"], "not a noisebo campaign"),
+    (["report", "noise.h5"], "not a readable HDF5 file"),
+    (["report", "nothing"], "no campaign files (*.h5) in this directory"),
+    (["report", "runs"], "not a readable HDF5 file"),
     (["launch"], "invalid choice: 'launch'"),
 ]
 
@@ -85,3 +92,12 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
     assert main(["inspect", path]) == 0
     text = capsys.readouterr().out
     assert "status completed" in text and "t_opt (s)" in text
+    # the recording is rebuilt beside a copy of the file, and the report lands where asked
+    copy = tmp_path / "copy" / "tiny_reward_s0002.h5"
+    copy.parent.mkdir()
+    shutil.copy(path, copy)
+    assert main(["replay", str(copy)]) == 0
+    assert copy.with_suffix(".rrd").stat().st_size > 10_000
+    assert main(["report", str(copy), "--out", str(tmp_path / "figs")]) == 0
+    assert capsys.readouterr().out.strip().endswith("tiny_reward_s0002_report.png")
+    assert (tmp_path / "figs" / "tiny_reward_s0002_report.png").exists()
