@@ -19,7 +19,9 @@ Entities (timeline ``step``, see ``noisebo.view.frames``; live campaigns also ca
 
 from __future__ import annotations
 
+import os
 import socket
+import sys
 import time
 from pathlib import Path
 from typing import Callable
@@ -112,8 +114,7 @@ class RerunView:
             Path(rrd).parent.mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(str(rrd)))
         if live == "spawn":
-            self.stream.spawn(connect=False, hide_welcome_screen=True)
-            live = DEFAULT_LIVE
+            live = DEFAULT_LIVE if self._spawn_viewer() else None
         if live is not None:
             if reachable(live):
                 sinks.append(rr.GrpcSink(live))
@@ -124,6 +125,22 @@ class RerunView:
             return
         self.stream.set_sinks(*sinks, default_blueprint=blueprint(self.config))
         self._log_static()
+
+    def _spawn_viewer(self) -> bool:
+        """Start a local viewer (the one installed beside this Python first); False if none starts."""
+        bin_dir = str(Path(sys.executable).parent)
+        if bin_dir not in os.environ.get("PATH", "").split(os.pathsep):
+            os.environ["PATH"] = bin_dir + os.pathsep + os.environ.get("PATH", "")
+        try:
+            self.stream.spawn(connect=False, hide_welcome_screen=True)
+        except Exception as error:  # noqa: BLE001 - no viewer: record to the file only
+            self.warn(f"noisebo: could not start a Rerun viewer ({str(error).splitlines()[0]}); recording to file only")
+            return False
+        for _ in range(20):  # the viewer takes a moment to listen
+            if reachable(DEFAULT_LIVE, 0.25):
+                return True
+            time.sleep(0.25)
+        return True
 
     def _guard(self, action: Callable[[], None], what: str) -> None:
         if not self.enabled:
