@@ -57,9 +57,19 @@ def sweep(
     seeds: list[int] = [0, 1, 2, 3],  # noqa: B006 - Prefect parameters are validated copies
     policies: list[Literal["reward", "double"]] = ["reward", "double"],  # noqa: B006
     out_dir: str = "data/runs/sweep",
+    per_run_dir: bool = False,
 ) -> str:
-    """Run every (seed, policy) campaign and return the path of the summary table."""
+    """Run every (seed, policy) campaign and return the path of the summary table.
+    ``per_run_dir``: write into OUT_DIR/<scheduled start, UTC> so that scheduled runs of a
+    deployment each get their own sweep instead of resuming the last one."""
     base = resolve_config(config, None)
+    if per_run_dir:
+        from datetime import timezone
+
+        from prefect.runtime import flow_run
+
+        started = flow_run.scheduled_start_time.astimezone(timezone.utc)
+        out_dir = str(Path(out_dir) / started.strftime("%Y%m%dT%H%M%SZ"))
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     futures = [
         sweep_campaign.submit(base.with_overrides(acquisition={"policy": policy}), seed, out_dir)

@@ -82,6 +82,27 @@ def _resume(args) -> int:
     return 0
 
 
+def _serve(args) -> int:
+    if not os.environ.get("PREFECT_API_URL"):
+        raise UsageError("serve needs a Prefect server that `prefect deployment run` can reach: start one with "
+                         "`prefect server start --host 127.0.0.1` and export PREFECT_API_URL=http://127.0.0.1:4200/api")
+    seeds = parse_seeds(args.sweep_seeds)
+    policies = ["reward", "double"] if args.sweep_policy == "both" else [args.sweep_policy]
+    if args.interval is not None and args.interval <= 0:
+        raise UsageError("--interval must be a positive number of seconds")
+    for path in args.config:
+        load_config(path)  # every config validated before anything is registered
+    runtime.configure()
+    from flows.deployments import deployments_for, serve_all
+
+    deployments = [d for path in args.config
+                   for d in deployments_for(path, args.out, seeds, policies, args.cron, args.interval)]
+    names = ", ".join(f"{d.flow_name}/{d.name}" for d in deployments)
+    print(f"serving {names} on {os.environ['PREFECT_API_URL']} (Ctrl-C stops)", flush=True)
+    serve_all(deployments, limit=args.limit)
+    return 0
+
+
 def _replay(args) -> int:
     from noisebo.view.recording import replay
 
@@ -205,6 +226,17 @@ def build_parser() -> argparse.ArgumentParser:
     resume.add_argument("file", help="the campaign's .h5 file")
     _view_options(resume)
     resume.set_defaults(handler=_resume)
+
+    serve = commands.add_parser("serve", help="serve campaign and sweep deployments to a Prefect server")
+    serve.add_argument("config", nargs="+", help="campaign YAML(s); deployments are named after each config's name")
+    serve.add_argument("--out", type=Path, default=Path("data/runs"))
+    serve.add_argument("--sweep-seeds", default="0-7", help="seeds of the sweep deployment: N, A-B or A,B,C")
+    serve.add_argument("--sweep-policy", choices=["reward", "double", "both"], default="both")
+    when = serve.add_mutually_exclusive_group()
+    when.add_argument("--cron", default=None, help="run the sweep on this cron schedule, e.g. '0 2 * * *'")
+    when.add_argument("--interval", type=float, default=None, help="run the sweep every this many seconds")
+    serve.add_argument("--limit", type=int, default=None, help="at most this many flow runs at once")
+    serve.set_defaults(handler=_serve)
 
     replay = commands.add_parser("replay", help="rebuild a campaign's Rerun recording from its .h5 file")
     replay.add_argument("file", help="the campaign's .h5 file")
