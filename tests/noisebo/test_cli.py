@@ -101,3 +101,24 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
     assert main(["report", str(copy), "--out", str(tmp_path / "figs")]) == 0
     assert capsys.readouterr().out.strip().endswith("tiny_reward_s0002_report.png")
     assert (tmp_path / "figs" / "tiny_reward_s0002_report.png").exists()
+
+
+@pytest.mark.parametrize("argv, env, message", [
+    (["serve", "TINY"], None, "serve needs a Prefect server"),
+    (["serve", "TINY", "--interval", "-5"], "http://127.0.0.1:9/api", "--interval must be a positive"),
+    (["serve", "broken.yaml"], "http://127.0.0.1:9/api", "not valid YAML"),
+    (["serve", "TINY", "--cron", "0 2 * * *", "--interval", "60"], None, "not allowed with argument"),
+])
+def test_serve_refuses_bad_input_before_registering_anything(argv, env, message, tmp_path, tiny_yaml, monkeypatch,
+                                                             capsys):
+    setup_files(tmp_path, tiny_yaml)
+    monkeypatch.chdir(tmp_path)
+    if env is None:
+        monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    else:
+        monkeypatch.setenv("PREFECT_API_URL", env)
+    with pytest.raises(SystemExit) as info:
+        raise SystemExit(main([str(tiny_yaml) if a == "TINY" else a for a in argv]))
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("noisebo: error: ") and message in err
