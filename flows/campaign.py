@@ -6,7 +6,6 @@ measures exactly what the uninterrupted one would have. Large arguments are pass
 Prefect then skips walking them for futures, which otherwise costs milliseconds per task.
 """
 
-from __future__ import annotations
 
 from contextlib import contextmanager
 from pathlib import Path

@@ -93,5 +93,21 @@ def sweep(
     return str(table)
 
 
+def task_runner(kind: Literal["threads", "dask"] = "threads", workers: int = 2, address: str | None = None):
+    """The sweep's task runner: ``workers`` threads in this process, or Dask: the cluster at
+    ``address`` (e.g. tcp://10.0.0.5:8786) or a local cluster of ``workers`` single-threaded
+    worker processes. Dask starts its worker processes with spawn, never fork, so no process
+    inherits a JAX runtime. Campaigns in other processes report to the Prefect server that
+    PREFECT_API_URL names (without one, each worker process starts a temporary server)."""
+    if kind == "threads":
+        return ThreadPoolTaskRunner(max_workers=workers)
+    from prefect_dask import DaskTaskRunner
+
+    if address:
+        return DaskTaskRunner(address=address)
+    return DaskTaskRunner(cluster_kwargs={"n_workers": workers, "threads_per_worker": 1, "processes": True,
+                                          "dashboard_address": None})
+
+
 class SweepError(RuntimeError):
     """Some campaigns of a sweep failed; the others finished and are summarised."""

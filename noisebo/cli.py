@@ -126,11 +126,13 @@ def _sweep(args) -> int:
     policies = ["reward", "double"] if args.policy == "both" else [args.policy]
     if args.workers < 1:
         raise UsageError("--workers must be at least 1")
+    if args.dask_address and args.runner != "dask":
+        raise UsageError("--dask-address needs --runner dask")
     _, sweep_flows = _prefect()
-    from prefect.task_runners import ThreadPoolTaskRunner
-
-    flow = sweep_flows.sweep.with_options(task_runner=ThreadPoolTaskRunner(max_workers=args.workers))
-    print(f"sweep {config.name!r}: seeds {seeds[0]}..{seeds[-1]} x {policies} on {args.workers} workers -> {args.out}", flush=True)
+    runner = sweep_flows.task_runner(args.runner, args.workers, args.dask_address)
+    flow = sweep_flows.sweep.with_options(task_runner=runner)
+    where = args.dask_address or f"{args.workers} {'local Dask worker processes' if args.runner == 'dask' else 'threads'}"
+    print(f"sweep {config.name!r}: seeds {seeds[0]}..{seeds[-1]} x {policies} on {where} -> {args.out}", flush=True)
     with flow_settings():
         table = flow(config, seeds=seeds, policies=policies, out_dir=str(args.out))
     print(Path(table).read_text())
@@ -253,7 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--seeds", required=True, help="N, A-B or A,B,C")
     sweep.add_argument("--policy", choices=["reward", "double", "both"], default="both")
     sweep.add_argument("--out", type=Path, default=Path("data/runs/sweep"))
-    sweep.add_argument("--workers", type=int, default=2)
+    sweep.add_argument("--workers", type=int, default=2, help="threads, or local Dask worker processes")
+    sweep.add_argument("--runner", choices=["threads", "dask"], default="threads")
+    sweep.add_argument("--dask-address", default=None, help="an existing Dask scheduler, e.g. tcp://host:8786")
     sweep.set_defaults(handler=_sweep)
 
     inspect = commands.add_parser("inspect", help="summarise a campaign file")

@@ -3,15 +3,8 @@
 
 Marked e2e: not in the default run (it starts servers), run by `.ci/run`."""
 
-import os
-import signal
-import socket
 import subprocess
-import sys
-import time
-from pathlib import Path
 
-import httpx
 import numpy as np
 import pytest
 import yaml
@@ -20,73 +13,29 @@ from instruments import build
 from noisebo.campaign import run_campaign
 from noisebo.storage.hdf5 import read_campaign
 
+from processes import BIN, start, stop, wait_for
+
 pytestmark = pytest.mark.e2e
-BIN = Path(sys.executable).parent
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def start(args, env, log: Path) -> subprocess.Popen:
-    """A process in its own group (so cleanup reaches its children), output to ``log``."""
-    with log.open("w") as out:
-        return subprocess.Popen(args, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
-
-
-def stop(process: subprocess.Popen) -> None:
-    if process.poll() is None:
-        os.killpg(process.pid, signal.SIGTERM)
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
-
-
-def wait_for(check, timeout_s: float, what: str, logs=()) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if check():
-            return
-        time.sleep(0.5)
-    raise AssertionError(f"timed out waiting for {what}\n" + "\n".join(f"--- {p}\n{p.read_text()[-3000:]}" for p in logs))
 
 
 @pytest.fixture(scope="module")
-def served(tmp_path_factory, tiny_config):
-    """A Prefect server on a free loopback port and `noisebo serve` of the tiny config, whose
-    sweep deployment (seeds 0-1, reward) runs every 60 s. Both stopped at the end."""
-    tmp = tmp_path_factory.mktemp("e2e")
+def served(prefect_server, tiny_config, tmp_path_factory):
+    """`noisebo serve` of the tiny config, whose sweep deployment (seeds 0-1, reward) runs every
+    60 s, against the session's server; stopped at the end."""
+    env = prefect_server
+    tmp = tmp_path_factory.mktemp("served")
     config = tmp / "tiny.yaml"
     config.write_text(yaml.safe_dump(tiny_config.model_dump(mode="json")))
-    port = free_port()
-    env = dict(os.environ, PREFECT_HOME=str(tmp / "prefect-home"), PREFECT_API_URL=f"http://127.0.0.1:{port}/api",
-               PREFECT_SERVER_ANALYTICS_ENABLED="false", DO_NOT_TRACK="1", TQDM_DISABLE="1")
-    server_log, serve_log = tmp / "server.log", tmp / "serve.log"
-    server = start([str(BIN / "prefect"), "server", "start", "--host", "127.0.0.1", "--port", str(port)], env, server_log)
-    processes = [server]
-
-    def healthy() -> bool:
-        try:
-            return httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=1).status_code == 200
-        except httpx.HTTPError:
-            return False
-
+    out, serve_log = tmp / "runs", tmp / "serve.log"
+    process = start([str(BIN / "noisebo"), "serve", str(config), "--out", str(out), "--sweep-seeds", "0-1",
+                     "--sweep-policy", "reward", "--interval", "60"], env, serve_log)
     try:
-        wait_for(healthy, 180, "the Prefect server", [server_log])
-        out = tmp / "runs"
-        processes.append(start([str(BIN / "noisebo"), "serve", str(config), "--out", str(out), "--sweep-seeds", "0-1",
-                                "--sweep-policy", "reward", "--interval", "60"], env, serve_log))
         listed = lambda: "campaign/tiny" in subprocess.run(  # noqa: E731
             [str(BIN / "prefect"), "deployment", "ls"], env=env, capture_output=True, text=True).stdout
         wait_for(listed, 180, "the deployments to register", [serve_log])
         yield env, out, serve_log
     finally:
-        for process in reversed(processes):
-            stop(process)
+        stop(process)
 
 
 def test_deployment_run_with_a_parameter_runs_the_campaign(served, tiny_config):
