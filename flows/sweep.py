@@ -51,6 +51,18 @@ def sweep_campaign(config: CampaignConfig, seed: int, out_dir: str) -> str:
     return done
 
 
+@task(name="sweep-campaign-on-workers", cache_policy=NO_CACHE)
+def campaign_on_workers(deployment: str, config: CampaignConfig, seed: int, out_dir: str) -> str:
+    """Hand one campaign to the workers of ``deployment``'s work pool and wait for it."""
+    from prefect.deployments import run_deployment
+
+    policy = config.acquisition.policy
+    run = run_deployment(deployment, parameters={"seed": seed, "policy": policy, "out_dir": out_dir}, timeout=None)
+    if not run.state.is_completed():
+        raise RuntimeError(f"{deployment} seed {seed} ({policy}) ended {run.state.name}: {run.state.message}")
+    return str(campaign_path(config, seed, out_dir))
+
+
 @flow(name="sweep", task_runner=ThreadPoolTaskRunner(max_workers=2))
 def sweep(
     config: str | CampaignConfig = "data/configs/forrester.yaml",
@@ -58,10 +70,13 @@ def sweep(
     policies: list[Literal["reward", "double"]] = ["reward", "double"],  # noqa: B006
     out_dir: str = "data/runs/sweep",
     per_run_dir: bool = False,
+    deployment: str | None = None,
 ) -> str:
     """Run every (seed, policy) campaign and return the path of the summary table.
     ``per_run_dir``: write into OUT_DIR/<scheduled start, UTC> so that scheduled runs of a
-    deployment each get their own sweep instead of resuming the last one."""
+    deployment each get their own sweep instead of resuming the last one. ``deployment`` (e.g.
+    "campaign/forrester", see ``noisebo deploy``): run every campaign as a run of that deployment,
+    on the workers of its work pool, instead of in this process's task runner."""
     base = resolve_config(config, None)
     if per_run_dir:
         from datetime import timezone
@@ -71,11 +86,12 @@ def sweep(
         started = flow_run.scheduled_start_time.astimezone(timezone.utc)
         out_dir = str(Path(out_dir) / started.strftime("%Y%m%dT%H%M%SZ"))
     Path(out_dir).mkdir(parents=True, exist_ok=True)
-    futures = [
-        sweep_campaign.submit(base.with_overrides(acquisition={"policy": policy}), seed, out_dir)
-        for policy in policies
-        for seed in seeds
-    ]
+    configs = [(base.with_overrides(acquisition={"policy": policy}), seed) for policy in policies for seed in seeds]
+    if deployment:
+        out_dir = str(Path(out_dir).resolve())
+        futures = [campaign_on_workers.submit(deployment, cfg, seed, out_dir) for cfg, seed in configs]
+    else:
+        futures = [sweep_campaign.submit(cfg, seed, out_dir) for cfg, seed in configs]
     paths, failures = [], []
     for future in futures:
         outcome = future.result(raise_on_failure=False)

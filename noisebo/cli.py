@@ -103,6 +103,21 @@ def _serve(args) -> int:
     return 0
 
 
+def _deploy(args) -> int:
+    if not os.environ.get("PREFECT_API_URL"):
+        raise UsageError("deploy needs a Prefect server: start one with `prefect server start --host 127.0.0.1` "
+                         "and export PREFECT_API_URL=http://127.0.0.1:4200/api")
+    for path in args.config:
+        load_config(path)
+    runtime.configure()
+    from flows.workers import deploy_campaign
+
+    for path in args.config:
+        name = deploy_campaign(path, args.pool, args.out)
+        print(f"deployed {name} to work pool {args.pool!r}; start workers with: prefect worker start --pool {args.pool}")
+    return 0
+
+
 def _replay(args) -> int:
     from noisebo.view.recording import replay
 
@@ -128,13 +143,21 @@ def _sweep(args) -> int:
         raise UsageError("--workers must be at least 1")
     if args.dask_address and args.runner != "dask":
         raise UsageError("--dask-address needs --runner dask")
+    deployment = None
+    if args.runner == "workers":
+        if not os.environ.get("PREFECT_API_URL"):
+            raise UsageError("--runner workers needs the Prefect server the workers poll: export PREFECT_API_URL")
+        deployment = args.deployment or f"campaign/{config.name}"
     _, sweep_flows = _prefect()
-    runner = sweep_flows.task_runner(args.runner, args.workers, args.dask_address)
+    n_campaigns = len(seeds) * len(policies)
+    runner = sweep_flows.task_runner("threads" if deployment else args.runner,
+                                     n_campaigns if deployment else args.workers, args.dask_address)
     flow = sweep_flows.sweep.with_options(task_runner=runner)
-    where = args.dask_address or f"{args.workers} {'local Dask worker processes' if args.runner == 'dask' else 'threads'}"
+    where = (f"the workers of {deployment}" if deployment else args.dask_address
+             or f"{args.workers} {'local Dask worker processes' if args.runner == 'dask' else 'threads'}")
     print(f"sweep {config.name!r}: seeds {seeds[0]}..{seeds[-1]} x {policies} on {where} -> {args.out}", flush=True)
     with flow_settings():
-        table = flow(config, seeds=seeds, policies=policies, out_dir=str(args.out))
+        table = flow(config, seeds=seeds, policies=policies, out_dir=str(args.out), deployment=deployment)
     print(Path(table).read_text())
     print(table)
     return 0
@@ -240,6 +263,12 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--limit", type=int, default=None, help="at most this many flow runs at once")
     serve.set_defaults(handler=_serve)
 
+    deploy = commands.add_parser("deploy", help="register campaign deployments in a Prefect process work pool")
+    deploy.add_argument("config", nargs="+", help="campaign YAML(s)")
+    deploy.add_argument("--pool", default="noisebo", help="process work pool (created if missing)")
+    deploy.add_argument("--out", type=Path, default=Path("data/runs"))
+    deploy.set_defaults(handler=_deploy)
+
     replay = commands.add_parser("replay", help="rebuild a campaign's Rerun recording from its .h5 file")
     replay.add_argument("file", help="the campaign's .h5 file")
     replay.add_argument("--out", type=Path, default=None, help="recording to write (default: FILE.rrd beside it)")
@@ -256,7 +285,9 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--policy", choices=["reward", "double", "both"], default="both")
     sweep.add_argument("--out", type=Path, default=Path("data/runs/sweep"))
     sweep.add_argument("--workers", type=int, default=2, help="threads, or local Dask worker processes")
-    sweep.add_argument("--runner", choices=["threads", "dask"], default="threads")
+    sweep.add_argument("--runner", choices=["threads", "dask", "workers"], default="threads",
+                       help="workers: each campaign a run of --deployment on its work pool's workers")
+    sweep.add_argument("--deployment", default=None, help="with --runner workers (default: campaign/CONFIG_NAME)")
     sweep.add_argument("--dask-address", default=None, help="an existing Dask scheduler, e.g. tcp://host:8786")
     sweep.set_defaults(handler=_sweep)
 

@@ -13,7 +13,7 @@ from instruments import build
 from noisebo.campaign import run_campaign
 from noisebo.storage.hdf5 import read_campaign
 
-from processes import BIN, start, stop, wait_for
+from flows.processes import BIN, start, stop, wait_for
 
 pytestmark = pytest.mark.e2e
 
