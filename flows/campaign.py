@@ -14,6 +14,7 @@ from typing import Callable, Literal
 from prefect import flow
 from prefect.utilities.annotations import quote
 
+from flows import abort
 from instruments import build
 from noisebo.config import CampaignConfig, load_config
 from noisebo.storage import records
@@ -45,6 +46,15 @@ def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, ste
     label = "seed point" if step < 0 else f"step {step + 1}/{progress.config.schedule.n_steps}"
     say(f"{label}: x={x:.4g} t={t:.4g} s shots={shots} value={point.value:.4g} noise={point.noise:.3g}")
     observe(recorder.progress)
+    _stop_if_asked(recorder)
+
+
+def _stop_if_asked(recorder: Recorder) -> None:
+    """After a committed point: if a signal asked to stop, record "aborted" and stop."""
+    signal_name = abort.requested()
+    if signal_name is not None:
+        ops.record(quote(recorder), quote(records.status_record("aborted", f"{signal_name} received")))
+        raise abort.CampaignAborted(signal_name, recorder.h5_path)
 
 
 def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda progress: None,
@@ -119,7 +129,7 @@ def campaign(
     recording beside it; ``live``: stream to a Rerun viewer ("spawn" or a gRPC url)."""
     cfg = resolve_config(config, policy)
     with Recorder.create(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
-        with _viewed(recorder, record_rrd, live, print) as (instrument, observe):
+        with _viewed(recorder, record_rrd, live, print) as (instrument, observe), abort.reclaimed():
             return str(run(recorder, print if show_progress else _silent, observe, instrument))
 
 
@@ -128,7 +138,7 @@ def resume(path: str, show_progress: bool = True, record_rrd: bool = True, live:
     """Continue a campaign from its file (after a crash, a kill or an abort); its recording is
     rebuilt from the journal first, then continues."""
     with Recorder.resume(Path(path)) as recorder:
-        with _viewed(recorder, record_rrd, live, print) as (instrument, observe):
+        with _viewed(recorder, record_rrd, live, print) as (instrument, observe), abort.reclaimed():
             return str(run(recorder, print if show_progress else _silent, observe, instrument))
 
 

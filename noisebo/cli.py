@@ -7,6 +7,7 @@ Every command validates its input before it creates anything; a problem is repor
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -63,7 +64,7 @@ def _run(args) -> int:
         raise CampaignFileError(f"{path} already exists; continue it with `noisebo resume {path}`")
     print(f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}: "
           f"{config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}", flush=True)
-    with flow_settings():
+    with flow_settings(), _abortable(path):
         path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd,
                                        live=args.live)
     print(path)
@@ -76,10 +77,36 @@ def _resume(args) -> int:
         raise CampaignFileError(f"cannot resume {path}: no journal {path.with_suffix('.journal')} beside it")
     campaign_flows, _ = _prefect()
     print(f"resuming {path}", flush=True)
-    with flow_settings():
+    with flow_settings(), _abortable(path):
         done = campaign_flows.resume(str(path), record_rrd=not args.no_rrd, live=args.live)
     print(done)
     return 0
+
+
+EXIT_SIGNAL = {"SIGINT": 130, "SIGTERM": 143}
+
+
+class Aborted(Exception):
+    """A campaign stopped on a signal: its message is the one line to print, ``code`` the exit code."""
+
+    def __init__(self, message: str, code: int):
+        super().__init__(message)
+        self.code = code
+
+
+@contextlib.contextmanager
+def _abortable(path: Path):
+    """SIGINT/SIGTERM stop the campaign cleanly after the current point (see flows/abort.py)."""
+    from flows.abort import AbortFlag, CampaignAborted
+
+    try:
+        with AbortFlag().installed():
+            yield
+    except CampaignAborted as stopped:
+        raise Aborted(str(stopped), EXIT_SIGNAL.get(stopped.signal_name, 130)) from None
+    except KeyboardInterrupt:
+        raise Aborted(f"stopped at once; {path} keeps every shot taken: continue it with `noisebo resume {path}`",
+                      130) from None
 
 
 def _serve(args) -> int:
@@ -305,6 +332,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, CampaignFileError, UsageError) as error:
         print(f"noisebo: error: {error}", file=sys.stderr)
         return EXIT_USAGE
+    except Aborted as stopped:
+        print(f"noisebo: {stopped}", file=sys.stderr)
+        return stopped.code
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

@@ -121,3 +121,32 @@ def test_another_process_reads_the_file_while_the_campaign_runs(tiny_yaml, tmp_p
     assert len({s[1] for s in running}) >= 3, "the reader saw the file grow point by point"
     assert [s[1] for s in seen] == sorted(s[1] for s in seen)
     assert_equals_reference(path, reference)
+
+
+@pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)], ids=["SIGTERM", "SIGINT"])
+def test_a_signal_aborts_cleanly_and_resume_finishes_the_same_campaign(signum, code, tiny_yaml, tmp_path,
+                                                                       prefect_harness, reference):
+    out = tmp_path / "runs"
+    path = out / f"tiny_reward_s{SEED:04d}.h5"
+    jpath = path.with_suffix(".journal")
+    env = cli_env(prefect_harness)
+    proc = subprocess.Popen([sys.executable, "-m", "noisebo.cli", "run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and proc.poll() is None:
+        if jpath.exists() and len(journal.read(jpath)[0]) >= 40:  # into the BO steps
+            break
+        time.sleep(0.05)
+    proc.send_signal(signum)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == code, stderr[-2000:]
+    assert "continue it with `noisebo resume" in stderr.strip().splitlines()[-1]
+    assert f"{signal.Signals(signum).name} received" in stdout
+    with h5py.File(path, "r") as f:
+        assert f.attrs["status"] == "aborted" and f.attrs["status_reason"] == f"{signal.Signals(signum).name} received"
+        n_points = int(f.attrs["n_points"])
+        assert f["shots/committed"][()].all()  # the point under way was finished, not left half-measured
+    assert 3 <= n_points < 3 + 4
+    done = noisebo(["resume", str(path)], env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert_equals_reference(path, reference)

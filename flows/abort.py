@@ -1,0 +1,83 @@
+"""Clean abort on SIGINT and SIGTERM.
+
+The first signal asks the campaign to stop: the point being measured is finished and committed,
+then the campaign records the status "aborted" (with the signal as the reason) and stops; the
+file is intact and ``noisebo resume`` continues it. A second signal stops at once: the shots
+already taken of the current point stay in the journal, so a resume still takes each shot once.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+
+
+class CampaignAborted(RuntimeError):
+    """The campaign stopped on a signal; its file records status "aborted" and can be resumed."""
+
+    def __init__(self, signal_name: str, path):
+        super().__init__(f"aborted on {signal_name}: {path} is intact; continue it with `noisebo resume {path}`")
+        self.signal_name, self.path = signal_name, path
+
+
+class AbortFlag:
+    """Set by the first SIGINT/SIGTERM while ``installed``; campaigns read it between points
+    through ``requested()``."""
+
+    def __init__(self):
+        self.signal_name: str | None = None
+
+    def requested(self) -> str | None:
+        return self.signal_name
+
+    def _handle(self, signum, frame) -> None:
+        if self.signal_name is not None:  # the second signal: stop now
+            raise KeyboardInterrupt(f"second {signal.Signals(signum).name}")
+        self.signal_name = signal.Signals(signum).name
+        print(f"noisebo: {self.signal_name} received: finishing the current point, then stopping "
+              "(send it again to stop at once)", flush=True)
+
+    @contextmanager
+    def installed(self):
+        """Handle SIGINT and SIGTERM while inside (main thread only; elsewhere a no-op)."""
+        global _active
+        _active = self
+        try:
+            with _handlers(self._handle):
+                yield self
+        finally:
+            _active = NO_ABORT
+
+
+@contextmanager
+def _handlers(handler):
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, old in previous.items():
+            signal.signal(s, old)
+
+
+@contextmanager
+def reclaimed():
+    """Inside a flow run: take SIGINT/SIGTERM back from Prefect's engine (which turns SIGTERM into
+    an immediate TerminationSignal) when a clean abort is installed; otherwise change nothing."""
+    if _active is NO_ABORT:
+        yield
+        return
+    with _handlers(_active._handle):
+        yield
+
+
+NO_ABORT = AbortFlag()  # never set: campaigns outside ``installed`` (tests, sweeps) run on
+_active = NO_ABORT
+
+
+def requested() -> str | None:
+    """The name of the signal that asked the running campaign to stop, or None."""
+    return _active.requested()
