@@ -41,7 +41,8 @@ def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, ste
     progress = recorder.progress
     index = len(progress.state.points)
     readings = ops.measure(quote(instrument), x, t, shots, progress.seed, index, quote(recorder))
-    point, shot_values = ops.reduce(x, t, quote(readings), model_noise, quote(progress.config.instrument))
+    config = progress.config
+    point, shot_values = ops.reduce(x, t, quote(readings), model_noise, quote(config.instrument), config.schedule.clip_sd)
     ops.record(quote(recorder), quote(records.point_record(index, step, point, shot_values)))
     label = "seed point" if step < 0 else f"step {step + 1}/{progress.config.schedule.n_steps}"
     say(f"{label}: x={x:.4g} t={t:.4g} s shots={shots} value={point.value:.4g} noise={point.noise:.3g}")

@@ -13,7 +13,7 @@ import numpy as np
 from noisebo.config import CampaignConfig
 from noisebo.decision import Decision, decide, fit_key, fit_models, grids, hyperparameters, predict
 from noisebo.keys import MEASURE, SEED_POINTS, numpy_rng
-from noisebo.reduction import ShotValue, shot_values, usable
+from noisebo.reduction import ShotValue, clip_outliers, shot_values, usable
 from noisebo.schedule import reduce_shots
 from noisebo.state import CampaignState, Point
 
@@ -59,12 +59,13 @@ def shot_readings(
 
 
 def make_point(
-    x: float, t: float, readings: Sequence, model_noise: float | None, instrument_config
+    x: float, t: float, readings: Sequence, model_noise: float | None, instrument_config, clip_sd: float | None = None
 ) -> tuple[Point, list[ShotValue]]:
     """A point from its readings (spectra are fitted here) and each shot's value. The point uses
-    the ok shots only. With ``model_noise`` None the noise is measured (the sample sd of the ok
-    shots, at least two needed), otherwise it is the given noise-model prediction."""
-    shots = shot_values(readings, instrument_config)
+    the ok shots only (after outlier clipping with ``clip_sd``, see ``ScheduleConfig``). With
+    ``model_noise`` None the noise is measured (the sample sd of the ok shots, at least two
+    needed), otherwise it is the given noise-model prediction."""
+    shots = clip_outliers(shot_values(readings, instrument_config), clip_sd)
     measured = model_noise is None
     reduced = reduce_shots(usable(shots, 2 if measured else 1))
     return Point(
@@ -129,7 +130,7 @@ def run_campaign(
     shots = config.schedule.shots_before
     for i, (x, t) in enumerate(seed_points(config, seed)):
         readings = shot_readings(instrument, x, t, shots, seed, i)
-        state = state.with_point(make_point(x, t, readings, None, config.instrument)[0])
+        state = state.with_point(make_point(x, t, readings, None, config.instrument, config.schedule.clip_sd)[0])
     decisions, latencies = [], []
     for step in range(config.schedule.n_steps):
         started = time.perf_counter()
@@ -138,7 +139,9 @@ def run_campaign(
         point_index = len(state.points)
         readings = shot_readings(instrument, decision.x, decision.t, decision.shots, seed, point_index)
         model_noise = None if decision.measure_noise else decision.noise_at_t
-        state = state.with_point(make_point(decision.x, decision.t, readings, model_noise, config.instrument)[0])
+        state = state.with_point(
+            make_point(decision.x, decision.t, readings, model_noise, config.instrument, config.schedule.clip_sd)[0]
+        )
         decisions.append(decision)
         if on_step is not None:
             on_step(decision, state)

@@ -228,6 +228,11 @@ class ScheduleConfig(_Frozen):
 
     Converged when the population variance of the predicted optimal t over the last ``window``
     BO steps is below ``threshold`` (s^2).
+
+    ``clip_sd``: outlier-robust reduction of a point's shots. A shot farther than ``clip_sd``
+    robust standard deviations (1.4826 x the median absolute deviation) from the median of the
+    point's ok shots is rejected (recorded with its reason, like any rejected shot) and the point
+    is the mean and sd of the rest. None: the plain mean of the ok shots.
     """
 
     n_seed: int = Field(3, ge=1)
@@ -238,6 +243,7 @@ class ScheduleConfig(_Frozen):
     shots_after: int = Field(3, ge=1)
     window: int = Field(3, ge=2)
     threshold: PositiveFloat = 5e-4
+    clip_sd: PositiveFloat | None = None
 
 
 class CampaignConfig(_Frozen):

@@ -69,11 +69,23 @@ def _fit_one(config: CampaignConfig, model, data, key, guess: dict, laplace: int
     return inference.fit_map(model, data, key, inf.restarts, laplace, guess, quadrature)
 
 
+class NonFiniteData(ValueError):
+    """A model was about to be trained on a NaN or infinite number: a bug upstream, never data."""
+
+
+def _check_finite(**columns: np.ndarray) -> None:
+    for name, column in columns.items():
+        bad = np.flatnonzero(~np.isfinite(np.asarray(column, dtype=np.float64)))
+        if bad.size:
+            raise NonFiniteData(f"point(s) {bad.tolist()} have a non-finite {name}; no model is trained on it")
+
+
 def fit_models(config: CampaignConfig, state: CampaignState, key: jax.Array) -> Fitted:
     """Fit the primary GP on every point and the noise model on its training points."""
     s = config.space
     x, t, value = state.column("x"), state.column("t"), state.column("value")
     n_shots, noise = state.column("n_shots"), state.column("noise")
+    _check_finite(x=x, t=t, value=value, noise=noise)
     capacity = capacity_for(len(state.points))
     pdata, std = primary.prepare(x, value, noise**2 / n_shots, capacity, s.x_min, s.x_max)
     train = state.noise_training_mask(config.noise_model.learn_after_convergence)

@@ -54,6 +54,29 @@ def shot_values(readings: Sequence, instrument_config) -> list[ShotValue]:
     return [shot_value(r, instrument_config) for r in readings]
 
 
+ROBUST_SD = 1.4826  # median absolute deviation -> standard deviation, for Gaussian data
+
+
+def clip_outliers(values: Sequence[ShotValue], clip_sd: float | None) -> list[ShotValue]:
+    """The shots with those of the ok ones farther than ``clip_sd`` robust sd (ROBUST_SD x MAD)
+    from their median turned into rejected shots; unchanged with ``clip_sd`` None, fewer than
+    three ok shots or a zero MAD."""
+    values = list(values)
+    good = np.asarray([v.value for v in values if v.ok], dtype=np.float64)
+    if clip_sd is None or good.size < 3:
+        return values
+    centre = float(np.median(good))
+    spread = ROBUST_SD * float(np.median(np.abs(good - centre)))
+    if spread <= 0:
+        return values
+    limit = clip_sd * spread
+    return [
+        v._replace(ok=False, reason=f"outlier: {abs(v.value - centre):.4g} from the median, limit {limit:.4g}")
+        if v.ok and abs(v.value - centre) > limit else v
+        for v in values
+    ]
+
+
 def usable(values: Sequence[ShotValue], needed: int) -> np.ndarray:
     """The finite values of the ok shots; raise ``NoUsableShots`` with fewer than ``needed``."""
     good = np.asarray([v.value for v in values if v.ok], dtype=np.float64)

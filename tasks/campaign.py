@@ -65,10 +65,11 @@ def measure(instrument, x: float, t: float, shots: int, seed: int, point: int, l
 
 @task(name="reduce", cache_policy=NO_CACHE)
 def reduce(
-    x: float, t: float, readings: Sequence[Reading], model_noise: float | None, instrument_config
+    x: float, t: float, readings: Sequence[Reading], model_noise: float | None, instrument_config,
+    clip_sd: float | None = None,
 ) -> tuple[Point, list[ShotValue]]:
     """Each shot's value (resonance sweeps are SHO-fitted here), then the point from the ok ones."""
-    return core.make_point(x, t, readings, model_noise, instrument_config)
+    return core.make_point(x, t, readings, model_noise, instrument_config, clip_sd)
 
 
 @task(name="update-models", cache_policy=NO_CACHE)

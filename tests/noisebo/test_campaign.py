@@ -67,3 +67,52 @@ def test_measured_noise_needs_two_usable_shots():
     point, shots = make_point(0.1, 1.0, [Reading(2.0), Reading(float("inf"))], 0.7, forrester)
     assert (point.value, point.n_shots, point.noise) == (2.0, 1, 0.7)
     assert [s.ok for s in shots] == [True, False] and shots[1].reason == "non-finite reading"
+
+
+def _shots(values, ok=None):
+    from noisebo.reduction import ShotValue
+
+    ok = ok or [True] * len(values)
+    return [ShotValue(v, o, "" if o else "bad", None) for v, o in zip(values, ok)]
+
+
+@pytest.mark.parametrize("values, clip, rejected", [
+    # median 10.5, MAD 0.5 -> robust sd 0.7413; 3 sd = 2.224: 16 (5.5 away) is out, 9.5 (1 away) in
+    ([9.5, 10.0, 10.5, 11.0, 16.0], 3.0, [4]),
+    ([9.5, 10.0, 10.5, 11.0, 16.0], 10.0, []),  # 10 sd = 7.41
+    ([9.5, 10.0, 10.5, 11.0, 16.0], None, []),
+    ([1.0, 50.0], 3.0, []),  # fewer than three: nothing to judge by
+    ([2.0, 2.0, 2.0, 9.0], 3.0, []),  # MAD 0: left alone
+])
+def test_outlier_clipping_by_hand(values, clip, rejected):
+    from noisebo.reduction import clip_outliers
+
+    out = clip_outliers(_shots(values), clip)
+    assert [i for i, v in enumerate(out) if not v.ok] == rejected
+    assert all(v.reason.startswith("outlier: ") for v in out if not v.ok)
+
+
+def test_clipping_ignores_shots_already_rejected_and_the_point_uses_the_rest():
+    import math
+
+    from instruments.base import Reading
+    from noisebo.campaign import make_point
+    from noisebo.config import ForresterInstrumentConfig
+
+    readings = [Reading(v) for v in (9.5, 10.0, 10.5, 11.0, 16.0, float("nan"))]
+    point, shots = make_point(0.5, 1.0, readings, None, ForresterInstrumentConfig(), clip_sd=3.0)
+    assert [s.ok for s in shots] == [True, True, True, True, False, False]
+    assert shots[5].reason == "non-finite reading"
+    assert point.value == pytest.approx(10.25) and point.n_shots == 4
+    assert point.shot_std == pytest.approx(math.sqrt((0.75**2 + 0.25**2 + 0.25**2 + 0.75**2) / 3))
+
+
+def test_no_model_is_ever_trained_on_a_non_finite_value(tiny_config):
+    from noisebo.decision import NonFiniteData, fit_models, fit_key
+    from noisebo.state import CampaignState, Point
+
+    state = CampaignState()
+    for i, value in enumerate([1.0, float("inf"), 2.0]):
+        state = state.with_point(Point(0.1 * i, 1.0, value, 0.5, 10, 0.5, True))
+    with pytest.raises(NonFiniteData, match=r"point\(s\) \[1\] have a non-finite value"):
+        fit_models(tiny_config, state, fit_key(0, 0))
