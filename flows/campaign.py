@@ -15,6 +15,7 @@ from prefect import flow
 from prefect.utilities.annotations import quote
 
 from flows import abort
+from noisebo.failures import FailureBudgetExceeded, check_budget
 from instruments import build
 from noisebo.config import CampaignConfig, load_config
 from noisebo.storage import records
@@ -40,10 +41,12 @@ def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, ste
                    observe: Observer) -> None:
     progress = recorder.progress
     index = len(progress.state.points)
-    readings = ops.measure(quote(instrument), x, t, shots, progress.seed, index, quote(recorder))
     config = progress.config
+    budget = (config.schedule.min_failed, config.schedule.tolerated_rate)
+    readings = ops.measure(quote(instrument), x, t, shots, progress.seed, index, quote(recorder), budget)
     point, shot_values = ops.reduce(x, t, quote(readings), model_noise, quote(config.instrument), config.schedule.clip_sd)
     ops.record(quote(recorder), quote(records.point_record(index, step, point, shot_values)))
+    check_budget(*recorder.failure_counts(), *budget)  # rejected shots count too
     label = "seed point" if step < 0 else f"step {step + 1}/{progress.config.schedule.n_steps}"
     say(f"{label}: x={x:.4g} t={t:.4g} s shots={shots} value={point.value:.4g} noise={point.noise:.3g}")
     observe(recorder.progress)
@@ -61,7 +64,17 @@ def _stop_if_asked(recorder: Recorder) -> None:
 def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda progress: None,
         instrument=None) -> Path:
     """Drive a campaign from wherever its journal stands to the end. ``observe`` sees the
-    campaign after every committed point and at the end (the live view)."""
+    campaign after every committed point and at the end (the live view). Past the failure
+    budget the campaign records the status "failed" with the reason, and stops."""
+    try:
+        return _drive(recorder, say, observe, instrument)
+    except FailureBudgetExceeded as error:
+        ops.record(quote(recorder), quote(records.status_record("failed", str(error))))
+        observe(recorder.progress)
+        raise
+
+
+def _drive(recorder: Recorder, say: Progress, observe: Observer, instrument) -> Path:
     progress = recorder.progress
     config, seed = progress.config, progress.seed
     sched = config.schedule

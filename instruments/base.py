@@ -25,7 +25,9 @@ class Instrument(Protocol):
 
 
 def build(config) -> Instrument:
-    """The driver for a validated instrument config (dispatch on its ``kind``)."""
+    """The driver for a validated instrument config (dispatch on its ``kind``), inside the
+    fault injector if ``faults`` is set, inside the timeout guard if ``timeout_s`` is."""
+    from instruments.faults import FaultyInstrument
     from instruments.forrester import ForresterInstrument
     from instruments.guard import TimeoutGuard
     from instruments.pfm import PFMInstrument
@@ -36,4 +38,6 @@ def build(config) -> Instrument:
     except KeyError:
         raise ValueError(f"unknown instrument kind {config.kind!r}; known: {sorted(drivers)}") from None
     instrument = driver(config)
+    if config.faults is not None:
+        instrument = FaultyInstrument(instrument, config.faults)
     return TimeoutGuard(instrument, config.timeout_s) if config.timeout_s is not None else instrument

@@ -12,14 +12,7 @@ import threading
 import numpy as np
 
 from instruments.base import Instrument, Reading
-
-
-class InstrumentError(RuntimeError):
-    """A transient instrument failure: worth a bounded number of retries."""
-
-
-class InstrumentTimeout(InstrumentError):
-    """The instrument did not answer within its timeout."""
+from noisebo.failures import InstrumentError, InstrumentTimeout  # noqa: F401 - re-exported
 
 
 class TimeoutGuard:
@@ -58,3 +51,8 @@ class TimeoutGuard:
 
     def noise_law(self, t):
         return self.inner.noise_law(t)
+
+    def __getattr__(self, name: str):  # the wrapped driver's extras, e.g. a fault ledger
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)

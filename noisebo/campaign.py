@@ -12,6 +12,7 @@ import numpy as np
 
 from noisebo.config import CampaignConfig
 from noisebo.decision import Decision, decide, fit_key, fit_models, grids, hyperparameters, predict
+from noisebo.failures import InstrumentError
 from noisebo.keys import MEASURE, SEED_POINTS, numpy_rng
 from noisebo.reduction import ShotValue, clip_outliers, shot_values, usable
 from noisebo.schedule import reduce_shots
@@ -46,12 +47,23 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
 def shot_readings(
     instrument, x: float, t: float, shots: int, seed: int, point: int,
     done: Sequence = (), on_shot: Callable[[int, object], None] | None = None,
+    on_failure: Callable[[int, InstrumentError], None] | None = None,
 ) -> list:
     """Readings ``len(done)..shots-1`` of a point appended to ``done``; shot k draws from key
-    (seed, point, k), and each new reading goes to ``on_shot(k, reading)`` as soon as it is taken."""
+    (seed, point, k), and each new reading goes to ``on_shot(k, reading)`` as soon as it is taken.
+    With ``on_failure``, an ``InstrumentError`` goes to ``on_failure(k, error)`` (which records
+    it and may stop the campaign) and shot k is tried again with the same key; without, it is
+    raised."""
     readings = list(done)
     for k in range(len(readings), shots):
-        reading = instrument.measure(x, t, numpy_rng(seed, MEASURE, point, k))
+        while True:
+            try:
+                reading = instrument.measure(x, t, numpy_rng(seed, MEASURE, point, k))
+                break
+            except InstrumentError as error:
+                if on_failure is None:
+                    raise
+                on_failure(k, error)
         if on_shot is not None:
             on_shot(k, reading)
         readings.append(reading)

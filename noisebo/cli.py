@@ -15,9 +15,11 @@ from pathlib import Path
 
 from noisebo import runtime
 from noisebo.config import ConfigError, load_config
+from noisebo.failures import FailureBudgetExceeded
 from noisebo.storage.hdf5 import CampaignFileError
 
 EXIT_USAGE = 2
+EXIT_FAILED = 3
 
 
 class UsageError(ValueError):
@@ -335,6 +337,9 @@ def main(argv: list[str] | None = None) -> int:
     except Aborted as stopped:
         print(f"noisebo: {stopped}", file=sys.stderr)
         return stopped.code
+    except FailureBudgetExceeded as error:
+        print(f"noisebo: stopped: {error}; the file records status failed", file=sys.stderr)
+        return EXIT_FAILED
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0

@@ -42,6 +42,35 @@ class UniformPrior(_Frozen):
         return self
 
 
+Rate = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+FAULT_KINDS = ("timeout", "exception", "nan", "inf", "outlier", "corrupt_spectrum")
+
+
+class FaultsConfig(_Frozen):
+    """Injected instrument faults, for testing a campaign's resilience: each call to the
+    instrument is, with these probabilities (drawn from the injector's own stream seeded by
+    ``seed``), a hang of ``hang_s`` (longer than the instrument's timeout), an instrument error,
+    a NaN or infinite reading, an outlier (the reading moved by ``outlier_sd`` times the true
+    single-shot noise sd) or, for spectra, a corrupted spectrum; otherwise the real reading."""
+
+    seed: int = Field(0, ge=0)
+    timeout: Rate = 0.0
+    exception: Rate = 0.0
+    nan: Rate = 0.0
+    inf: Rate = 0.0
+    outlier: Rate = 0.0
+    corrupt_spectrum: Rate = 0.0
+    outlier_sd: PositiveFloat = 50.0
+    hang_s: PositiveFloat = 2.0
+
+    @model_validator(mode="after")
+    def _at_most_one(self) -> FaultsConfig:
+        total = sum(getattr(self, k) for k in FAULT_KINDS)
+        if total > 1:
+            raise ValueError(f"fault rates add up to {total:g}; at most 1")
+        return self
+
+
 class ForresterInstrumentConfig(_Frozen):
     """Forrester benchmark: shots are f(x) + N(0, (a1/sqrt(t) + a0)^2).
 
@@ -51,6 +80,21 @@ class ForresterInstrumentConfig(_Frozen):
     a0: NonNegativeFloat = 0.1
     a1: NonNegativeFloat = 2.0
     timeout_s: PositiveFloat | None = None
+    faults: FaultsConfig | None = None
+
+    @model_validator(mode="after")
+    def _faults_fit(self) -> ForresterInstrumentConfig:
+        _check_faults(self.faults, self.timeout_s, spectra=False)
+        return self
+
+
+def _check_faults(faults: FaultsConfig | None, timeout_s: float | None, spectra: bool) -> None:
+    if faults is None:
+        return
+    if faults.timeout > 0 and (timeout_s is None or faults.hang_s <= timeout_s):
+        raise ValueError("injected timeouts need timeout_s set and faults.hang_s above it")
+    if faults.corrupt_spectrum > 0 and not spectra:
+        raise ValueError("faults.corrupt_spectrum needs an instrument that returns spectra")
 
 
 class ScanProfileConfig(_Frozen):
@@ -114,9 +158,11 @@ class PFMInstrumentConfig(_Frozen):
     resonance_jitter_hz: NonNegativeFloat = 50.0
     q_bounds: tuple[PositiveFloat, PositiveFloat] = (5.0, 5000.0)
     timeout_s: PositiveFloat | None = None
+    faults: FaultsConfig | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> PFMInstrumentConfig:
+        _check_faults(self.faults, self.timeout_s, spectra=True)
         if self.sweep_half_span_hz >= self.resonance_hz:
             raise ValueError("sweep_half_span_hz must be below resonance_hz")
         if not self.q_bounds[0] < self.q < self.q_bounds[1]:
@@ -233,6 +279,10 @@ class ScheduleConfig(_Frozen):
     robust standard deviations (1.4826 x the median absolute deviation) from the median of the
     point's ok shots is rejected (recorded with its reason, like any rejected shot) and the point
     is the mean and sd of the rest. None: the plain mean of the ok shots.
+
+    Failure budget: once at least ``min_failed`` shots have failed (instrument errors, timeouts,
+    rejected readings), a campaign whose failed fraction of all attempts exceeds
+    ``tolerated_rate`` stops with ``FailureBudgetExceeded`` and the status "failed".
     """
 
     n_seed: int = Field(3, ge=1)
@@ -244,6 +294,8 @@ class ScheduleConfig(_Frozen):
     window: int = Field(3, ge=2)
     threshold: PositiveFloat = 5e-4
     clip_sd: PositiveFloat | None = None
+    min_failed: int = Field(5, ge=1)
+    tolerated_rate: Rate = 0.5
 
 
 class CampaignConfig(_Frozen):

@@ -10,6 +10,7 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from instruments.guard import InstrumentError
+from noisebo.failures import check_budget
 from noisebo import campaign as core
 from noisebo import decision as core_decision
 from noisebo.config import CampaignConfig
@@ -27,6 +28,10 @@ class ShotLog(Protocol):
     def taken(self, point: int) -> list[Reading]: ...
 
     def add(self, point: int, shot: int, x: float, t: float, reading: Reading) -> None: ...
+
+    def failed(self, point: int, shot: int, x: float, t: float, error: BaseException) -> None: ...
+
+    def failure_counts(self) -> tuple[int, int]: ...
 
 
 def _instrument_failed(task, task_run, state) -> bool:
@@ -52,15 +57,23 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     retry_delay_seconds=0.2,
     retry_condition_fn=_instrument_failed,
 )
-def measure(instrument, x: float, t: float, shots: int, seed: int, point: int, log: ShotLog) -> list[Reading]:
+def measure(
+    instrument, x: float, t: float, shots: int, seed: int, point: int, log: ShotLog, budget: tuple[int, float] = (5, 0.5)
+) -> list[Reading]:
     """Shots of a point up to ``shots``, starting after those ``log`` already holds and handing
     each new one to the log as soon as it is taken; a retry or a resumed campaign therefore
-    continues where the last attempt stopped, and no shot is taken or recorded twice."""
+    continues where the last attempt stopped, and no shot is taken or recorded twice. A failed
+    attempt is logged and tried again while the failure ``budget`` (min_failed, tolerated_rate)
+    holds; past it, ``FailureBudgetExceeded``."""
 
     def add(k: int, reading: Reading) -> None:
         log.add(point, k, x, t, reading)
 
-    return core.shot_readings(instrument, x, t, shots, seed, point, log.taken(point), add)
+    def failed(k: int, error: InstrumentError) -> None:
+        log.failed(point, k, x, t, error)
+        check_budget(*log.failure_counts(), *budget)
+
+    return core.shot_readings(instrument, x, t, shots, seed, point, log.taken(point), add, failed)
 
 
 @task(name="reduce", cache_policy=NO_CACHE)

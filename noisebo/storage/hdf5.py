@@ -110,6 +110,7 @@ def _fill(f: h5py.File, progress: Progress) -> None:
         n_points=len(progress.state.points),
         n_steps=len(progress.decisions),
         n_shots=len(progress.shot_rows),
+        n_failed_attempts=len(progress.failures),
         config_json=json.dumps(config.model_dump(mode="json")),
         versions_json=json.dumps(progress.versions),
     )
@@ -120,6 +121,7 @@ def _fill(f: h5py.File, progress: Progress) -> None:
     _put(grid, "t_fine", tables["grid"]["t_fine"], "s", "t grid of the predicted optimal t")
 
     _fill_shots(f, progress, tables["shots"])
+    _fill_failures(f, progress)
 
     points = f.create_group("points")
     for name, (units, description) in POINT_COLUMNS.items():
@@ -183,6 +185,25 @@ def _shot_columns(rows: list[dict]) -> dict:
         get = getters.get(name, lambda r, n=name: r[n])
         out[name] = np.asarray([get(r) for r in rows], dtype=dtype)
     return out
+
+
+FAILURE_COLUMNS = (
+    ("point", np.int32, "1", "point the failed attempt belongs to"),
+    ("shot", np.int32, "1", "shot index it was an attempt at (retried with the same key)"),
+    ("x", np.float64, "x units", "position"),
+    ("t", np.float64, "s", "exposure (sweep) time"),
+)
+
+
+def _fill_failures(f: h5py.File, progress: Progress) -> None:
+    group = f.create_group("failures")
+    group.attrs["description"] = "failed attempts at shots (instrument errors, timeouts); each was tried again"
+    rows = progress.failures
+    for name, dtype, units, description in FAILURE_COLUMNS:
+        _put(group, name, np.asarray([r[name] for r in rows], dtype=dtype), units, description)
+    strings = h5py.string_dtype()
+    for name, description in (("kind", "timeout | instrument error"), ("reason", "the error message")):
+        _put(group, name, np.asarray([r[name] for r in rows], dtype=object).astype(strings), "text", description)
 
 
 def _fill_shots(f: h5py.File, progress: Progress, columns: dict) -> None:

@@ -97,6 +97,13 @@ class Recorder:
         """Journal one shot (its raw reading)."""
         self.append(records.shot_record(point, shot, x, t, reading))
 
+    def failed(self, point: int, shot: int, x: float, t: float, error: BaseException) -> None:
+        """Journal one failed attempt at a shot."""
+        self.append(records.failure_record(point, shot, x, t, error))
+
+    def failure_counts(self) -> tuple[int, int]:
+        return self.progress.failure_counts()
+
     def snapshot(self) -> None:
         write_snapshot(self.h5_path, self.progress)
 

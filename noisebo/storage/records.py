@@ -4,6 +4,7 @@ Record types, in the order a campaign writes them:
     campaign  config, seed, versions, start time (first record, once)
     decision  one BO step's proposal and model outputs (before its shots)
     shot      one shot: point index, shot index, x, t, value
+    failure   a failed attempt at a shot (instrument error, timeout): point, shot, x, t, reason
     point     a point reduced from its shots: commits the point
     summary   the final models after the last point
     status    running / completed / aborted / failed, with a reason
@@ -51,6 +52,12 @@ def shot_record(point: int, shot: int, x: float, t: float, reading) -> Record:
     fields = {"point": int(point), "shot": int(shot), "x": float(x), "t": float(t), "value": value}
     arrays = {} if reading.spectrum is None else {"spectrum": np.asarray(reading.spectrum)}
     return Record("shot", fields, arrays)
+
+
+def failure_record(point: int, shot: int, x: float, t: float, error: BaseException) -> Record:
+    kind = "timeout" if type(error).__name__ == "InstrumentTimeout" else "instrument error"
+    return Record("failure", {"point": int(point), "shot": int(shot), "x": float(x), "t": float(t), "kind": kind,
+                              "reason": str(error)})
 
 
 def point_record(index: int, step: int, point: Point, shots=()) -> Record:
@@ -106,6 +113,12 @@ class Progress:
     summary: Record | None = None
     status: str = "running"
     reason: str = ""
+    failures: list[dict] = field(default_factory=list)
+
+    def failure_counts(self) -> tuple[int, int]:
+        """(failed, attempted) shots so far: failed attempts plus rejected shots, of all attempts."""
+        rejected = sum(1 for r in self.shot_rows if "reduced" in r and not r.get("ok", False))
+        return len(self.failures) + rejected, len(self.failures) + len(self.shot_rows)
 
     @property
     def pending(self) -> Record | None:
@@ -173,6 +186,10 @@ def replay_one(progress: Progress, record: Record) -> Progress:
         progress.state = progress.state.with_point(Point(**fields))
         _commit_shots(progress, f, record.arrays)
         progress.point_steps.append(f["step"])
+    elif record.type == "failure":
+        if f["point"] != len(progress.state.points) or f["shot"] != len(progress.shots.get(f["point"], [])):
+            raise CorruptJournal(f"failure at shot {f['shot']} of point {f['point']} out of order")
+        progress.failures.append(dict(f))
     elif record.type == "summary":
         progress.summary = record
     elif record.type == "status":

@@ -31,6 +31,7 @@ def test_seed_points_task_is_the_core_function(tiny_config):
 class ListLog:
     def __init__(self, done=()):
         self.rows = [(0, k, v) for k, v in enumerate(done)]
+        self.failures = []
 
     def taken(self, point):
         return [v for p, _, v in self.rows if p == point]
@@ -38,6 +39,12 @@ class ListLog:
     def add(self, point, shot, x, t, value):
         assert shot == len(self.taken(point)), "a shot recorded twice or out of order"
         self.rows.append((point, shot, value))
+
+    def failed(self, point, shot, x, t, error):
+        self.failures.append((point, shot, type(error).__name__))
+
+    def failure_counts(self):
+        return len(self.failures), len(self.failures) + len(self.rows)
 
 
 def test_measure_continues_after_the_shots_already_taken(tiny_config):
@@ -124,6 +131,17 @@ def test_measure_retries_instrument_errors_and_keeps_the_shots_it_took(tiny_conf
     assert values == reference
     assert [k for _, k, _ in log.rows] == [0, 1, 2, 3, 4]
     assert inst.calls == 7
+    assert log.failures == [(0, 2, "InstrumentError"), (0, 2, "InstrumentError")]  # both logged, then retried
+
+
+def test_measure_stops_past_the_failure_budget(tiny_config):
+    from noisebo.failures import FailureBudgetExceeded
+
+    inst = FailsMidway(tiny_config, after=1, failures=100)
+    log = ListLog()
+    with pytest.raises(FailureBudgetExceeded, match="3 of 4 shot attempts failed"):
+        ops.measure.fn(inst, 0.3, 2.0, 5, 1, 0, log, (3, 0.5))
+    assert len(log.rows) == 1 and len(log.failures) == 3
 
 
 def test_measure_does_not_retry_other_errors(tiny_config, prefect_harness):

@@ -1,0 +1,87 @@
+"""A fault-injecting wrapper around any instrument, for testing a campaign's resilience.
+
+Each call first asks the wrapped instrument for its real reading (with the shot's own random
+stream, so a retried shot gets the same reading once no fault is injected), then, with the rates
+of ``FaultsConfig`` drawn from the injector's own seeded stream, replaces it by a fault: a hang
+longer than the instrument's timeout, an ``InstrumentError``, a NaN or infinite reading, an
+outlier, or a corrupted spectrum. Every injected fault is appended to ``ledger``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from instruments.base import Instrument, Reading
+from noisebo.config import FAULT_KINDS, FaultsConfig
+from noisebo.failures import InstrumentError
+
+
+class FaultyInstrument:
+    """Wraps ``inner``; put the timeout guard around this wrapper so injected hangs are cut off."""
+
+    def __init__(self, inner: Instrument, faults: FaultsConfig):
+        self.inner, self.faults, self.name = inner, faults, inner.name
+        self._rng = np.random.default_rng(faults.seed)
+        self._lock = threading.Lock()
+        self.calls = 0
+        self.ledger: list[dict] = []
+
+    def _draw(self, x: float, t: float) -> str | None:
+        with self._lock:
+            u = float(self._rng.random())
+            sign = 1.0 if self._rng.random() < 0.5 else -1.0
+            self.calls += 1
+            edge = 0.0
+            for kind in FAULT_KINDS:
+                edge += getattr(self.faults, kind)
+                if u < edge:
+                    self.ledger.append({"call": self.calls, "x": float(x), "t": float(t), "kind": kind, "sign": sign})
+                    return kind
+            return None
+
+    def measure(self, x: float, t: float, rng: np.random.Generator) -> Reading:
+        reading = self.inner.measure(x, t, rng)
+        kind = self._draw(x, t)
+        if kind is None:
+            return reading
+        if kind == "timeout":
+            time.sleep(self.faults.hang_s)
+            return reading
+        if kind == "exception":
+            raise InstrumentError(f"{self.name}: injected instrument error at x={x:g}, t={t:g}")
+        if kind in ("nan", "inf"):
+            bad = float("nan") if kind == "nan" else float("inf")
+            if reading.spectrum is None:
+                return Reading(bad)
+            spectrum = np.array(reading.spectrum, copy=True)
+            spectrum[1] = bad
+            return Reading(None, spectrum)
+        if kind == "outlier":
+            return self._outlier(reading, x, t, self.ledger[-1]["sign"])
+        return Reading(None, np.asarray(reading.spectrum)[:, :3])  # corrupt: a 3-sample stub
+
+    def _outlier(self, reading: Reading, x: float, t: float, sign: float) -> Reading:
+        """The reading moved by outlier_sd true noise sd: a scalar directly; a spectrum scaled
+        so that its fitted amplitude moves by that much (the fit is linear in the scale)."""
+        noise = self.inner.noise_law(np.asarray([t]))
+        step = self.faults.outlier_sd * (float(noise[0]) if noise is not None else 1.0)
+        if reading.spectrum is None:
+            return Reading(float(reading.value) + sign * step)
+        truth = self.inner.truth(np.asarray([x]))
+        amplitude = max(abs(float(truth[0])), 1.0) if truth is not None else 1.0
+        spectrum = np.array(reading.spectrum, copy=True)
+        spectrum[1] *= max(1.0 + sign * step / amplitude, 0.0)
+        return Reading(None, spectrum)
+
+    def truth(self, x):
+        return self.inner.truth(x)
+
+    def noise_law(self, t):
+        return self.inner.noise_law(t)
+
+    def counts(self) -> dict[str, int]:
+        """Injected faults per kind."""
+        return {kind: sum(1 for f in self.ledger if f["kind"] == kind) for kind in FAULT_KINDS}

@@ -1,0 +1,25 @@
+"""Instrument failures and the campaign's failure budget (pure)."""
+
+from __future__ import annotations
+
+
+class InstrumentError(RuntimeError):
+    """A transient instrument failure: the shot is tried again, within the failure budget."""
+
+
+class InstrumentTimeout(InstrumentError):
+    """The instrument did not answer within its timeout."""
+
+
+class FailureBudgetExceeded(RuntimeError):
+    """Too many shots failed: the campaign stops instead of looping."""
+
+
+def check_budget(n_failed: int, n_attempts: int, min_failed: int, tolerated_rate: float) -> None:
+    """Raise ``FailureBudgetExceeded`` once at least ``min_failed`` of ``n_attempts`` shot
+    attempts failed and their fraction exceeds ``tolerated_rate``."""
+    if n_failed >= min_failed and n_attempts > 0 and n_failed / n_attempts > tolerated_rate:
+        raise FailureBudgetExceeded(
+            f"failure budget exceeded: {n_failed} of {n_attempts} shot attempts failed "
+            f"({100 * n_failed / n_attempts:.0f} % > {100 * tolerated_rate:.0f} % tolerated, after at least {min_failed})"
+        )

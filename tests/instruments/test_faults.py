@@ -1,0 +1,110 @@
+"""The fault injector: its ledger, each kind of fault, and campaigns that survive faults or stop
+on the failure budget, with every failure in the file."""
+
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from instruments import build
+from instruments.faults import FaultyInstrument
+from instruments.forrester import ForresterInstrument
+from noisebo.config import FAULT_KINDS, CampaignConfig, ForresterInstrumentConfig
+from noisebo.failures import FailureBudgetExceeded, InstrumentError, InstrumentTimeout, check_budget
+from noisebo.storage.hdf5 import read_campaign
+
+
+def faulty(**rates):
+    return FaultyInstrument(ForresterInstrument(ForresterInstrumentConfig()), ForresterInstrumentConfig(
+        faults=rates).faults)
+
+
+def test_the_ledger_counts_every_fault_and_rates_hold():
+    inst = faulty(exception=0.2, nan=0.1, outlier=0.1, seed=3)
+    outcomes = {"exception": 0, "nan": 0, "outlier": 0, "ok": 0}
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        try:
+            value = inst.measure(0.5, 1.0, rng).value
+        except InstrumentError:
+            outcomes["exception"] += 1
+            continue
+        truth = float(inst.truth(np.array([0.5]))[0])
+        outcomes["nan" if np.isnan(value) else "outlier" if abs(value - truth) > 30 else "ok"] += 1
+    counts = inst.counts()
+    assert {k: counts[k] for k in ("exception", "nan", "outlier")} == {k: outcomes[k] for k in ("exception", "nan", "outlier")}
+    assert 0.17 < counts["exception"] / 2000 < 0.23 and 0.07 < counts["nan"] / 2000 < 0.13
+    assert len(inst.ledger) == sum(counts.values()) and set(counts) == set(FAULT_KINDS)
+
+
+def test_a_retried_shot_gets_its_real_reading():
+    clean = ForresterInstrument(ForresterInstrumentConfig())
+    inst = faulty(exception=0.5, seed=1)
+    expected = clean.measure(0.3, 2.0, np.random.default_rng(7)).value
+    for _ in range(20):
+        try:
+            assert inst.measure(0.3, 2.0, np.random.default_rng(7)).value == expected
+        except InstrumentError:
+            pass
+
+
+def test_an_injected_hang_is_cut_off_by_the_guard_within_half_a_second():
+    config = ForresterInstrumentConfig(timeout_s=0.3, faults={"timeout": 1.0, "hang_s": 5.0})
+    inst = build(config)
+    started = time.perf_counter()
+    with pytest.raises(InstrumentTimeout):
+        inst.measure(0.5, 1.0, np.random.default_rng(0))
+    assert time.perf_counter() - started < 0.3 + 0.5
+    assert inst.ledger[0]["kind"] == "timeout"  # the guard passes the ledger through
+
+
+@pytest.mark.parametrize("failed, attempts, stops", [(4, 4, False), (5, 5, True), (5, 10, False), (6, 10, True)])
+def test_failure_budget_by_hand(failed, attempts, stops):
+    # min_failed 5, tolerated 50 %: 4/4 is too few failures to judge; 5/10 is not above 50 %
+    if stops:
+        with pytest.raises(FailureBudgetExceeded, match=f"{failed} of {attempts} shot attempts failed"):
+            check_budget(failed, attempts, 5, 0.5)
+    else:
+        check_budget(failed, attempts, 5, 0.5)
+
+
+def run_flow(config, seed, path, instrument):
+    from flows.campaign import run
+    from noisebo.storage.recorder import Recorder
+
+    with Recorder.create(path, config, seed) as recorder:
+        return run(recorder, instrument=instrument)
+
+
+def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tiny_config, prefect_harness, tmp_path):
+    from noisebo.campaign import run_campaign
+
+    config = tiny_config.with_overrides(instrument={"timeout_s": 0.2, "faults": {
+        "seed": 5, "timeout": 0.05, "exception": 0.15, "nan": 0.05, "inf": 0.05}})
+    inst = build(config.instrument)
+    path = run_flow(config, 2, tmp_path / "faulty.h5", inst)
+    data, counts = read_campaign(path), inst.counts()
+    with h5py.File(path, "r") as f:
+        kinds = [k.decode() for k in f["failures/kind"][()]]
+        reasons = [r.decode() for r in f["shots/reason"][()]]
+    assert kinds.count("timeout") == counts["timeout"] and kinds.count("instrument error") == counts["exception"]
+    assert reasons.count("non-finite reading") == counts["nan"] + counts["inf"]
+    assert data["attrs"]["status"] == "completed" and sum(counts.values()) > 10
+    # instrument errors and timeouts are retried with the same key: points equal the clean run's
+    # wherever no NaN or inf reading was rejected
+    clean = run_campaign(tiny_config, build(tiny_config.instrument), 2)
+    assert len(data["points"]["x"]) == len(clean.state.points)
+
+
+def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config, prefect_harness, tmp_path):
+    from flows.campaign import campaign
+
+    config = tiny_config.with_overrides(instrument={"faults": {"seed": 1, "exception": 0.9}},
+                                        schedule={"min_failed": 5, "tolerated_rate": 0.5})
+    with pytest.raises(FailureBudgetExceeded):
+        campaign(config, seed=0, out_dir=str(tmp_path), show_progress=False, record_rrd=False)
+    data = read_campaign(tmp_path / "tiny_reward_s0000.h5")
+    assert data["attrs"]["status"] == "failed" and "failure budget exceeded" in data["attrs"]["status_reason"]
+    attempts = int(data["attrs"]["n_failed_attempts"]) + int(data["attrs"]["n_shots"])
+    assert 5 <= attempts <= 5 / 0.5  # stopped within min_failed / tolerated_rate attempts
