@@ -108,3 +108,21 @@ def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config
     assert data["attrs"]["status"] == "failed" and "failure budget exceeded" in data["attrs"]["status_reason"]
     attempts = int(data["attrs"]["n_failed_attempts"]) + int(data["attrs"]["n_shots"])
     assert 5 <= attempts <= 5 / 0.5  # stopped within min_failed / tolerated_rate attempts
+
+
+@pytest.mark.parametrize("kind, reason", [("corrupt_spectrum", ""), ("nan", ""), ("outlier", None)])
+def test_spectrum_faults_never_give_a_usable_wrong_value_silently(kind, reason):
+    from noisebo.config import PFMInstrumentConfig
+    from noisebo.reduction import shot_value
+
+    config = PFMInstrumentConfig(profile={"source": "synthetic", "length_um": 1.0, "n_domains": 3},
+                                 faults={kind: 1.0, "outlier_sd": 20.0})
+    inst = build(config)
+    reading = inst.measure(0.4, 0.2, np.random.default_rng(0))
+    shot = shot_value(reading, config)
+    assert inst.ledger[0]["kind"] == kind
+    if reason is None:  # an outlier is a fine sweep of a wrong amplitude: caught by clipping, not here
+        truth = float(inst.truth(np.array([0.4]))[0])
+        assert shot.ok and abs(abs(shot.value) - abs(truth)) > 10 * float(inst.noise_law(np.array([0.2]))[0])
+    else:
+        assert not shot.ok and shot.reason and np.isnan(shot.value)
