@@ -16,6 +16,7 @@ from prefect.utilities.annotations import quote
 
 from flows import abort
 from noisebo.failures import FailureBudgetExceeded, check_budget
+from noisebo.reduction import NoUsableShots
 from instruments import build
 from noisebo.config import CampaignConfig, load_config
 from noisebo.storage import records
@@ -43,8 +44,17 @@ def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, ste
     index = len(progress.state.points)
     config = progress.config
     budget = (config.schedule.min_failed, config.schedule.tolerated_rate)
-    readings = ops.measure(quote(instrument), x, t, shots, progress.seed, index, quote(recorder), budget)
-    point, shot_values = ops.reduce(x, t, quote(readings), model_noise, quote(config.instrument), config.schedule.clip_sd)
+    wanted = shots
+    while True:  # extra shots while too few are usable, within the failure budget
+        readings = ops.measure(quote(instrument), x, t, wanted, progress.seed, index, quote(recorder), budget)
+        reduced = ops.reduce(x, t, quote(readings), model_noise, quote(config.instrument), config.schedule.clip_sd)
+        if not isinstance(reduced, NoUsableShots):
+            point, shot_values = reduced
+            break
+        failed, attempts = recorder.failure_counts()
+        check_budget(failed + reduced.rejected, attempts, *budget)
+        say(f"point {index}: {reduced}; taking {reduced.missing} more")
+        wanted = len(readings) + reduced.missing
     ops.record(quote(recorder), quote(records.point_record(index, step, point, shot_values)))
     check_budget(*recorder.failure_counts(), *budget)  # rejected shots count too
     label = "seed point" if step < 0 else f"step {step + 1}/{progress.config.schedule.n_steps}"

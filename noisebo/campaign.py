@@ -14,7 +14,7 @@ from noisebo.config import CampaignConfig
 from noisebo.decision import Decision, decide, fit_key, fit_models, grids, hyperparameters, predict
 from noisebo.failures import InstrumentError
 from noisebo.keys import MEASURE, SEED_POINTS, numpy_rng
-from noisebo.reduction import ShotValue, clip_outliers, shot_values, usable
+from noisebo.reduction import NoUsableShots, ShotValue, clip_outliers, shot_values, usable
 from noisebo.schedule import reduce_shots
 from noisebo.state import CampaignState, Point
 
@@ -121,6 +121,17 @@ def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summar
     )
 
 
+def _measure_pure(config: CampaignConfig, instrument, x, t, shots: int, seed: int, index: int, model_noise) -> Point:
+    """A point measured in this process: its shots, then extra shots while too few are usable."""
+    readings: list = []
+    while True:
+        readings = shot_readings(instrument, x, t, shots, seed, index, readings)
+        try:
+            return make_point(x, t, readings, model_noise, config.instrument, config.schedule.clip_sd)[0]
+        except NoUsableShots as short:
+            shots = len(readings) + short.missing
+
+
 @dataclass(frozen=True)
 class CampaignResult:
     state: CampaignState
@@ -141,18 +152,15 @@ def run_campaign(
     state = CampaignState()
     shots = config.schedule.shots_before
     for i, (x, t) in enumerate(seed_points(config, seed)):
-        readings = shot_readings(instrument, x, t, shots, seed, i)
-        state = state.with_point(make_point(x, t, readings, None, config.instrument, config.schedule.clip_sd)[0])
+        state = state.with_point(_measure_pure(config, instrument, x, t, shots, seed, i, None))
     decisions, latencies = [], []
     for step in range(config.schedule.n_steps):
         started = time.perf_counter()
         decision, state = decide(config, state, seed, step)
         latencies.append(time.perf_counter() - started)
-        point_index = len(state.points)
-        readings = shot_readings(instrument, decision.x, decision.t, decision.shots, seed, point_index)
         model_noise = None if decision.measure_noise else decision.noise_at_t
         state = state.with_point(
-            make_point(decision.x, decision.t, readings, model_noise, config.instrument, config.schedule.clip_sd)[0]
+            _measure_pure(config, instrument, decision.x, decision.t, decision.shots, seed, len(state.points), model_noise)
         )
         decisions.append(decision)
         if on_step is not None:

@@ -32,7 +32,12 @@ class ShotValue(NamedTuple):
 
 
 class NoUsableShots(ValueError):
-    """A point none (or too few) of whose shots gave a value."""
+    """A point none (or too few) of whose shots gave a value: ``missing`` more ok shots are
+    needed, ``rejected`` of its shots were not ok."""
+
+    def __init__(self, message: str, missing: int = 1, rejected: int = 0):
+        super().__init__(message)
+        self.missing, self.rejected = missing, rejected
 
 
 def shot_value(reading, instrument_config) -> ShotValue:
@@ -82,5 +87,6 @@ def usable(values: Sequence[ShotValue], needed: int) -> np.ndarray:
     good = np.asarray([v.value for v in values if v.ok], dtype=np.float64)
     if good.size < needed:
         reasons = sorted({v.reason for v in values if not v.ok})
-        raise NoUsableShots(f"{good.size} of {len(values)} shots usable, {needed} needed ({'; '.join(reasons)})")
+        raise NoUsableShots(f"{good.size} of {len(values)} shots usable, {needed} needed ({'; '.join(reasons)})",
+                            needed - good.size, len(values) - good.size)
     return good

@@ -14,7 +14,7 @@ from noisebo.failures import check_budget
 from noisebo import campaign as core
 from noisebo import decision as core_decision
 from noisebo.config import CampaignConfig
-from noisebo.reduction import Reading, ShotValue
+from noisebo.reduction import NoUsableShots, Reading, ShotValue
 from noisebo.state import CampaignState, Point
 from noisebo.storage.journal import Record
 from noisebo.storage.recorder import Recorder
@@ -80,9 +80,13 @@ def measure(
 def reduce(
     x: float, t: float, readings: Sequence[Reading], model_noise: float | None, instrument_config,
     clip_sd: float | None = None,
-) -> tuple[Point, list[ShotValue]]:
-    """Each shot's value (resonance sweeps are SHO-fitted here), then the point from the ok ones."""
-    return core.make_point(x, t, readings, model_noise, instrument_config, clip_sd)
+) -> tuple[Point, list[ShotValue]] | NoUsableShots:
+    """Each shot's value (resonance sweeps are SHO-fitted here), then the point from the ok ones;
+    too few ok shots is an answer (``NoUsableShots``, returned), not a failed task."""
+    try:
+        return core.make_point(x, t, readings, model_noise, instrument_config, clip_sd)
+    except NoUsableShots as short:
+        return short
 
 
 @task(name="update-models", cache_policy=NO_CACHE)

@@ -126,3 +126,22 @@ def test_spectrum_faults_never_give_a_usable_wrong_value_silently(kind, reason):
         assert shot.ok and abs(abs(shot.value) - abs(truth)) > 10 * float(inst.noise_law(np.array([0.2]))[0])
     else:
         assert not shot.ok and shot.reason and np.isnan(shot.value)
+
+
+def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny_config, prefect_harness, tmp_path):
+    from flows.campaign import campaign
+    from noisebo.campaign import run_campaign
+
+    # 70 % of the readings NaN: some points get too few usable shots and must take more
+    config = tiny_config.with_overrides(instrument={"faults": {"seed": 4, "nan": 0.7}},
+                                        schedule={"n_steps": 6, "min_failed": 1000})
+    path = campaign(config, seed=1, out_dir=str(tmp_path), show_progress=False, record_rrd=False)
+    data = read_campaign(path)
+    n_shots = np.asarray(data["points"]["n_shots"])
+    per_point = np.bincount(np.asarray(data["shots"]["point"]))
+    assert data["attrs"]["status"] == "completed"
+    assert np.all(n_shots >= np.where(np.asarray(data["points"]["noise_measured"]), 2, 1))
+    scheduled = np.concatenate([[10] * 3, np.asarray(data["steps"]["shots"])])
+    assert np.any(per_point > scheduled)  # extra shots were taken
+    pure = run_campaign(config, build(config.instrument), 1)
+    np.testing.assert_array_equal(data["points"]["value"], [p.value for p in pure.state.points])
