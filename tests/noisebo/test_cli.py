@@ -22,6 +22,11 @@ def setup_files(tmp_path, tiny_yaml):
     (tmp_path / "noise.h5").write_bytes(b"\x89HDF-not-really" * 50)
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f["data"] = [1, 2, 3]
+    with h5py.File(tmp_path / "truncated.h5", "w") as f:
+        f.attrs["schema"] = "noisebo.campaign"
+        f["points/x"] = list(range(20_000))
+    data = (tmp_path / "truncated.h5").read_bytes()
+    (tmp_path / "truncated.h5").write_bytes(data[: len(data) * 2 // 3])  # a copy cut short
     with h5py.File(tmp_path / "future.h5", "w") as f:
         f.attrs["schema"] = "noisebo.campaign"
         f.attrs["schema_version"] = 99
@@ -49,6 +54,12 @@ CASES = [
     (["inspect", "future.h5"], "schema version 99"),
     (["sweep", "TINY", "--seeds", "a-b"], "--seeds 'a-b'"),
     (["sweep", "TINY", "--seeds", "1", "--workers", "0"], "--workers must be at least 1"),
+    (["inspect", "truncated.h5"], "not a readable HDF5 file"),
+    (["resume", "truncated.h5"], "cannot resume truncated.h5"),
+    (["report", "truncated.h5"], "not a readable HDF5 file"),
+    (["report", "empty.h5"], "empty file (0 bytes)"),
+    (["report", "future.h5"], "schema version 99"),
+    (["report", "other.h5"], "not a noisebo campaign"),
     (["replay", "absent.h5"], "no such file"),
     (["replay", "other.h5"], "not a noisebo campaign"),
     (["report", "noise.h5"], "not a readable HDF5 file"),
