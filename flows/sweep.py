@@ -56,8 +56,13 @@ def campaign_on_workers(deployment: str, config: CampaignConfig, seed: int, out_
     """Hand one campaign to the workers of ``deployment``'s work pool and wait for it."""
     from prefect.deployments import run_deployment
 
+    from prefect.runtime import flow_run
+
     policy = config.acquisition.policy
-    run = run_deployment(deployment, parameters={"seed": seed, "policy": policy, "out_dir": out_dir}, timeout=None)
+    # One flow run per campaign even when a loaded server makes the client repeat its request.
+    key = f"{flow_run.id}:{deployment}:{policy}:{seed}"
+    run = run_deployment(deployment, parameters={"seed": seed, "policy": policy, "out_dir": out_dir}, timeout=None,
+                         idempotency_key=key)
     if not run.state.is_completed():
         raise RuntimeError(f"{deployment} seed {seed} ({policy}) ended {run.state.name}: {run.state.message}")
     return str(campaign_path(config, seed, out_dir))
