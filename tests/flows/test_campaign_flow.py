@@ -79,10 +79,18 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
     assert files == ["tiny_double_s0005.h5", "tiny_double_s0006.h5", "tiny_reward_s0005.h5", "tiny_reward_s0006.h5"]
     text = Path(table).read_text()
     assert "| reward | 2 |" in text and "| double | 2 |" in text
-    # Per-seed results do not depend on running in a sweep.
+    # Concurrent campaigns in one folder: distinct, intact files, each equal to its seed run alone.
     alone, _, _ = points_of(finished)
     swept, _, _ = points_of(tmp_path / "tiny_reward_s0005.h5")
     np.testing.assert_array_equal(alone["value"], swept["value"])
+    for policy in ("reward", "double"):
+        config = tiny_config.with_overrides(acquisition={"policy": policy})
+        for seed in (5, 6):
+            pure = run_campaign(config, build(config.instrument), seed)
+            points, shots, attrs = points_of(tmp_path / f"tiny_{policy}_s{seed:04d}.h5")
+            assert attrs["status"] == "completed" and attrs["seed"] == seed and attrs["policy"] == policy
+            np.testing.assert_array_equal(points["value"], [p.value for p in pure.state.points])
+            assert len(shots["value"]) == sum(p.n_shots for p in pure.state.points)
     summary = json.loads((tmp_path / "sweep_summary.json").read_text())
     assert len(summary["records"]) == 4
     assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000
