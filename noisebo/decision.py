@@ -88,7 +88,7 @@ def fit_models(config: CampaignConfig, state: CampaignState, key: jax.Array) -> 
     _check_finite(x=x, t=t, value=value, noise=noise)
     capacity = capacity_for(len(state.points))
     pdata, std = primary.prepare(x, value, noise**2 / n_shots, capacity, s.x_min, s.x_max)
-    train = state.noise_training_mask(config.noise_model.learn_after_convergence)
+    train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
     ndata, scale = noise_model.prepare(
         t[train], state.column("shot_std")[train], n_shots[train], capacity, config.noise_model, s.t_min, s.t_max
     )

@@ -49,10 +49,11 @@ class CampaignState:
         """One field of every point as an array (n,)."""
         return np.asarray([getattr(p, name) for p in self.points])
 
-    def noise_training_mask(self, include_unmeasured: bool) -> np.ndarray:
-        """Which points train the noise model: those whose noise was measured, or (optionally)
-        every point with at least two shots."""
+    def noise_training_mask(self, include_unmeasured: bool, full_shots: int = 2) -> np.ndarray:
+        """Which points train the noise model: those whose noise was measured, and (optionally)
+        the few-shot ones that kept at least ``full_shots`` (and two) ok shots: a point that lost
+        shots to rejection may hide an outlier its few remaining shots cannot expose."""
         measured = self.column("noise_measured").astype(bool)
         if include_unmeasured:
-            return self.column("n_shots") >= 2
+            return measured | (self.column("n_shots") >= max(2, full_shots))
         return measured

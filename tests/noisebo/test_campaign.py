@@ -116,3 +116,14 @@ def test_no_model_is_ever_trained_on_a_non_finite_value(tiny_config):
         state = state.with_point(Point(0.1 * i, 1.0, value, 0.5, 10, 0.5, True))
     with pytest.raises(NonFiniteData, match=r"point\(s\) \[1\] have a non-finite value"):
         fit_models(tiny_config, state, fit_key(0, 0))
+
+
+def test_few_shot_points_that_lost_shots_do_not_train_the_noise_model():
+    from noisebo.state import CampaignState, Point
+
+    state = CampaignState()
+    for n, measured in [(30, True), (2, True), (3, False), (2, False), (1, False)]:
+        state = state.with_point(Point(0.5, 1.0, 1.0, 0.3, n, 0.3, measured))
+    assert state.noise_training_mask(False).tolist() == [True, True, False, False, False]
+    assert state.noise_training_mask(True, 3).tolist() == [True, True, True, False, False]
+    assert state.noise_training_mask(True, 2).tolist() == [True, True, True, True, False]
