@@ -7,7 +7,6 @@ an interrupted one is resumed, a missing one is started.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Literal
 
@@ -19,7 +18,7 @@ from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows.campaign import campaign, campaign_path, resolve_config, resume
 from noisebo.config import CampaignConfig
-from noisebo.view.report import convergence_figure, write_summary
+from noisebo.view.report import write_summary
 
 
 def _orchestration_failed(task, task_run, state) -> bool:
@@ -104,10 +103,7 @@ def sweep(
             failures.append(f"{type(outcome).__name__}: {outcome}")
         else:
             paths.append(outcome)
-    table = write_summary(paths, out_dir) if paths else None
-    if table is not None:
-        convergence_figure(json.loads((Path(out_dir) / "sweep_summary.json").read_text())["records"],
-                            Path(out_dir) / "convergence_steps.png")
+    table = write_summary(paths, out_dir)[0] if paths else None
     if failures:
         raise SweepError(f"{len(failures)} of {len(futures)} campaigns failed (summary of the rest: {table}): "
                          + "; ".join(failures))

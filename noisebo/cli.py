@@ -111,10 +111,14 @@ def _abortable(path: Path):
                       130) from None
 
 
-def _serve(args) -> int:
+def _require_server(what: str) -> None:
     if not os.environ.get("PREFECT_API_URL"):
-        raise UsageError("serve needs a Prefect server that `prefect deployment run` can reach: start one with "
-                         "`prefect server start --host 127.0.0.1` and export PREFECT_API_URL=http://127.0.0.1:4200/api")
+        raise UsageError(f"{what}: start one with `prefect server start --host 127.0.0.1` "
+                         "and export PREFECT_API_URL=http://127.0.0.1:4200/api")
+
+
+def _serve(args) -> int:
+    _require_server("serve needs a Prefect server that `prefect deployment run` can reach")
     seeds = parse_seeds(args.sweep_seeds)
     policies = ["reward", "double"] if args.sweep_policy == "both" else [args.sweep_policy]
     if args.interval is not None and args.interval <= 0:
@@ -133,9 +137,7 @@ def _serve(args) -> int:
 
 
 def _deploy(args) -> int:
-    if not os.environ.get("PREFECT_API_URL"):
-        raise UsageError("deploy needs a Prefect server: start one with `prefect server start --host 127.0.0.1` "
-                         "and export PREFECT_API_URL=http://127.0.0.1:4200/api")
+    _require_server("deploy needs a Prefect server")
     for path in args.config:
         load_config(path)
     runtime.configure()
@@ -174,8 +176,7 @@ def _sweep(args) -> int:
         raise UsageError("--dask-address needs --runner dask")
     deployment = None
     if args.runner == "workers":
-        if not os.environ.get("PREFECT_API_URL"):
-            raise UsageError("--runner workers needs the Prefect server the workers poll: export PREFECT_API_URL")
+        _require_server("--runner workers needs the Prefect server the workers poll")
         deployment = args.deployment or f"campaign/{config.name}"
     _, sweep_flows = _prefect()
     n_campaigns = len(seeds) * len(policies)

@@ -53,6 +53,10 @@ def _put(group: h5py.Group, name: str, data, units: str, description: str) -> No
     ds.attrs["description"] = description
 
 
+def _put_text(group: h5py.Group, name: str, values, description: str) -> None:
+    _put(group, name, np.asarray(list(values), dtype=object).astype(h5py.string_dtype()), "text", description)
+
+
 ARRAY_COLUMNS = {
     "acq_map": ("1", "acquisition over the (x, t) grid, axes (step, x, t)"),
     "f_mean": ("f units", "predicted f on the x grid"),
@@ -201,9 +205,8 @@ def _fill_failures(f: h5py.File, progress: Progress) -> None:
     rows = progress.failures
     for name, dtype, units, description in FAILURE_COLUMNS:
         _put(group, name, np.asarray([r[name] for r in rows], dtype=dtype), units, description)
-    strings = h5py.string_dtype()
     for name, description in (("kind", "timeout | instrument error"), ("reason", "the error message")):
-        _put(group, name, np.asarray([r[name] for r in rows], dtype=object).astype(strings), "text", description)
+        _put_text(group, name, [r[name] for r in rows], description)
 
 
 def _fill_shots(f: h5py.File, progress: Progress, columns: dict) -> None:
@@ -211,15 +214,13 @@ def _fill_shots(f: h5py.File, progress: Progress, columns: dict) -> None:
     rows = progress.shot_rows
     for name, _, units, description in SHOT_COLUMNS:
         _put(shots, name, columns[name], units, description)
-    strings = h5py.string_dtype()
-    _put(shots, "reason", np.asarray([r.get("reason", "") for r in rows], dtype=object).astype(strings),
-         "text", "why the shot was rejected (empty if ok)")
+    _put_text(shots, "reason", [r.get("reason", "") for r in rows], "why the shot was rejected (empty if ok)")
     if any("amplitude" in r for r in rows):
         fit = shots.create_group("fit")
         for name, (units, description) in FIT_UNITS.items():
             _put(fit, name, np.asarray([r.get(name, np.nan) for r in rows], dtype=np.float64), units, description)
-        _put(fit, "note", np.asarray([r.get("fit_reason", "") for r in rows], dtype=object).astype(strings),
-             "text", "how the fit went (empty: free fit; else why the nominal resonance was used or it failed)")
+        _put_text(fit, "note", [r.get("fit_reason", "") for r in rows],
+                  "how the fit went (empty: free fit; else why the nominal resonance was used or it failed)")
     spectra = {i: rs for i, rs in progress.shots.items() if rs and rs[0].spectrum is not None}
     if spectra:
         group = f.create_group("spectra")

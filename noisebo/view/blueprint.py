@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import rerun.blueprint as rrb
-
 from noisebo.config import CampaignConfig
 
 
-def blueprint(config: CampaignConfig) -> rrb.Blueprint:
-    """Acquisition map with the measured points, f with its band and the truth, the noise model
-    with its data, the normalised reward with t_opt (and the latest sweep for PFM); below them
-    the scalar traces and the decision log."""
+def blueprint(config: CampaignConfig):
+    """The ``rerun.blueprint.Blueprint``: acquisition map with the measured points, f with its
+    band and the truth, the noise model with its data, the normalised reward with t_opt (and the
+    latest sweep for PFM); below them the scalar traces and the decision log."""
+    import rerun.blueprint as rrb
+
     top = [
         rrb.Spatial2DView(origin="acquisition", name="acquisition over (x, t); points by step"),
         rrb.Spatial2DView(origin="f", name="f(x): mean, +-2 sd band, truth, points"),

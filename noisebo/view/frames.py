@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from noisebo.config import CampaignConfig
+from noisebo.reward import normalise, reward
 
 POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured")
 
@@ -51,10 +52,8 @@ class Frame:
 
 
 def normalised_reward(t: np.ndarray, noise: np.ndarray, alpha: float, beta: float) -> np.ndarray:
-    """R = -alpha t^2 - beta Noise on the grid t, min-max normalised to [0, 1]."""
-    r = -alpha * t**2 - beta * noise
-    span = r.max() - r.min()
-    return (r - r.min()) / span if span > 0 else np.zeros_like(r)
+    """R = -alpha t^2 - beta Noise on the grid t, min-max normalised to [0, 1] (numpy)."""
+    return np.asarray(normalise(reward(np.asarray(t), np.asarray(noise), alpha, beta)), dtype=np.float64)
 
 
 def n_frames(tables: dict, config: CampaignConfig) -> int:

@@ -76,9 +76,19 @@ def _latest_sweep(frame: Frame, shots: dict, shot_rows: list[dict]) -> tuple[np.
     return np.asarray(reading.spectrum), fit
 
 
+def last_sweep(h5_path: Path, data: dict, fits: dict, point: int) -> tuple[np.ndarray, dict | None]:
+    """The last raw sweep (3, N) of ``point`` in a campaign file and its fit (every column of
+    ``/shots/fit`` at that shot; None if the point has no shot rows)."""
+    from noisebo.storage.hdf5 import read_spectra
+
+    mine = np.flatnonzero(np.asarray(data["shots"]["point"]) == point)
+    fit = {k: float(v[mine[-1]]) for k, v in fits.items()} if mine.size else None
+    return read_spectra(h5_path, point)[-1], fit
+
+
 def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], None] = print) -> Path:
     """Rebuild a campaign's recording from its HDF5 file alone; returns the .rrd path."""
-    from noisebo.storage.hdf5 import read_campaign, read_shot_fits, read_spectra
+    from noisebo.storage.hdf5 import read_campaign, read_shot_fits
 
     h5_path = Path(h5_path)
     data = read_campaign(h5_path)
@@ -93,10 +103,7 @@ def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], No
     for frame in all_frames:
         spectrum, fit = None, None
         if fits is not None and frame.latest_point is not None:
-            sweeps = read_spectra(h5_path, frame.latest_point)
-            mine = np.flatnonzero(np.asarray(data["shots"]["point"]) == frame.latest_point)
-            spectrum = sweeps[-1]
-            fit = {k: float(fits[k][mine[-1]]) for k in FIT_KEYS} if mine.size else None
+            spectrum, fit = last_sweep(h5_path, data, fits, frame.latest_point)
         view.log(frame, spectrum, fit)
     view.close()
     if not view.enabled:

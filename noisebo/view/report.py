@@ -13,14 +13,14 @@ import json
 from pathlib import Path
 
 import numpy as np
-from matplotlib import colormaps
 from matplotlib.figure import Figure
 
 from noisebo.config import CampaignConfig, parse_config
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
 from noisebo.reward import true_optimal_t
-from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits, read_spectra
-from noisebo.view.recording import instrument_curves
+from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits
+from noisebo.view.recording import instrument_curves, last_sweep
+from noisebo.view.style import step_colours
 
 DPI = 130
 
@@ -48,7 +48,7 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
     fig = Figure(figsize=(12, 8.5), layout="constrained")
     (ax_map, ax_t), (ax_f, ax_noise) = fig.subplots(2, 2)
     steps = np.asarray(data["points"]["step"]) + 1  # 0 = seed point
-    colours = _step_colours(steps, config.schedule.n_steps)
+    colours = step_colours(steps, config.schedule.n_steps)
     _trajectory(ax_map, data, config, colours)
     _t_opt(ax_t, data, config, law)
     _f(ax_f, data, config, truth, colours)
@@ -62,12 +62,6 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
     if fits is not None and len(data["points"]["x"]):
         written.append(_sweep_figure(path, data, fits, out_dir))
     return written
-
-
-def _step_colours(steps: np.ndarray, n_steps: int) -> np.ndarray:
-    rgba = colormaps["viridis"](np.clip(steps - 1, 0, None) / max(n_steps - 1, 1))
-    rgba[steps == 0] = (0.55, 0.55, 0.55, 1.0)
-    return rgba
 
 
 def _step_colourbar(fig_ax, n_steps: int) -> None:
@@ -158,14 +152,12 @@ def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
     from noisebo.sho import sho_amplitude
 
     last = len(data["points"]["x"]) - 1
-    sweeps = read_spectra(path, last)
-    mine = np.flatnonzero(np.asarray(data["shots"]["point"]) == last)
-    freq, amp = sweeps[-1][0].astype(np.float64), sweeps[-1][1].astype(np.float64)
+    spectrum, fit = last_sweep(path, data, fits, last)
+    freq, amp = spectrum[0].astype(np.float64), spectrum[1].astype(np.float64)
     fig = Figure(figsize=(7, 4.2), layout="constrained")
     ax = fig.subplots()
     ax.plot(freq / 1e3, amp / 1e3, ".", ms=1.5, color="0.5", label=f"sweep ({freq.size} samples)")
-    fit = {k: float(fits[k][mine[-1]]) for k in ("amplitude", "resonance_hz", "q", "amplitude_se")}
-    if np.isfinite(fit["amplitude"]):
+    if fit is not None and np.isfinite(fit["amplitude"]):
         ax.plot(freq / 1e3, sho_amplitude(freq, fit["amplitude"], fit["resonance_hz"], fit["q"]) / 1e3, color="tab:red",
                 label=f"SHO fit: r = {fit['amplitude']:.3g} +- {fit['amplitude_se']:.2g} pm, "
                       f"f0 = {fit['resonance_hz'] / 1e3:.2f} kHz, Q = {fit['q']:.0f}")
@@ -194,16 +186,18 @@ def figures_from_file(path: str | Path) -> dict:
     return record
 
 
-def write_summary(paths: list, out_dir: str | Path) -> Path:
-    """sweep_summary.md (a table per policy) and sweep_summary.json (one record per campaign)."""
+def write_summary(paths: list, out_dir: str | Path) -> tuple[Path, Path]:
+    """sweep_summary.md (a table per policy), sweep_summary.json (one record per campaign) and
+    convergence_steps.png (Figure S1) of finished campaign files; returns (table, figure)."""
     records = [figures_from_file(p) for p in paths]
     policies = sorted({r["policy"] for r in records})
     rows = {p: summarise_campaigns([r for r in records if r["policy"] == p]) for p in policies}
     out = Path(out_dir)
     (out / "sweep_summary.json").write_text(json.dumps({"records": records, "summary": rows}, indent=1))
-    table = out / "sweep_summary.md"
+    table, figure = out / "sweep_summary.md", out / "convergence_steps.png"
     table.write_text("Median [IQR] over campaigns.\n\n" + summary_table(rows) + "\n")
-    return table
+    convergence_figure(records, figure)
+    return table, figure
 
 
 def sweep_report(files: list[Path], out_dir: Path) -> list[Path]:
@@ -215,10 +209,7 @@ def sweep_report(files: list[Path], out_dir: Path) -> list[Path]:
     if not finished:
         raise CampaignFileError(f"none of the {len(files)} campaign files has finished")
     out_dir.mkdir(parents=True, exist_ok=True)
-    table = write_summary(finished, out_dir)
-    records = json.loads((out_dir / "sweep_summary.json").read_text())["records"]
-    figure = out_dir / "convergence_steps.png"
-    convergence_figure(records, figure)
+    table, figure = write_summary(finished, out_dir)
     if skipped:
         print(f"left out {len(skipped)} unfinished campaign(s): " + ", ".join(p.name for p in skipped))
     return [figure, table]

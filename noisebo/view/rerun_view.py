@@ -31,6 +31,7 @@ import numpy as np
 
 from noisebo.config import CampaignConfig
 from noisebo.view.frames import Curve, Frame
+from noisebo.view.style import step_colours
 
 BOX_W, BOX_H = 300.0, 150.0
 TRACES = ("t_opt_s", "a0", "a1", "latency_s", "measurement_time_s")
@@ -38,13 +39,8 @@ DEFAULT_LIVE = "rerun+http://127.0.0.1:9876/proxy"
 
 
 def colour_by_step(steps: np.ndarray, n_steps: int) -> np.ndarray:
-    """RGB uint8 (n, 3): seed points (step 0) grey, BO steps along viridis from dark to yellow."""
-    from matplotlib import colormaps
-
-    steps = np.asarray(steps)
-    rgb = (colormaps["viridis"](np.clip(steps - 1, 0, None) / max(n_steps - 1, 1))[:, :3] * 255).astype(np.uint8)
-    rgb[steps == 0] = (150, 150, 150)
-    return rgb
+    """RGB uint8 (n, 3) of ``style.step_colours``."""
+    return (step_colours(steps, n_steps)[:, :3] * 255).astype(np.uint8)
 
 
 def acquisition_image(acq_map: np.ndarray) -> np.ndarray:
@@ -124,7 +120,6 @@ class RerunView:
             self.enabled = False
             return
         self.stream.set_sinks(*sinks, default_blueprint=blueprint(self.config))
-        self._log_static()
 
     def _spawn_viewer(self) -> bool:
         """Start a local viewer (the one installed beside this Python first); False if none starts."""
@@ -171,11 +166,6 @@ class RerunView:
             self._guard(finish, "could not finish the Rerun recording")
 
     # -- drawing -------------------------------------------------------------------------------
-
-    def _log_static(self) -> None:
-        rr, s = self.rr, self.config.space
-        f_label = "f (pm)" if self.config.instrument.kind == "pfm" else "f"
-        self.stream.log("f/axes", rr.TextDocument(f"x in [{s.x_min:g}, {s.x_max:g}], {f_label}"), static=True)
 
     def _ranges(self, frame: Frame) -> tuple[Box, Box]:
         s = self.config.space

@@ -42,11 +42,13 @@ def test_a_retried_shot_gets_its_real_reading():
     clean = ForresterInstrument(ForresterInstrumentConfig())
     inst = faulty(exception=0.5, seed=1)
     expected = clean.measure(0.3, 2.0, np.random.default_rng(7)).value
+    readings = []
     for _ in range(20):
         try:
-            assert inst.measure(0.3, 2.0, np.random.default_rng(7)).value == expected
+            readings.append(inst.measure(0.3, 2.0, np.random.default_rng(7)).value)
         except InstrumentError:
             pass
+    assert 0 < len(readings) < 20 and readings == [expected] * len(readings)
 
 
 def test_an_injected_hang_is_cut_off_by_the_guard_within_half_a_second():
