@@ -16,7 +16,9 @@ from pathlib import Path
 from noisebo import runtime
 from noisebo.config import ConfigError, load_config
 from noisebo.failures import FailureBudgetExceeded
-from noisebo.storage.hdf5 import CampaignFileError
+from noisebo.storage.hdf5 import CampaignFileError, check_present
+from noisebo.storage.isolated import call_isolated
+from noisebo.storage.journal import JournalError, JournalWriter
 
 EXIT_USAGE = 2
 EXIT_FAILED = 3
@@ -77,6 +79,10 @@ def _resume(args) -> int:
     path = Path(args.file)
     if not path.with_suffix(".journal").exists():
         raise CampaignFileError(f"cannot resume {path}: no journal {path.with_suffix('.journal')} beside it")
+    try:  # refuse a campaign that is still running before any server starts
+        JournalWriter.open(path.with_suffix(".journal")).close()
+    except JournalError as error:
+        raise CampaignFileError(f"cannot resume {path}: {error}") from None
     campaign_flows, _ = _prefect()
     print(f"resuming {path}", flush=True)
     with flow_settings(), _abortable(path):
@@ -149,11 +155,15 @@ def _deploy(args) -> int:
     return 0
 
 
+def _warn(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
 def _replay(args) -> int:
     from noisebo.view.recording import replay
 
-    path = Path(args.file)
-    out = replay(path, args.out, warn=lambda line: print(line, file=sys.stderr))
+    path = check_present(Path(args.file))
+    out = call_isolated(replay, path, args.out, _warn, what=str(path))
     print(f"{out}  (view it with: rerun {out})")
     return 0
 
@@ -161,7 +171,10 @@ def _replay(args) -> int:
 def _report(args) -> int:
     from noisebo.view.report import report
 
-    for written in report(Path(args.target), args.out):
+    target = Path(args.target)
+    if not target.is_dir():
+        check_present(target)
+    for written in call_isolated(report, target, args.out, what=str(target)):
         print(written)
     return 0
 
@@ -231,7 +244,8 @@ def inspect_summary(path: Path) -> dict:
 
 
 def _inspect(args) -> int:
-    summary = inspect_summary(Path(args.file))
+    path = check_present(Path(args.file))
+    summary = call_isolated(inspect_summary, path, what=str(path))
     if args.json:
         print(json.dumps(summary, indent=1))
         return 0

@@ -268,16 +268,24 @@ class CampaignFileError(RuntimeError):
     """A campaign file that cannot be read as one; the message names the file and the problem."""
 
 
+def check_present(path: Path) -> Path:
+    """``path`` if it names a non-empty file, else a CampaignFileError saying what it is."""
+    path = Path(path)
+    if not path.exists():
+        raise CampaignFileError(f"{path}: no such file")
+    if not path.is_file():
+        raise CampaignFileError(f"{path}: not a file")
+    if path.stat().st_size == 0:
+        raise CampaignFileError(f"{path}: empty file (0 bytes), not a campaign")
+    return path
+
+
 def read_campaign(path: Path) -> dict:
     """Everything in a campaign file as plain Python and numpy values.
 
     Keys: "attrs" (root attributes, with "config" parsed from config_json), "grid", "points",
     "steps" (with "hyperparameters"), "shots" (dicts of arrays) and "summary" (None until done)."""
-    path = Path(path)
-    if not path.exists():
-        raise CampaignFileError(f"{path}: no such file")
-    if path.stat().st_size == 0:
-        raise CampaignFileError(f"{path}: empty file (0 bytes), not a campaign")
+    path = check_present(path)
     try:
         f = h5py.File(path, "r")
     except OSError as error:

@@ -7,6 +7,7 @@ import h5py
 import pytest
 
 from noisebo.cli import main, parse_seeds
+from noisebo.storage.recorder import Recorder
 
 
 def snapshot(folder):
@@ -18,6 +19,8 @@ def setup_files(tmp_path, tiny_yaml):
     (tmp_path / "inverted.yaml").write_text("space: {t_min: 5.0, t_max: 1.0}\n")
     (tmp_path / "laser.yaml").write_text("instrument: {kind: laser}\n")
     (tmp_path / "extra.yaml").write_text("colour: blue\n")
+    for name, text in BAD_CONFIGS.items():
+        (tmp_path / name).write_text(text)
     (tmp_path / "empty.h5").write_bytes(b"")
     (tmp_path / "noise.h5").write_bytes(b"\x89HDF-not-really" * 50)
     with h5py.File(tmp_path / "other.h5", "w") as f:
@@ -36,7 +39,26 @@ def setup_files(tmp_path, tiny_yaml):
     (runs / "tiny_reward_s0000.h5").write_bytes(b"existing results")
 
 
+BAD_CONFIGS = {  # file -> text; each is also a CASES row
+    "no_kind.yaml": "instrument: {a0: 0.1}\n",
+    "wrong_type.yaml": "schedule: {n_steps: many}\n",
+    "nan.yaml": "space: {x_max: .nan}\n",
+    "inf.yaml": "space: {t_max: .inf}\n",
+    "zero_shots.yaml": "schedule: {shots_after: 0}\n",
+    "negative_shots.yaml": "schedule: {shots_before: -3}\n",
+    "future.yaml": "schema_version: 99\n",
+    "empty.yaml": "",
+}
+
 CASES = [
+    (["run", "no_kind.yaml"], "instrument.kind: Field required"),
+    (["run", "wrong_type.yaml"], "schedule.n_steps: Input should be a valid integer"),
+    (["run", "nan.yaml"], "space.x_max: Input should be a finite number"),
+    (["run", "inf.yaml"], "space.t_max: Input should be a finite number"),
+    (["run", "zero_shots.yaml"], "schedule.shots_after: Input should be greater than or equal to 1"),
+    (["run", "negative_shots.yaml"], "schedule.shots_before: Input should be greater than or equal to 2"),
+    (["run", "future.yaml"], "unsupported schema version 99"),
+    (["run", "empty.yaml"], "empty.yaml: the file is empty"),
     (["run", "broken.yaml"], "broken.yaml: not valid YAML at line 2"),
     (["run", "inverted.yaml"], "t_min (5.0) must be below t_max (1.0)"),
     (["run", "laser.yaml"], "instrument"),
@@ -133,3 +155,15 @@ def test_serve_refuses_bad_input_before_registering_anything(argv, env, message,
     assert info.value.code == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("noisebo: error: ") and message in err
+
+
+def test_a_file_held_by_a_running_campaign_is_not_resumed_but_can_be_read(tiny_config, tmp_path, capsys):
+    path = tmp_path / "held.h5"
+    with Recorder.create(path, tiny_config, 1):
+        before = snapshot(tmp_path)
+        assert main(["resume", str(path)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "in use by another running campaign" in err
+        assert main(["inspect", str(path)]) == 0  # its last snapshot, written whole, is readable
+        assert "status running" in capsys.readouterr().out
+        assert snapshot(tmp_path) == before

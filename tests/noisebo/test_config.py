@@ -49,6 +49,7 @@ BAD = [
     ({"colour": "blue"}, "colour: Extra inputs are not permitted"),
     ({"space": {"n_z": 3}}, "space.n_z"),
     ({"instrument": {"kind": "laser"}}, "instrument"),
+    ({"instrument": {"a0": 0.1}}, "instrument.kind: Field required"),
     ({"acquisition": {"f_acquisition": "pi"}}, "acquisition.f_acquisition"),
     ({"noise_model": {"a1_prior": {"low": 5, "high": 1}}}, "noise_model.a1_prior"),
     ({"inference": {"mode": "hmc"}}, "inference.mode"),
