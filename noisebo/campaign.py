@@ -24,7 +24,10 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
 
     "latin_hypercube" (default) stratifies both axes, t on a log scale: the seeds then span the
     exposure range, from a short, cheap shot to a long one, which separates A0 from A1 in the
-    noise model from the start. "uniform" draws each coordinate uniformly."""
+    noise model from the start. "uniform" draws each coordinate uniformly. ``seed_t_scale``
+    "log_span" replaces the random t by n values evenly spaced on a log scale from t_min to t_max
+    inclusive (in random order): the ends of the range are where the two terms of the noise law
+    differ most, so they pin A0 and A1 best."""
     s, sched = config.space, config.schedule
     n = sched.n_seed
     rng = numpy_rng(seed, SEED_POINTS)
@@ -36,6 +39,8 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     x = s.x_min + u[:, 0] * (s.x_max - s.x_min)
     if sched.seed_t_scale == "log":
         t = s.t_min * (s.t_max / s.t_min) ** u[:, 1]
+    elif sched.seed_t_scale == "log_span":
+        t = s.t_min * (s.t_max / s.t_min) ** (rng.permutation(n) / max(n - 1, 1))
     else:
         t = s.t_min + u[:, 1] * (s.t_max - s.t_min)
     if config.acquisition.fixed_t is not None:

@@ -232,13 +232,15 @@ class PrimaryModelConfig(_Frozen):
 class NoiseModelConfig(_Frozen):
     """Structured GP for the single-shot noise standard deviation Noise(t).
 
-    ``mean``: "inv_sqrt" is the paper's A1/sqrt(t) + A0; "power" is A1/t^p + A0 with p inferred.
+    ``mean``: "inv_sqrt" is the paper's A1/sqrt(t) + A0; "power" is A1/t^p + A0 with p inferred;
+    "quadrature" is sqrt(A1^2/t + A0^2), for a shot-noise source and an independent
+    time-independent one whose variances add.
     Priors on A0 and A1 are Uniform in the units of the measured value.
     ``learn_after_convergence``: also train on the few-shot noise estimates taken after convergence
     (weighted by their larger sampling error) instead of freezing the noise model's data.
     """
 
-    mean: Literal["inv_sqrt", "power"] = "inv_sqrt"
+    mean: Literal["inv_sqrt", "power", "quadrature"] = "inv_sqrt"
     a0_prior: UniformPrior = UniformPrior()
     a1_prior: UniformPrior = UniformPrior()
     p_prior: UniformPrior = UniformPrior(low=0.1, high=1.5)
@@ -287,7 +289,7 @@ class ScheduleConfig(_Frozen):
 
     n_seed: int = Field(3, ge=1)
     seed_design: Literal["latin_hypercube", "uniform"] = "latin_hypercube"
-    seed_t_scale: Literal["log", "linear"] = "log"
+    seed_t_scale: Literal["log", "linear", "log_span"] = "log"
     n_steps: int = Field(15, ge=0)
     shots_before: int = Field(30, ge=2)
     shots_after: int = Field(3, ge=1)
@@ -343,6 +345,10 @@ def _describe(error: ValidationError) -> str:
     parts = []
     for item in error.errors():
         loc = ".".join(str(p) for p in item["loc"]) or "<root>"
+        if item["type"] == "union_tag_not_found":  # pydantic's words for a missing discriminator
+            field = str(item.get("ctx", {}).get("discriminator", "kind")).strip("'")
+            parts.append(f"{loc}.{field}: Field required")
+            continue
         parts.append(f"{loc}: {item['msg']}")
     return "; ".join(parts)
 

@@ -1,6 +1,7 @@
 """The noise model: a structured GP for the single-shot noise standard deviation Noise(t).
 
-Its mean is a physical law (the paper's A1/sqrt(t) + A0, or A1/t^p + A0), its residual a small
+Its mean is a physical law (the paper's A1/sqrt(t) + A0, A1/t^p + A0, or sqrt(A1^2/t + A0^2) for
+independent sources whose variances add), its residual a small
 Matern 5/2 GP over t scaled to [0, 1]. It is trained on each point's measured noise: the sample
 standard deviation s of n shots, divided by c4(n) so it is unbiased. The sampling variance of that
 estimate is known, Var[s/c4] = Noise(t)^2 (1 - c4^2) / c4^2 (about Noise^2 / (2(n-1))), and sits
@@ -47,9 +48,12 @@ def c4(n: np.ndarray) -> np.ndarray:
 
 
 def mean_law(kind: str, t: jnp.ndarray, a0, a1, p=0.5) -> jnp.ndarray:
-    """Noise(t) for the named law: "inv_sqrt" A1/sqrt(t) + A0, "power" A1/t^p + A0."""
+    """Noise(t) for the named law: "inv_sqrt" A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature"
+    sqrt(A1^2/t + A0^2) (a shot-noise source and a time-independent one, independent of each other)."""
     if kind == "inv_sqrt":
         return a1 / jnp.sqrt(t) + a0
+    if kind == "quadrature":
+        return jnp.sqrt(a1**2 / t + a0**2)
     if kind == "power":
         return a1 * t ** (-p) + a0
     raise ValueError(f"unknown noise law {kind!r}")
@@ -103,17 +107,19 @@ def prepare(
 
 def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
     """A data-driven starting point for the MAP fit: the law fitted by non-negative least squares
-    (over a grid of exponents for "power"), residual GP at its prior median. Scaled units."""
+    (over a grid of exponents for "power"; on the squared law for "quadrature"), residual GP at its
+    prior median. Scaled units."""
     mask = np.asarray(data.mask)
     t, y = np.asarray(data.t)[mask], np.asarray(data.y)[mask]
     bounds = np.asarray(data.bounds)
     exponents = np.linspace(bounds[2, 0], bounds[2, 1], 29) if cfg.mean == "power" else np.array([0.5])
     best = None
+    power = 2.0 if cfg.mean == "quadrature" else 1.0
     for p in exponents:
-        design = np.column_stack([np.ones_like(t), t ** (-p)]) / y[:, None]  # relative errors
+        design = np.column_stack([np.ones_like(t), t ** (-p * power)]) / y[:, None] ** power  # relative errors
         coef, residual = optimize.nnls(design, np.ones_like(y))
         if best is None or residual < best[0]:
-            best = (residual, coef, p)
+            best = (residual, coef ** (1.0 / power), p)
     _, (a0, a1), p = best
     eps = 1e-6
     guess = {

@@ -24,6 +24,13 @@ def test_seed_points_are_a_latin_hypercube_in_x_and_log_t():
     assert sorted(log_strata) == [0, 1, 2, 3, 4]
 
 
+def test_log_span_seeds_put_t_at_both_ends_and_the_geometric_middle():
+    cfg = CampaignConfig().with_overrides(schedule={"seed_t_scale": "log_span"})
+    pts = seed_points(cfg, 3)
+    np.testing.assert_allclose(sorted(pts[:, 1]), [0.2, np.sqrt(0.2 * 10.0), 10.0])
+    assert sorted(np.floor(pts[:, 0] * 3).astype(int)) == [0, 1, 2]
+
+
 def test_same_seed_same_campaign(short_run):
     again = run_campaign(SHORT, build(SHORT.instrument), seed=11)
     assert again.state == short_run.state

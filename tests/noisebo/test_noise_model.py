@@ -11,10 +11,10 @@ def test_c4_known_values():
     np.testing.assert_allclose(noise_model.c4(np.array([2, 3, 30])), [np.sqrt(2 / np.pi), 0.886227, 0.991418], atol=1e-5)
 
 
-def synthetic(a0, a1, n_points=16, shots=30, seed=0):
+def synthetic(a0, a1, n_points=16, shots=30, seed=0, law="inv_sqrt"):
     rng = np.random.default_rng(seed)
     t = np.geomspace(0.2, 10.0, n_points)
-    sd = a1 / np.sqrt(t) + a0
+    sd = np.asarray(noise_model.mean_law(law, t, a0, a1))
     shot_std = (sd[:, None] * rng.standard_normal((n_points, shots))).std(axis=1, ddof=1)
     return t, shot_std, np.full(n_points, shots)
 
@@ -38,6 +38,26 @@ def test_power_law_recovers_the_exponent():
     params = fit(NoiseModelConfig(mean="power"), *synthetic(0.1, 2.0, n_points=24, shots=200, seed=1))
     assert params["p"] == pytest.approx(0.5, abs=0.08)
     assert params["a1"] == pytest.approx(2.0, rel=0.1)
+
+
+def test_quadrature_law_by_hand():
+    # sqrt(A1^2/t + A0^2): t = 4, A1 = 2, A0 = 1.5 -> sqrt(1 + 2.25) = 1.802776
+    np.testing.assert_allclose(noise_model.mean_law("quadrature", np.array([4.0]), 1.5, 2.0), [np.sqrt(3.25)])
+
+
+def test_quadrature_law_recovers_a0_and_a1():
+    params = fit(NoiseModelConfig(mean="quadrature"), *synthetic(1.0, 2.0, shots=100, law="quadrature"))
+    assert params["a1"] == pytest.approx(2.0, rel=0.10)
+    assert params["a0"] == pytest.approx(1.0, abs=0.15)
+
+
+def test_quadrature_initial_guess_is_exact_on_exact_data():
+    t = np.geomspace(0.2, 10.0, 8)
+    sd = np.sqrt(4.0 / t + 0.25)
+    cfg = NoiseModelConfig(mean="quadrature")
+    data, scale = noise_model.prepare(t, sd * noise_model.c4(np.full(8, 30)), np.full(8, 30), 32, cfg, 0.2, 10.0)
+    guess = noise_model.initial_guess(data, cfg)
+    assert guess["a1"] * scale == pytest.approx(2.0, rel=1e-6) and guess["a0"] * scale == pytest.approx(0.5, rel=1e-6)
 
 
 def test_padding_does_not_change_predictions():
