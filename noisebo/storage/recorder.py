@@ -42,6 +42,7 @@ class Recorder:
         self.h5_path = Path(h5_path)
         self._writer = writer
         self.progress = progress
+        self._budget_start = progress.failure_counts()
 
     @classmethod
     def create(cls, h5_path: Path, config: CampaignConfig, seed: int) -> Recorder:
@@ -102,7 +103,10 @@ class Recorder:
         self.append(records.failure_record(point, shot, x, t, error))
 
     def failure_counts(self) -> tuple[int, int]:
-        return self.progress.failure_counts()
+        """(failed, attempted) shots since this recorder opened the campaign: a resumed campaign
+        gets a fresh failure budget (its file keeps every earlier failure)."""
+        failed, attempts = self.progress.failure_counts()
+        return failed - self._budget_start[0], attempts - self._budget_start[1]
 
     def snapshot(self) -> None:
         write_snapshot(self.h5_path, self.progress)

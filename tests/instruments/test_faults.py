@@ -101,7 +101,7 @@ def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tin
 
 
 def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config, prefect_harness, tmp_path):
-    from flows.campaign import campaign
+    from flows.campaign import campaign, resume
 
     config = tiny_config.with_overrides(instrument={"faults": {"seed": 1, "exception": 0.9}},
                                         schedule={"min_failed": 5, "tolerated_rate": 0.5})
@@ -111,6 +111,12 @@ def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config
     assert data["attrs"]["status"] == "failed" and "failure budget exceeded" in data["attrs"]["status_reason"]
     attempts = int(data["attrs"]["n_failed_attempts"]) + int(data["attrs"]["n_shots"])
     assert 5 <= attempts <= 5 / 0.5  # stopped within min_failed / tolerated_rate attempts
+    # Resumed (say, after fixing the instrument), it gets a fresh budget, not an instant stop.
+    with pytest.raises(FailureBudgetExceeded):
+        resume(str(tmp_path / "tiny_reward_s0000.h5"), show_progress=False, record_rrd=False)
+    again = read_campaign(tmp_path / "tiny_reward_s0000.h5")["attrs"]
+    more = int(again["n_failed_attempts"]) + int(again["n_shots"]) - attempts
+    assert 5 <= more <= 5 / 0.5 and again["status"] == "failed"
 
 
 @pytest.mark.parametrize("kind, reason", [("corrupt_spectrum", ""), ("nan", ""), ("outlier", None)])
