@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from flows.campaign import campaign, campaign_path, resume
-from flows.sweep import sweep
+from flows.sweep import sweep, task_runner
 from instruments import build
 from noisebo.campaign import run_campaign
 from noisebo.storage.hdf5 import CampaignFileError
@@ -74,25 +74,27 @@ def test_resuming_a_finished_campaign_changes_nothing(finished, prefect_harness)
 
 
 def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect_harness, tmp_path):
-    table = sweep(tiny_config, seeds=[5, 6], policies=["reward", "double"], out_dir=str(tmp_path))
+    # Six campaigns at once writing into one folder: six distinct, intact files, each equal to
+    # its seed run alone.
+    six_at_once = sweep.with_options(task_runner=task_runner("threads", 6))
+    table = six_at_once(tiny_config, seeds=[5, 6, 7], policies=["reward", "double"], out_dir=str(tmp_path))
     files = sorted(p.name for p in tmp_path.glob("*.h5"))
-    assert files == ["tiny_double_s0005.h5", "tiny_double_s0006.h5", "tiny_reward_s0005.h5", "tiny_reward_s0006.h5"]
+    assert files == [f"tiny_{policy}_s000{seed}.h5" for policy in ("double", "reward") for seed in (5, 6, 7)]
     text = Path(table).read_text()
-    assert "| reward | 2 |" in text and "| double | 2 |" in text
-    # Concurrent campaigns in one folder: distinct, intact files, each equal to its seed run alone.
+    assert "| reward | 3 |" in text and "| double | 3 |" in text
     alone, _, _ = points_of(finished)
     swept, _, _ = points_of(tmp_path / "tiny_reward_s0005.h5")
     np.testing.assert_array_equal(alone["value"], swept["value"])
     for policy in ("reward", "double"):
         config = tiny_config.with_overrides(acquisition={"policy": policy})
-        for seed in (5, 6):
+        for seed in (5, 6, 7):
             pure = run_campaign(config, build(config.instrument), seed)
             points, shots, attrs = points_of(tmp_path / f"tiny_{policy}_s{seed:04d}.h5")
             assert attrs["status"] == "completed" and attrs["seed"] == seed and attrs["policy"] == policy
             np.testing.assert_array_equal(points["value"], [p.value for p in pure.state.points])
             assert len(shots["value"]) == sum(p.n_shots for p in pure.state.points)
     summary = json.loads((tmp_path / "sweep_summary.json").read_text())
-    assert len(summary["records"]) == 4
+    assert len(summary["records"]) == 6
     assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000
     # `noisebo report DIR` redraws the same from the files alone
     from noisebo.view.report import report
