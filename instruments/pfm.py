@@ -91,14 +91,20 @@ class PFMInstrument:
         information = np.einsum("in,jn->ij", jac, jac)
         return float(c.sample_noise_pm**2 * np.linalg.solve(information, np.eye(3))[0, 0])
 
-    @lru_cache(maxsize=1)
-    def _jitter_variance(self) -> float:
+    def static_sd(self, x: np.ndarray) -> np.ndarray:
+        """Sd (pm) of the per-sweep noise that no sweep length averages away, at positions x (um):
+        sqrt(E Var[(1 + g e) r(x + d) + b]) over gain, landing and background jitter (Gauss-Hermite
+        over the landing error). It grows where the profile is steep (domain walls) and with |r|."""
         c = self.config
         nodes, weights = np.polynomial.hermite_e.hermegauss(QUADRATURE_NODES)
         weights = weights / weights.sum()
-        x = np.linspace(0.0, self.length_um, 1001)
-        landed = np.clip(x[:, None] + c.position_jitter_um * nodes[None, :], 0.0, self.length_um)
+        x = np.asarray(x, dtype=np.float64)
+        landed = np.clip(x[..., None] + c.position_jitter_um * nodes, 0.0, self.length_um)
         r = self.profile(landed)
         mean = r @ weights
         second = (r**2) @ weights * (1.0 + c.gain_jitter**2)
-        return float(np.mean(second - mean**2)) + c.background_pm**2
+        return np.sqrt(np.maximum(second - mean**2, 0.0) + c.background_pm**2)
+
+    @lru_cache(maxsize=1)
+    def _jitter_variance(self) -> float:
+        return float(np.mean(self.static_sd(np.linspace(0.0, self.length_um, 1001)) ** 2))

@@ -46,6 +46,17 @@ def test_noise_law_falls_with_sweep_time_towards_the_time_independent_floor():
     assert law[-1] == pytest.approx(np.sqrt(inst._jitter_variance()), rel=0.02) and law[-1] >= SYNTH.background_pm
 
 
+def test_time_independent_noise_by_hand_and_at_the_walls():
+    # Without landing error: sd = sqrt(g^2 r(x)^2 + b^2) exactly (the quadrature of a constant).
+    still = PFMInstrument(SYNTH.model_copy(update={"position_jitter_um": 0.0, "gain_jitter": 0.01, "background_pm": 0.5}))
+    x = np.array([0.1, 0.25, 0.5])
+    np.testing.assert_allclose(still.static_sd(x), np.sqrt((0.01 * still.truth(x)) ** 2 + 0.25), rtol=1e-9)
+    # With it, a domain wall (x = 0.5) is noisier than a domain's middle.
+    shaky = PFMInstrument(SYNTH.model_copy(update={"position_jitter_um": 0.005}))
+    middle, wall = shaky.static_sd(np.array([0.25, 0.5]))
+    assert wall > 2 * middle
+
+
 @pytest.mark.parametrize(
     "change, message",
     [
