@@ -143,7 +143,9 @@ class PFMInstrumentConfig(_Frozen):
     source of the A1/sqrt(t) part once fitted); and a phase spectrum. Time-independent noise per
     sweep: an electrostatic background response ``background_pm`` (sd, added to the local
     response), relative gain jitter ``gain_jitter`` (drive and contact), tip-position jitter
-    ``position_jitter_um`` and resonance drift ``resonance_jitter_hz``."""
+    ``position_jitter_um`` and resonance drift ``resonance_jitter_hz``. The defaults (those of
+    ``data/configs/pfm.yaml``) keep the time-independent noise nearly the same at every x, as the
+    noise model assumes; larger gain or landing jitter makes strong domains and walls noisier."""
 
     kind: Literal["pfm"] = "pfm"
     profile: ProfileConfig = ScanProfileConfig()
@@ -151,10 +153,10 @@ class PFMInstrumentConfig(_Frozen):
     q: float = Field(250.0, gt=1, allow_inf_nan=False)
     sweep_half_span_hz: PositiveFloat = 5_000.0
     sample_rate_hz: PositiveFloat = 10_000.0
-    sample_noise_pm: NonNegativeFloat = 5_000.0
-    background_pm: NonNegativeFloat = 2.0
-    gain_jitter: NonNegativeFloat = 0.01
-    position_jitter_um: NonNegativeFloat = 0.0005
+    sample_noise_pm: NonNegativeFloat = 7_500.0
+    background_pm: NonNegativeFloat = 0.5
+    gain_jitter: NonNegativeFloat = 0.002
+    position_jitter_um: NonNegativeFloat = 0.0001
     resonance_jitter_hz: NonNegativeFloat = 50.0
     q_bounds: tuple[PositiveFloat, PositiveFloat] = (5.0, 5000.0)
     timeout_s: PositiveFloat | None = None
