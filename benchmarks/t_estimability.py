@@ -64,7 +64,8 @@ def simulate(config, noise_law, t_star: float, trials: int) -> np.ndarray:
     for trial in range(trials):
         t = np.concatenate([seed_points(config, trial)[:, 1], np.full(N_BEFORE_CONVERGENCE + n_after, t_star)])
         n = np.array([sched.shots_before] * (sched.n_seed + N_BEFORE_CONVERGENCE) + [sched.shots_after] * n_after)
-        sd = np.array([np.std(rng.normal(0.0, noise_law(np.array([ti]))[0], k), ddof=1) for ti, k in zip(t, n)])
+        true_sd = noise_law(t)
+        sd = np.array([np.std(rng.normal(0.0, sigma, k), ddof=1) for sigma, k in zip(true_sd, n)])
         errors.append(abs(fitted_t_opt(t, sd, n, grid, rew.alpha, rew.beta) / t_star - 1.0))
     return np.asarray(errors)
 
