@@ -25,8 +25,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from instruments import build  # noqa: E402
-from noisebo.campaign import run_campaign  # noqa: E402
+from noisebo.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
+from noisebo.decision import grids  # noqa: E402
 from noisebo.diagnostics import compile_count  # noqa: E402
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table  # noqa: E402
 from noisebo.reward import true_optimal_t  # noqa: E402
@@ -35,16 +36,16 @@ def run_one(config, instrument, seed: int) -> dict:
     compiles = {"after_first": None}
     before = compile_count()
 
-    def on_step(decision, state):
-        if decision.step == 0:
+    def on_commit(state, events):
+        if len(state.decisions) == 1 and compiles["after_first"] is None:
             compiles["after_first"] = compile_count()
 
     started = time.perf_counter()
-    result = run_campaign(config, instrument, seed, on_step=on_step)
+    result = run_campaign(config, instrument, seed, on_commit=on_commit)
     wall = time.perf_counter() - started
     points = result.state.points
     record = campaign_figures(
-        config, instrument, result.state.t_opt_history, result.summary.t_opt, result.summary.x,
+        config, instrument, result.state.t_opt_history, result.summary.t_opt, grids(config).x,
         result.summary.f_mean, [p.t for p in points for _ in range(p.n_shots)], result.latencies_s,
     )
     after_first = compiles["after_first"]

@@ -24,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from noisebo import runtime  # noqa: E402
+from flows import runtime  # noqa: E402
 
 runtime.configure()
 
@@ -33,7 +33,7 @@ import h5py  # noqa: E402
 from flows.campaign import campaign  # noqa: E402
 from flows.local import flow_settings  # noqa: E402
 from instruments import build  # noqa: E402
-from noisebo.campaign import run_campaign  # noqa: E402
+from noisebo.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 
 

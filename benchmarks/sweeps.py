@@ -25,10 +25,10 @@ sys.path.insert(0, str(ROOT))
 
 from flows.processes import BIN, local_server, start, stop, wait_for  # noqa: E402
 from instruments import build  # noqa: E402
-from noisebo.campaign import run_campaign  # noqa: E402
-from noisebo.cli import parse_seeds  # noqa: E402
+from noisebo.driver import run_campaign  # noqa: E402
+from cli.main import parse_seeds  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
-from noisebo.storage.hdf5 import read_campaign  # noqa: E402
+from storage.hdf5 import read_campaign  # noqa: E402
 
 ENGINES = {
     "sequential (1 thread)": ["--runner", "threads", "--workers", "1"],

@@ -9,22 +9,24 @@ Prefect then skips walking them for futures, which otherwise costs milliseconds 
 
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Literal
+from typing import Callable, Literal, Sequence
 
 from prefect import flow
 from prefect.utilities.annotations import quote
 
+import noisebo
 from flows import abort
-from noisebo.failures import FailureBudgetExceeded, check_budget
-from noisebo.reduction import NoUsableShots
 from instruments import build
 from noisebo.config import CampaignConfig, load_config
-from noisebo.storage import records
-from noisebo.storage.recorder import Recorder
+from noisebo.driver import drive, now_utc
+from noisebo.engine import EngineState, new_campaign
+from noisebo.events import Decided, DriverInfo, Event, MoreShots, PointCommitted, Status
+from noisebo.failures import FailureBudgetExceeded
+from storage.recorder import Recorder, package_versions
 from tasks import campaign as ops
 
 Progress = Callable[[str], None]
-Observer = Callable[[records.Progress], None]
+Observer = Callable[[EngineState], None]
 
 
 def campaign_path(config: CampaignConfig, seed: int, out_dir: str | Path) -> Path:
@@ -38,96 +40,80 @@ def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> C
     return cfg.with_overrides(acquisition={"policy": policy}) if policy else cfg
 
 
-def _measure_point(recorder: Recorder, instrument, x, t, shots, model_noise, step, say: Progress,
-                   observe: Observer) -> None:
-    progress = recorder.progress
-    index = len(progress.state.points)
-    config = progress.config
-    budget = (config.schedule.min_failed, config.schedule.tolerated_rate)
-    wanted = shots
-    while True:  # extra shots while too few are usable, within the failure budget
-        readings = ops.measure(quote(instrument), x, t, wanted, progress.seed, index, quote(recorder), budget)
-        reduced = ops.reduce(x, t, quote(readings), model_noise, quote(config.instrument), config.schedule.clip_sd)
-        if not isinstance(reduced, NoUsableShots):
-            point, shot_values = reduced
-            break
-        failed, attempts = recorder.failure_counts()
-        check_budget(failed + reduced.rejected, attempts, *budget)
-        say(f"point {index}: {reduced}; taking {reduced.missing} more")
-        wanted = len(readings) + reduced.missing
-    ops.record(quote(recorder), quote(records.point_record(index, step, point, shot_values)))
-    check_budget(*recorder.failure_counts(), *budget)  # rejected shots count too
-    label = "seed point" if step < 0 else f"step {step + 1}/{progress.config.schedule.n_steps}"
-    say(f"{label}: x={x:.4g} t={t:.4g} s shots={shots} value={point.value:.4g} noise={point.noise:.3g}")
-    observe(recorder.progress)
-    _stop_if_asked(recorder)
+def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
+    """What a person watching the campaign is told about ``events`` (committed after ``state``)."""
+    lines, n_steps = [], state.config.schedule.n_steps
+    for event in events:
+        if isinstance(event, PointCommitted):
+            p = event.point
+            label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
+            lines.append(f"{label}: x={p.x:.4g} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} noise={p.noise:.3g}")
+        elif isinstance(event, MoreShots):
+            lines.append(f"point {event.point}: {event.reason}; taking more shots ({event.wanted} in all)")
+        elif isinstance(event, Decided) and event.decision.converged and not state.data.is_converged:
+            lines.append(f"noise model converged at step {event.decision.step + 1}: t_opt = {event.decision.t_opt:.4g} s")
+    return lines
 
 
-def _stop_if_asked(recorder: Recorder) -> None:
-    """After a committed point: if a signal asked to stop, record "aborted" and stop."""
-    signal_name = abort.requested()
-    if signal_name is not None:
-        ops.record(quote(recorder), quote(records.status_record("aborted", f"{signal_name} received")))
-        raise abort.CampaignAborted(signal_name, recorder.h5_path)
-
-
-def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda progress: None,
+def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda state: None,
         instrument=None) -> Path:
-    """Drive a campaign from wherever its journal stands to the end. ``observe`` sees the
-    campaign after every committed point and at the end (the live view). Past the failure
-    budget the campaign records the status "failed" with the reason, and stops."""
-    try:
-        return _drive(recorder, say, observe, instrument)
-    except FailureBudgetExceeded as error:
-        ops.record(quote(recorder), quote(records.status_record("failed", str(error))))
-        observe(recorder.progress)
-        raise
+    """Drive a campaign from wherever its journal stands to the end: each shot is a ``measure``
+    task, each decision a ``decide`` task, every event journaled before it counts. ``observe``
+    sees the campaign after every committed point and at the end (the live view). Past the
+    failure budget the campaign records the status "failed" with the reason and raises
+    ``FailureBudgetExceeded``; on a signal it finishes the point, records "aborted" and raises
+    ``abort.CampaignAborted``."""
+    instrument = instrument if instrument is not None else build(recorder.state.config.instrument)
 
+    def commit(state: EngineState, events: Sequence[Event]) -> EngineState:
+        new = recorder.commit(state, events)
+        for line in progress_lines(state, events):
+            say(line)
+        if len(new.points) > len(state.points) or new.status is not state.status:
+            observe(new)
+        return new
 
-def _drive(recorder: Recorder, say: Progress, observe: Observer, instrument) -> Path:
-    progress = recorder.progress
-    config, seed = progress.config, progress.seed
-    sched = config.schedule
-    instrument = instrument if instrument is not None else build(config.instrument)
-    observe(progress)
-    seeds = ops.seed_points(quote(config), seed)
-    for i in range(len(progress.state.points), sched.n_seed):
-        x, t = (float(v) for v in seeds[i])
-        _measure_point(recorder, instrument, x, t, sched.shots_before, None, -1, say, observe)
-    while recorder.progress.next_step < sched.n_steps or recorder.progress.pending is not None:
-        progress = recorder.progress
-        pending = progress.pending
-        if pending is None:
-            step = progress.next_step
-            fitted, fit_s = ops.update_models(quote(config), quote(progress.state), seed, step)
-            decision, acq_s = ops.acquire(quote(config), quote(fitted), quote(progress.state), step)
-            ops.record(quote(recorder), quote(records.decision_record(decision, fit_s + acq_s)), snapshot=False)
-            pending = recorder.progress.pending
-        f = pending.fields
-        if f["converged"] and not (f["step"] > 0 and progress.decisions[f["step"] - 1].fields["converged"]):
-            say(f"noise model converged at step {f['step'] + 1}: t_opt = {f['t_opt']:.4g} s")
-        _measure_point(
-            recorder, instrument, f["x"], f["t"], f["shots"], None if f["measure_noise"] else f["noise_at_t"],
-            f["step"], say, observe,
-        )
-    if recorder.progress.status != "completed":
-        summary = ops.summarize(quote(config), quote(recorder.progress.state), seed)
-        ops.record(quote(recorder), quote(records.summary_record(summary)), quote(records.status_record("completed")))
-    observe(recorder.progress)
+    def measure(instrument, seed, request):
+        return ops.measure(quote(instrument), seed, request)
+
+    def decide(state):
+        return ops.decide(quote(state))
+
+    def stop_requested() -> str | None:
+        name = abort.requested()
+        return None if name is None else f"{name} received"
+
+    observe(recorder.state)
+    final = drive(recorder.state, instrument, commit, measure, decide, stop_requested)
+    observe(final)
+    if final.status is Status.FAILED:
+        raise FailureBudgetExceeded(final.reason)
+    if final.status is Status.ABORTED and abort.requested() is not None:
+        raise abort.CampaignAborted(abort.requested(), recorder.h5_path)
     return recorder.h5_path
+
+
+def driver_info(config: CampaignConfig) -> DriverInfo:
+    """The driver a config names, as the campaign file records it."""
+    return DriverInfo(config.instrument.kind, noisebo.__version__, config.instrument.model_dump(mode="json"))
+
+
+def start_campaign(path: Path, config: CampaignConfig, seed: int) -> Recorder:
+    """A new campaign's recorder: its first event journaled, its file written."""
+    return Recorder.create(path, new_campaign(config, seed, driver_info(config), package_versions(), now_utc()))
 
 
 @contextmanager
 def _viewed(recorder: Recorder, record_rrd: bool, live: str | None, warn: Progress):
     """(instrument, observer) for a campaign: a Rerun recording beside its file and/or a live
     viewer, or no observer at all when neither is asked for."""
-    config = recorder.progress.config
+    config = recorder.state.config
     instrument = build(config.instrument)
     if not record_rrd and live is None:
         yield instrument, lambda progress: None
         return
-    from noisebo.view.recording import CampaignRecording, instrument_curves, rrd_path_for
-    from noisebo.view.rerun_view import RerunView
+    from view.recording import CampaignRecording, instrument_curves, rrd_path_for
+    from view.rerun_view import RerunView
 
     truth, law = instrument_curves(config, instrument)
     rrd = rrd_path_for(recorder.h5_path) if record_rrd else None
@@ -152,7 +138,7 @@ def campaign(
     """Run one campaign and return the path of its HDF5 file. ``record_rrd``: also write a Rerun
     recording beside it; ``live``: stream to a Rerun viewer ("spawn" or a gRPC url)."""
     cfg = resolve_config(config, policy)
-    with Recorder.create(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
+    with start_campaign(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
         with _viewed(recorder, record_rrd, live, print) as (instrument, observe), abort.reclaimed():
             return str(run(recorder, print if show_progress else _silent, observe, instrument))
 

@@ -18,7 +18,7 @@ from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows.campaign import campaign, campaign_path, resolve_config, resume
 from noisebo.config import CampaignConfig
-from noisebo.view.report import write_summary
+from view.report import write_summary
 
 
 def _orchestration_failed(task, task_run, state) -> bool:

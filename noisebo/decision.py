@@ -184,7 +184,9 @@ def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState) -> Pre
 @dataclass(frozen=True)
 class Decision:
     """The outcome of one BO step (0-based ``step``): the proposal, how to measure it, and what
-    the models said. ``noise_at_t`` is the noise model's single-shot sd at the proposed t."""
+    the models said. ``noise_at_t`` is the noise model's single-shot sd at the proposed t.
+    Arrays: ``acq_map`` (n_x, n_t) float32; ``f_mean``, ``f_var`` (n_x,) on the x grid;
+    ``noise_mean``, ``noise_var`` (n_t,) on the t grid. ``latency_s``: the decision's time (s)."""
 
     step: int
     x: float
@@ -196,8 +198,12 @@ class Decision:
     t_opt: float
     converged: bool
     hyperparameters: dict
-    prediction: Prediction
     acq_map: np.ndarray
+    f_mean: np.ndarray
+    f_var: np.ndarray
+    noise_mean: np.ndarray
+    noise_var: np.ndarray
+    latency_s: float = 0.0
 
 
 def hyperparameters(fitted: Fitted) -> dict[str, float]:
@@ -241,8 +247,11 @@ def acquire(
         t_opt=t_opt,
         converged=now_converged,
         hyperparameters=hyperparameters(fitted),
-        prediction=prediction,
-        acq_map=np.asarray(values),
+        acq_map=np.asarray(values, dtype=np.float32),
+        f_mean=np.asarray(prediction.posterior.f_mean, dtype=np.float64),
+        f_var=np.asarray(prediction.posterior.f_var, dtype=np.float64),
+        noise_mean=np.asarray(prediction.posterior.noise_mean, dtype=np.float64),
+        noise_var=np.asarray(prediction.posterior.noise_var, dtype=np.float64),
     )
     return decision, new_state
 

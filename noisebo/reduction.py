@@ -12,14 +12,27 @@ import numpy as np
 from noisebo.sho import SHOFit, fit_sho
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Reading:
     """One shot as an instrument returns it: a scalar ``value`` (value units), or a raw
-    ``spectrum`` that the reduction turns into one (PFM: rows frequency Hz, amplitude pm,
-    phase deg, float32) with value None."""
+    ``spectrum`` with value None that the named ``reduction`` turns into one ("sho", the
+    default for spectra: rows frequency Hz, amplitude pm, phase deg)."""
 
     value: float | None
     spectrum: np.ndarray | None = None
+    reduction: str | None = None
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Reading):
+            return NotImplemented
+        same_spectrum = (self.spectrum is None and other.spectrum is None) or (
+            self.spectrum is not None and other.spectrum is not None
+            and np.array_equal(self.spectrum, other.spectrum, equal_nan=True))
+        same_value = self.value == other.value or (
+            self.value is not None and other.value is not None and np.isnan(self.value) and np.isnan(other.value))
+        return same_value and self.reduction == other.reduction and same_spectrum
+
+    __hash__ = None
 
 
 class ShotValue(NamedTuple):

@@ -8,7 +8,7 @@ import yaml
 os.environ.setdefault("PREFECT_HOME", tempfile.mkdtemp(prefix="noisebo-test-prefect-"))
 os.environ.setdefault("NOISEBO_JAX_CACHE", "")
 
-from noisebo import runtime  # noqa: E402
+from flows import runtime  # noqa: E402
 
 runtime.configure()
 

@@ -10,9 +10,10 @@ import pytest
 from flows.campaign import campaign, campaign_path, resume
 from flows.sweep import sweep, task_runner
 from instruments import build
-from noisebo.campaign import run_campaign
-from noisebo.storage.hdf5 import CampaignFileError
-from noisebo.storage.recorder import Recorder
+from noisebo.driver import run_campaign
+from storage.hdf5 import CampaignFileError
+from flows.campaign import start_campaign
+from storage.recorder import Recorder
 
 
 def points_of(path):
@@ -53,13 +54,13 @@ def test_file_layout_is_readable_with_plain_h5py(finished):
 def test_a_second_campaign_on_the_same_file_is_refused(tiny_config, finished):
     before = Path(finished).read_bytes()
     with pytest.raises(CampaignFileError, match="already exists"):
-        Recorder.create(finished, tiny_config, 5)
+        start_campaign(finished, tiny_config, 5)
     assert Path(finished).read_bytes() == before
 
 
 def test_a_running_campaign_locks_its_journal(tiny_config, tmp_path):
     path = campaign_path(tiny_config, 1, tmp_path)
-    with Recorder.create(path, tiny_config, 1):
+    with start_campaign(path, tiny_config, 1):
         with pytest.raises(CampaignFileError, match="in use by another running campaign"):
             Recorder.resume(path)
 
@@ -97,7 +98,7 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
     assert len(summary["records"]) == 6
     assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000
     # `noisebo report DIR` redraws the same from the files alone
-    from noisebo.view.report import report
+    from view.report import report
 
     written = report(tmp_path, tmp_path / "report")
     assert [p.name for p in written] == ["convergence_steps.png", "sweep_summary.md"]

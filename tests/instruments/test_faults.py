@@ -12,7 +12,7 @@ from instruments.faults import FaultyInstrument
 from instruments.forrester import ForresterInstrument
 from noisebo.config import FAULT_KINDS, CampaignConfig, ForresterInstrumentConfig
 from noisebo.failures import FailureBudgetExceeded, InstrumentError, InstrumentTimeout, check_budget
-from noisebo.storage.hdf5 import read_campaign
+from storage.hdf5 import read_campaign
 
 
 def faulty(**rates):
@@ -72,16 +72,14 @@ def test_failure_budget_by_hand(failed, attempts, stops):
 
 
 def run_flow(config, seed, path, instrument):
-    from flows.campaign import run
-    from noisebo.reward import true_optimal_t
-    from noisebo.storage.recorder import Recorder
+    from flows.campaign import run, start_campaign
 
-    with Recorder.create(path, config, seed) as recorder:
+    with start_campaign(path, config, seed) as recorder:
         return run(recorder, instrument=instrument)
 
 
 def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tiny_config, prefect_harness, tmp_path):
-    from noisebo.campaign import run_campaign
+    from noisebo.driver import run_campaign
 
     config = tiny_config.with_overrides(instrument={"timeout_s": 0.2, "faults": {
         "seed": 5, "timeout": 0.05, "exception": 0.15, "nan": 0.05, "inf": 0.05}})
@@ -139,7 +137,7 @@ def test_spectrum_faults_never_give_a_usable_wrong_value_silently(kind, reason):
 
 def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny_config, prefect_harness, tmp_path):
     from flows.campaign import campaign
-    from noisebo.campaign import run_campaign
+    from noisebo.driver import run_campaign
 
     # 70 % of the readings NaN: some points get too few usable shots and must take more
     config = tiny_config.with_overrides(instrument={"faults": {"seed": 4, "nan": 0.7}},
@@ -158,9 +156,8 @@ def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny
 
 @pytest.mark.slow
 def test_a_200_step_campaign_with_a_quarter_of_faults(prefect_harness, tmp_path):
-    from flows.campaign import run
+    from flows.campaign import run, start_campaign
     from noisebo.reward import true_optimal_t
-    from noisebo.storage.recorder import Recorder
 
     config = CampaignConfig().with_overrides(
         name="faulty200",
@@ -172,7 +169,7 @@ def test_a_200_step_campaign_with_a_quarter_of_faults(prefect_harness, tmp_path)
 
     @__import__("prefect").flow
     def faulty_campaign():
-        with Recorder.create(tmp_path / "faulty200.h5", config, 3) as recorder:
+        with start_campaign(tmp_path / "faulty200.h5", config, 3) as recorder:
             return run(recorder, instrument=inst)
 
     data = read_campaign(faulty_campaign())

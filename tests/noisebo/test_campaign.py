@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from instruments import build
-from noisebo.campaign import make_point, run_campaign, seed_points
+from noisebo.campaign import make_point, seed_points
+from noisebo.driver import run_campaign
 from noisebo.config import CampaignConfig
 from noisebo.diagnostics import compile_count
 from noisebo.reduction import NoUsableShots, Reading
@@ -61,7 +62,8 @@ def test_campaign_shape_and_bookkeeping(short_run):
 
 def test_no_recompilation_after_the_first_step(short_run):
     marks = []
-    run_campaign(SHORT, build(SHORT.instrument), seed=5, on_step=lambda d, s: marks.append(compile_count()))
+    run_campaign(SHORT, build(SHORT.instrument), seed=5,
+                 on_commit=lambda state, events: marks.append(compile_count()) if state.decisions else None)
     assert marks[-1] == marks[0]
 
 

@@ -1,7 +1,7 @@
 """What a campaign looks like at each step: pure frames built from its tables.
 
 A frame is everything the live view and the report draw at one moment of a campaign, in raw
-units. The input is the table dict of ``noisebo.storage.hdf5.campaign_tables`` (a running
+units. The input is the table dict of ``storage.hdf5.campaign_tables`` (a running
 campaign) or ``read_campaign`` (a file): the same frames come out of both, so a replayed
 recording equals the live one.
 

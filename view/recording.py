@@ -14,8 +14,8 @@ import numpy as np
 
 from noisebo.config import CampaignConfig, parse_config
 from noisebo.decision import grids
-from noisebo.view.frames import Frame, frame_at, frames, n_frames
-from noisebo.view.rerun_view import RerunView
+from view.frames import Frame, frame_at, frames, n_frames
+from view.rerun_view import RerunView
 
 FIT_KEYS = ("amplitude", "resonance_hz", "q", "sign")
 
@@ -47,39 +47,39 @@ class CampaignRecording:
         self.view, self.config = view, config
         self.logged = 0
 
-    def update(self, progress) -> None:
-        from noisebo.storage.hdf5 import campaign_tables
+    def update(self, state) -> None:
+        """Log the frames ``state`` (an ``EngineState``) has reached and not logged yet."""
+        from storage.hdf5 import campaign_tables
 
         if not self.view.enabled:
             return
-        tables = campaign_tables(progress)
-        seeded = len(progress.state.points) >= self.config.schedule.n_seed
+        tables = campaign_tables(state)
+        seeded = len(state.points) >= self.config.schedule.n_seed
         ready = n_frames(tables, self.config) if seeded else 0  # frame 0 waits for the last seed point
         for k in range(self.logged, ready):
             frame = frame_at(tables, self.config, k)
-            self.view.log(frame, *_latest_sweep(frame, progress.shots, progress.shot_rows))
+            self.view.log(frame, *_latest_sweep(frame, state))
         self.logged = max(self.logged, ready)
 
     def close(self) -> None:
         self.view.close()
 
 
-def _latest_sweep(frame: Frame, shots: dict, shot_rows: list[dict]) -> tuple[np.ndarray | None, dict | None]:
-    """The last sweep of the frame's latest point and its fit, from a running campaign."""
-    if frame.latest_point is None or frame.latest_point not in shots or not shots[frame.latest_point]:
+def _latest_sweep(frame: Frame, state) -> tuple[np.ndarray | None, dict | None]:
+    """The last sweep of the frame's latest (committed) point and its fit, from a running campaign."""
+    if frame.latest_point is None or frame.latest_point >= len(state.points):
         return None, None
-    reading = shots[frame.latest_point][-1]
-    if reading.spectrum is None:
+    entry = state.points[frame.latest_point]
+    if not entry.shots or entry.shots[-1].reading.spectrum is None:
         return None, None
-    rows = [r for r in shot_rows if r["point"] == frame.latest_point and "amplitude" in r]
-    fit = {k: float(rows[-1][k]) for k in FIT_KEYS} if rows else None
-    return np.asarray(reading.spectrum), fit
+    fit = entry.committed.values[-1].fit
+    return np.asarray(entry.shots[-1].reading.spectrum), None if fit is None else {k: float(getattr(fit, k)) for k in FIT_KEYS}
 
 
 def last_sweep(h5_path: Path, data: dict, fits: dict, point: int) -> tuple[np.ndarray, dict | None]:
     """The last raw sweep (3, N) of ``point`` in a campaign file and its fit (every column of
     ``/shots/fit`` at that shot; None if the point has no shot rows)."""
-    from noisebo.storage.hdf5 import read_spectra
+    from storage.hdf5 import read_spectra
 
     mine = np.flatnonzero(np.asarray(data["shots"]["point"]) == point)
     fit = {k: float(v[mine[-1]]) for k, v in fits.items()} if mine.size else None
@@ -88,7 +88,7 @@ def last_sweep(h5_path: Path, data: dict, fits: dict, point: int) -> tuple[np.nd
 
 def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], None] = print) -> Path:
     """Rebuild a campaign's recording from its HDF5 file alone; returns the .rrd path."""
-    from noisebo.storage.hdf5 import read_campaign, read_shot_fits
+    from storage.hdf5 import read_campaign, read_shot_fits
 
     h5_path = Path(h5_path)
     data = read_campaign(h5_path)

@@ -18,9 +18,9 @@ from matplotlib.figure import Figure
 from noisebo.config import CampaignConfig, parse_config
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
 from noisebo.reward import true_optimal_t
-from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits
-from noisebo.view.recording import instrument_curves, last_sweep
-from noisebo.view.style import step_colours
+from storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits
+from view.recording import instrument_curves, last_sweep
+from view.style import step_colours
 
 DPI = 130
 

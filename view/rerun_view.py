@@ -5,7 +5,7 @@ guarded; the first failure is reported once (through ``warn``) and the view swit
 A live viewer is streamed to only if its address answers a TCP connect within half a second, so an
 absent viewer costs at most that, once.
 
-Entities (timeline ``step``, see ``noisebo.view.frames``; live campaigns also carry ``wall``):
+Entities (timeline ``step``, see ``view.frames``; live campaigns also carry ``wall``):
     acquisition/map      the acquisition over the (x, t) grid as an image (t upwards)
     acquisition/points   measured points on that image, coloured by the step that measured them
     f/{mean,band,truth,points}, noise/{mean,band,law,points}, reward/{curve,t_opt}
@@ -30,8 +30,8 @@ from urllib.parse import urlparse
 import numpy as np
 
 from noisebo.config import CampaignConfig
-from noisebo.view.frames import Curve, Frame
-from noisebo.view.style import step_colours
+from view.frames import Curve, Frame
+from view.style import step_colours
 
 BOX_W, BOX_H = 300.0, 150.0
 TRACES = ("t_opt_s", "a0", "a1", "latency_s", "measurement_time_s")
@@ -101,7 +101,7 @@ class RerunView:
     def _open(self, name: str, rrd: Path | None, live: str | None) -> None:
         import rerun as rr
 
-        from noisebo.view.blueprint import blueprint
+        from view.blueprint import blueprint
 
         self.rr = rr
         self.stream = rr.RecordingStream("noisebo", recording_id=name, send_properties=False)

@@ -17,9 +17,9 @@ import h5py
 import numpy as np
 
 from noisebo.decision import grids
-from noisebo.storage.faults import crash_point
-from noisebo.storage.journal import _fsync_dir
-from noisebo.storage.records import Progress
+from storage.faults import crash_point
+from storage.journal import _fsync_dir
+from noisebo.engine import EngineState
 
 SCHEMA = "noisebo.campaign"
 SCHEMA_VERSION = 1
@@ -66,66 +66,67 @@ ARRAY_COLUMNS = {
 }
 
 
-def campaign_tables(progress: Progress) -> dict:
+def campaign_tables(state: EngineState) -> dict:
     """The campaign as plain columns, in the shape ``read_campaign`` returns (without "attrs"):
     "grid", "points", "steps" (with "hyperparameters" and the per-step arrays), "shots" and
     "summary" (None until done)."""
-    g = grids(progress.config)
-    state, decisions = progress.state, [d.fields for d in progress.decisions]
+    g = grids(state.config)
     points = {}
     for name, (units, _) in POINT_COLUMNS.items():
         dtype = bool if units == "bool" else (np.int32 if name == "n_shots" else np.float64)
-        points[name] = np.asarray([getattr(p, name) for p in state.points], dtype=dtype)
-    points["step"] = np.asarray(progress.point_steps, dtype=np.int32)
+        points[name] = np.asarray([getattr(p, name) for p in state.data.points], dtype=dtype)
+    points["step"] = np.asarray(state.step_of_points, dtype=np.int32)
+    decisions = state.decisions
     steps = {}
     for name, (units, _) in STEP_COLUMNS.items():
         dtype = bool if units == "bool" else (np.int32 if name in ("step", "shots") else np.float64)
-        steps[name] = np.asarray([d[name] for d in decisions], dtype=dtype)
-    names = sorted({k for d in decisions for k in d["hyperparameters"]})
+        steps[name] = np.asarray([getattr(d, name) for d in decisions], dtype=dtype)
+    names = sorted({k for d in decisions for k in d.hyperparameters})
     steps["hyperparameters"] = {
-        name: np.asarray([d["hyperparameters"].get(name, np.nan) for d in decisions], dtype=np.float64) for name in names
+        name: np.asarray([d.hyperparameters.get(name, np.nan) for d in decisions], dtype=np.float64) for name in names
     }
     shapes = {"acq_map": (g.x.size, g.t.size), "f_mean": (g.x.size,), "f_var": (g.x.size,),
               "noise_mean": (g.t.size,), "noise_var": (g.t.size,)}
     for name, shape in shapes.items():
-        steps[name] = np.stack([d.arrays[name] for d in progress.decisions]) if decisions else np.zeros((0, *shape))
+        steps[name] = np.stack([getattr(d, name) for d in decisions]) if decisions else np.zeros((0, *shape))
+    steps["acq_map"] = steps["acq_map"].astype(np.float32)
     summary = None
-    if progress.summary is not None:
-        summary = {k: progress.summary.arrays[k] for k in ("f_mean", "f_var", "noise_fine")}
-        summary |= {"t_opt": float(progress.summary.fields["t_opt"]),
-                    "hyperparameters": dict(progress.summary.fields["hyperparameters"])}
+    if state.summary is not None:
+        s = state.summary
+        summary = {"f_mean": s.f_mean, "f_var": s.f_var, "noise_fine": s.noise_fine, "t_opt": float(s.t_opt),
+                   "hyperparameters": dict(s.hyperparameters)}
     return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": points, "steps": steps,
-            "shots": _shot_columns(progress.shot_rows), "summary": summary}
+            "shots": shot_columns(state), "summary": summary}
 
 
-def _fill(f: h5py.File, progress: Progress) -> None:
-    config = progress.config
+def _fill(f: h5py.File, state: EngineState) -> None:
+    config = state.config
     f.attrs.update(
         schema=SCHEMA,
         schema_version=SCHEMA_VERSION,
         name=config.name,
-        seed=progress.seed,
+        seed=state.seed,
         policy=config.acquisition.policy,
         instrument=config.instrument.kind,
-        status=progress.status,
-        status_reason=progress.reason,
-        created_utc=progress.created_utc,
-        converged_step=-1 if progress.state.converged_step is None else progress.state.converged_step,
-        n_points=len(progress.state.points),
-        n_steps=len(progress.decisions),
-        n_shots=len(progress.shot_rows),
-        n_failed_attempts=len(progress.failures),
+        status=state.status.value,
+        status_reason=state.reason,
+        created_utc=state.created_utc,
+        converged_step=-1 if state.data.converged_step is None else state.data.converged_step,
+        n_points=len(state.points),
+        n_steps=len(state.decisions),
+        n_shots=state.n_shots,
+        n_failed_attempts=len(state.failures),
         config_json=json.dumps(config.model_dump(mode="json")),
-        versions_json=json.dumps(progress.versions),
+        versions_json=json.dumps(state.versions),
     )
-    tables = campaign_tables(progress)
+    tables = campaign_tables(state)
     grid = f.create_group("grid")
     _put(grid, "x", tables["grid"]["x"], "x units", "candidate x grid")
     _put(grid, "t", tables["grid"]["t"], "s", "candidate t grid")
     _put(grid, "t_fine", tables["grid"]["t_fine"], "s", "t grid of the predicted optimal t")
 
-    _fill_shots(f, progress, tables["shots"])
-    _fill_failures(f, progress)
+    _fill_shots(f, state, tables["shots"])
+    _fill_failures(f, state)
 
     points = f.create_group("points")
     for name, (units, description) in POINT_COLUMNS.items():
@@ -172,23 +173,36 @@ FIT_UNITS = {
 }
 
 
-def _shot_value(row: dict) -> float:
-    if "reduced" in row:
-        return row["reduced"]
-    return float("nan") if row["value"] is None else float(row["value"])
-
-
-def _shot_columns(rows: list[dict]) -> dict:
-    getters = {
-        "value": _shot_value,
-        "committed": lambda r: "reduced" in r,
-        "ok": lambda r: bool(r.get("ok", False)),
-    }
-    out = {}
-    for name, dtype, _, _ in SHOT_COLUMNS:
-        get = getters.get(name, lambda r, n=name: r[n])
-        out[name] = np.asarray([get(r) for r in rows], dtype=dtype)
+def shot_columns(state: EngineState) -> dict:
+    """Every shot as columns (SHOT_COLUMNS, "reason", "note" and the FIT_UNITS columns): those
+    of committed points with their reduced values, then the shots of the point under way."""
+    cols: dict[str, list] = {name: [] for name, *_ in SHOT_COLUMNS}
+    cols |= {"reason": [], "note": []} | {name: [] for name in FIT_UNITS}
+    for entry in state.points:
+        for shot, value in zip(entry.shots, entry.committed.values):
+            _add_shot(cols, shot, value)
+    for shot in state.taken:
+        _add_shot(cols, shot, None)
+    out = {name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS}
+    out["reason"], out["note"] = cols["reason"], cols["note"]
+    out["fit"] = {name: np.asarray(cols[name], dtype=np.float64) for name in FIT_UNITS}
     return out
+
+
+def _add_shot(cols: dict, shot, value) -> None:
+    raw = shot.reading.value
+    cols["point"].append(shot.point)
+    cols["shot"].append(shot.shot)
+    cols["x"].append(shot.x[0])
+    cols["t"].append(shot.t)
+    cols["value"].append(value.value if value is not None else (np.nan if raw is None else raw))
+    cols["committed"].append(value is not None)
+    cols["ok"].append(value is not None and value.ok)
+    cols["reason"].append(value.reason if value is not None else "")
+    fit = value.fit if value is not None else None
+    cols["note"].append(fit.reason if fit is not None else "")
+    for name in FIT_UNITS:
+        cols[name].append(getattr(fit, name) if fit is not None else np.nan)
 
 
 FAILURE_COLUMNS = (
@@ -199,35 +213,37 @@ FAILURE_COLUMNS = (
 )
 
 
-def _fill_failures(f: h5py.File, progress: Progress) -> None:
+def _fill_failures(f: h5py.File, state: EngineState) -> None:
     group = f.create_group("failures")
     group.attrs["description"] = "failed attempts at shots (instrument errors, timeouts); each was tried again"
-    rows = progress.failures
+    rows = state.failures
     for name, dtype, units, description in FAILURE_COLUMNS:
-        _put(group, name, np.asarray([r[name] for r in rows], dtype=dtype), units, description)
+        _put(group, name, np.asarray([r.x[0] if name == "x" else getattr(r, name) for r in rows], dtype=dtype),
+             units, description)
     for name, description in (("kind", "timeout | instrument error"), ("reason", "the error message")):
-        _put_text(group, name, [r[name] for r in rows], description)
+        _put_text(group, name, [getattr(r, name) for r in rows], description)
 
 
-def _fill_shots(f: h5py.File, progress: Progress, columns: dict) -> None:
+def _fill_shots(f: h5py.File, state: EngineState, columns: dict) -> None:
     shots = f.create_group("shots")
-    rows = progress.shot_rows
     for name, _, units, description in SHOT_COLUMNS:
         _put(shots, name, columns[name], units, description)
-    _put_text(shots, "reason", [r.get("reason", "") for r in rows], "why the shot was rejected (empty if ok)")
-    if any("amplitude" in r for r in rows):
+    _put_text(shots, "reason", columns["reason"], "why the shot was rejected (empty if ok)")
+    if np.any(np.isfinite(columns["fit"]["amplitude"])):
         fit = shots.create_group("fit")
         for name, (units, description) in FIT_UNITS.items():
-            _put(fit, name, np.asarray([r.get(name, np.nan) for r in rows], dtype=np.float64), units, description)
-        _put_text(fit, "note", [r.get("fit_reason", "") for r in rows],
+            _put(fit, name, columns["fit"][name], units, description)
+        _put_text(fit, "note", columns["note"],
                   "how the fit went (empty: free fit; else why the nominal resonance was used or it failed)")
-    spectra = {i: rs for i, rs in progress.shots.items() if rs and rs[0].spectrum is not None}
+    spectra = {e.committed.index: e.shots for e in state.points if e.shots and e.shots[0].reading.spectrum is not None}
+    if state.taken and state.taken[0].reading.spectrum is not None:
+        spectra[len(state.points)] = state.taken
     if spectra:
         group = f.create_group("spectra")
         group.attrs["description"] = "raw resonance sweeps per point: (shot, row, sample); rows frequency, amplitude, phase"
         group.attrs["rows"] = "frequency_hz, amplitude_pm, phase_deg"
-        for i, readings in sorted(spectra.items()):
-            data = np.stack([r.spectrum for r in readings])
+        for i, shots_of in sorted(spectra.items()):
+            data = np.stack([s.reading.spectrum for s in shots_of])
             ds = group.create_dataset(f"point_{i:04d}", data=data, chunks=(1, *data.shape[1:]), compression="gzip", compression_opts=1)
             ds.attrs["units"] = "Hz, pm, deg"
 
@@ -241,12 +257,12 @@ def read_spectra(path: Path, point: int) -> np.ndarray:
         return f[name][()]
 
 
-def write_snapshot(path: Path, progress: Progress) -> None:
-    """Atomically replace ``path`` with a fresh HDF5 snapshot of ``progress``."""
+def write_snapshot(path: Path, state: EngineState) -> None:
+    """Atomically replace ``path`` with a fresh HDF5 snapshot of ``state``."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     with h5py.File(tmp, "w", libver=LIBVER) as f:
-        _fill(f, progress)
+        _fill(f, state)
         f.flush()
         crash_point("hdf5")
     fd = os.open(tmp, os.O_RDONLY)

@@ -8,15 +8,17 @@ measurement exactly once.
 
 from __future__ import annotations
 
-import datetime as dt
 import importlib.metadata
 import platform
 from pathlib import Path
+from typing import Sequence
 
-from noisebo.config import CampaignConfig
-from noisebo.storage import journal, records
-from noisebo.storage.hdf5 import CampaignFileError, stray_temporaries, write_snapshot
-from noisebo.storage.journal import JournalError, JournalWriter
+from noisebo import engine
+from noisebo.engine import EngineState
+from noisebo.events import Event, PointCommitted, Started, StatusChanged, Summarised
+from storage import journal, records
+from storage.hdf5 import CampaignFileError, stray_temporaries, write_snapshot
+from storage.journal import JournalError, JournalWriter
 
 PACKAGES = ("noisebo", "numpy", "scipy", "jax", "jaxlib", "numpyro", "h5py", "prefect", "pydantic", "rerun-sdk")
 
@@ -35,33 +37,36 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-class Recorder:
-    """Appends campaign events to the journal and refreshes the HDF5 snapshot."""
+SNAPSHOT_AFTER = (Started, PointCommitted, Summarised, StatusChanged)
 
-    def __init__(self, h5_path: Path, writer: JournalWriter, progress: records.Progress):
+
+class Recorder:
+    """Commits campaign events: each is journaled (written and fsynced) before it is applied,
+    and the HDF5 snapshot is refreshed after every committed point and status change."""
+
+    def __init__(self, h5_path: Path, writer: JournalWriter, state: EngineState):
         self.h5_path = Path(h5_path)
         self._writer = writer
-        self.progress = progress
-        self._budget_start = progress.failure_counts()
+        self.state = state
 
     @classmethod
-    def create(cls, h5_path: Path, config: CampaignConfig, seed: int) -> Recorder:
+    def create(cls, h5_path: Path, started: Started) -> Recorder:
         h5_path = Path(h5_path)
         if h5_path.exists():
             raise CampaignFileError(f"{h5_path} already exists; continue it with `noisebo resume {h5_path}`")
         h5_path.parent.mkdir(parents=True, exist_ok=True)
-        created = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
-        first = records.campaign_record(config, seed, package_versions(), created)
         try:
-            writer = JournalWriter.create(journal_path(h5_path), first)
+            writer = JournalWriter.create(journal_path(h5_path), records.encode(started))
         except JournalError as error:
             raise CampaignFileError(str(error)) from None
-        recorder = cls(h5_path, writer, records.replay([first]))
+        recorder = cls(h5_path, writer, engine.start(started))
         recorder.snapshot()
         return recorder
 
     @classmethod
     def resume(cls, h5_path: Path) -> Recorder:
+        """The campaign of ``h5_path`` from its journal, its status set back to running (unless
+        it completed): a torn tail is cut off and stray half-written snapshots removed."""
         h5_path = Path(h5_path)
         jpath = journal_path(h5_path)
         if not jpath.exists():
@@ -73,43 +78,34 @@ class Recorder:
             raise CampaignFileError(str(error)) from None
         try:
             found, valid_length = journal.read(jpath)
-            progress = records.replay(found)
+            state = records.rebuild(found)
         except (records.CorruptJournal, OSError) as error:
             writer.close()
             raise CampaignFileError(f"cannot resume {h5_path}: {error}") from None
         writer.truncate_to(valid_length)
         for tmp in stray_temporaries(h5_path):
             tmp.unlink()
-        recorder = cls(h5_path, writer, progress)
-        if progress.status != "completed":
-            recorder.append(records.status_record("running", "resumed"))
-        recorder.snapshot()
+        recorder = cls(h5_path, writer, state)
+        events = engine.resumed(state)
+        recorder.commit(state, events)
+        if not events:
+            recorder.snapshot()
         return recorder
 
-    def append(self, record: journal.Record) -> None:
-        self._writer.append(record)
-        self.progress = records.replay_one(self.progress, record)
-
-    def taken(self, point: int) -> list:
-        """Readings of ``point`` already in the journal."""
-        return list(self.progress.shots.get(point, []))
-
-    def add(self, point: int, shot: int, x: float, t: float, reading) -> None:
-        """Journal one shot (its raw reading)."""
-        self.append(records.shot_record(point, shot, x, t, reading))
-
-    def failed(self, point: int, shot: int, x: float, t: float, error: BaseException) -> None:
-        """Journal one failed attempt at a shot."""
-        self.append(records.failure_record(point, shot, x, t, error))
-
-    def failure_counts(self) -> tuple[int, int]:
-        """(failed, attempted) shots since this recorder opened the campaign: a resumed campaign
-        gets a fresh failure budget (its file keeps every earlier failure)."""
-        failed, attempts = self.progress.failure_counts()
-        return failed - self._budget_start[0], attempts - self._budget_start[1]
+    def commit(self, state: EngineState, events: Sequence[Event]) -> EngineState:
+        """Journal and apply ``events`` to ``state`` in order; returns the new state."""
+        snapshot = False
+        for event in events:
+            self._writer.append(records.encode(event))
+            state = engine.apply(state, event)
+            snapshot = snapshot or isinstance(event, SNAPSHOT_AFTER)
+        self.state = state
+        if snapshot:
+            self.snapshot()
+        return state
 
     def snapshot(self) -> None:
-        write_snapshot(self.h5_path, self.progress)
+        write_snapshot(self.h5_path, self.state)
 
     def close(self) -> None:
         self._writer.close()

@@ -6,8 +6,8 @@ import shutil
 import h5py
 import pytest
 
-from noisebo.cli import main, parse_seeds
-from noisebo.storage.recorder import Recorder
+from cli.main import main, parse_seeds
+from flows.campaign import start_campaign
 
 
 def snapshot(folder):
@@ -159,7 +159,7 @@ def test_serve_refuses_bad_input_before_registering_anything(argv, env, message,
 
 def test_a_file_held_by_a_running_campaign_is_not_resumed_but_can_be_read(tiny_config, tmp_path, capsys):
     path = tmp_path / "held.h5"
-    with Recorder.create(path, tiny_config, 1):
+    with start_campaign(path, tiny_config, 1):
         before = snapshot(tmp_path)
         assert main(["resume", str(path)]) == 2
         err = capsys.readouterr().err.strip()

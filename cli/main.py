@@ -13,12 +13,12 @@ import os
 import sys
 from pathlib import Path
 
-from noisebo import runtime
+from flows import runtime
 from noisebo.config import ConfigError, load_config
 from noisebo.failures import FailureBudgetExceeded
-from noisebo.storage.hdf5 import CampaignFileError, check_present
-from noisebo.storage.isolated import call_isolated
-from noisebo.storage.journal import JournalError, JournalWriter
+from storage.hdf5 import CampaignFileError, check_present
+from storage.isolated import call_isolated
+from storage.journal import JournalError, JournalWriter
 
 EXIT_USAGE = 2
 EXIT_FAILED = 3
@@ -160,7 +160,7 @@ def _warn(line: str) -> None:
 
 
 def _replay(args) -> int:
-    from noisebo.view.recording import replay
+    from view.recording import replay
 
     path = check_present(Path(args.file))
     out = call_isolated(replay, path, args.out, _warn, what=str(path))
@@ -169,7 +169,7 @@ def _replay(args) -> int:
 
 
 def _report(args) -> int:
-    from noisebo.view.report import report
+    from view.report import report
 
     target = Path(args.target)
     if not target.is_dir():
@@ -208,7 +208,7 @@ def _sweep(args) -> int:
 
 def inspect_summary(path: Path) -> dict:
     """The JSON view of a campaign file (see ``noisebo inspect --json``)."""
-    from noisebo.storage.hdf5 import read_campaign
+    from storage.hdf5 import read_campaign
 
     data = read_campaign(path)
     attrs, points, steps = data["attrs"], data["points"], data["steps"]

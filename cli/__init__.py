@@ -1,0 +1,1 @@
+"""The ``noisebo`` command line: an adapter over the flows, storage and views."""

@@ -1,0 +1,120 @@
+"""The one campaign loop: ask the engine, measure a shot, tell it, commit the events.
+
+Every way of running a campaign goes through ``drive``; what differs is passed in: where events
+are committed (memory, or a journal and an HDF5 file), how a shot is measured and a decision made
+(plain calls, or Prefect tasks around them), and whether someone asked to stop.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+from noisebo import engine
+from noisebo.config import CampaignConfig
+from noisebo.decision import Decision
+from noisebo.engine import EngineState
+from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
+from noisebo.failures import InstrumentError, InstrumentTimeout
+from noisebo.keys import MEASURE, numpy_rng
+from noisebo.state import CampaignState
+
+Commit = Callable[[EngineState, Sequence[Event]], EngineState]
+Measure = Callable[[object, int, Request], Outcome]
+Decide = Callable[[EngineState], Sequence[Event]]
+
+
+def take_shot(instrument, seed: int, request: Request) -> Outcome:
+    """One attempt at the next wanted shot of ``request``, with the random stream keyed by
+    (seed, point, shot): a retried shot gets the reading it would have had. An
+    ``InstrumentError`` becomes a ``ShotError`` (the engine asks for the shot again)."""
+    rng = numpy_rng(seed, MEASURE, request.point, request.taken)
+    try:
+        return instrument.measure(request.x[0], request.t, rng)
+    except InstrumentError as error:
+        kind = "timeout" if isinstance(error, InstrumentTimeout) else "instrument error"
+        return ShotError(kind, str(error))
+
+
+def in_memory(state: EngineState, events: Sequence[Event]) -> EngineState:
+    """Commit events by applying them (no journal)."""
+    for event in events:
+        state = engine.apply(state, event)
+    return state
+
+
+def drive(
+    state: EngineState,
+    instrument,
+    commit: Commit = in_memory,
+    measure: Measure = take_shot,
+    decide: Decide = engine.advance,
+    stop_requested: Callable[[], str | None] = lambda: None,
+) -> EngineState:
+    """Step the campaign from ``state`` until the engine says it is done, and return the final
+    state. After each committed point, ``stop_requested()`` may name a reason to stop: the
+    campaign is then committed as aborted with that reason."""
+    while True:
+        step = engine.ask(state)
+        if isinstance(step, Done):
+            return state
+        if isinstance(step, DecisionDue):
+            state = commit(state, decide(state))
+            continue
+        outcome = measure(instrument, state.seed, step)
+        before = len(state.points)
+        state = commit(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
+        if len(state.points) > before:
+            reason = stop_requested()
+            if reason is not None:
+                state = commit(state, engine.stop(state, Status.ABORTED, reason))
+
+
+@dataclass(frozen=True)
+class CampaignRun:
+    """A campaign run in this process, with no files: its final engine state."""
+
+    final: EngineState
+
+    @property
+    def state(self) -> CampaignState:
+        return self.final.data
+
+    @property
+    def decisions(self) -> tuple[Decision, ...]:
+        return self.final.decisions
+
+    @property
+    def latencies_s(self) -> tuple[float, ...]:
+        return tuple(d.latency_s for d in self.final.decisions)
+
+    @property
+    def summary(self) -> Summary | None:
+        return self.final.summary
+
+    @property
+    def total_measurement_time(self) -> float:
+        """Sum over all shots of t (s), seed points included."""
+        return float(sum(s.t for p in self.final.points for s in p.shots))
+
+
+def now_utc() -> str:
+    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def run_campaign(
+    config: CampaignConfig, instrument, seed: int, driver: DriverInfo | None = None,
+    on_commit: Callable[[EngineState, Sequence[Event]], None] | None = None,
+) -> CampaignRun:
+    """A whole campaign in this process, in memory (benchmarks, tests). ``on_commit`` sees the
+    state before and the events of every commit."""
+    info = driver or DriverInfo(getattr(instrument, "name", type(instrument).__name__), "", {})
+    state = engine.start(engine.new_campaign(config, seed, info, {}, now_utc()))
+
+    def commit(state: EngineState, events: Sequence[Event]) -> EngineState:
+        if on_commit is not None:
+            on_commit(state, events)
+        return in_memory(state, events)
+
+    return CampaignRun(drive(state, instrument, commit))

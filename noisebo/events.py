@@ -1,0 +1,175 @@
+"""What a campaign is made of: typed events (the journal's records, from the core to the file),
+and what the engine asks for next.
+
+A campaign is the fold of its events (``noisebo.engine.apply``), in the order written:
+
+    Started        config, seed, the driver, versions, start time (first, once)
+    Decided        one BO step's proposal and model outputs (before the point's shots)
+    ShotTaken      one shot's raw reading
+    ShotFailed     a failed attempt at a shot (instrument error, timeout); the shot is tried again
+    MoreShots      a point left with too few usable shots wants more
+    PointCommitted a point reduced from its shots
+    Summarised     the final models after the last point
+    StatusChanged  running / completed / aborted / failed, with a reason
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Union
+
+import numpy as np
+
+from noisebo.config import CampaignConfig
+from noisebo.decision import Decision
+from noisebo.reduction import Reading, ShotValue
+from noisebo.state import Point
+
+
+class Status(str, Enum):
+    """A campaign's status; only these four exist."""
+
+    RUNNING = "running"
+    COMPLETED = "completed"
+    ABORTED = "aborted"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class DriverInfo:
+    """The instrument driver a campaign was run with: its entry-point name, version and the
+    settings it was built from (JSON-able)."""
+
+    name: str
+    version: str
+    settings: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Started:
+    config: CampaignConfig
+    seed: int
+    driver: DriverInfo
+    versions: dict
+    created_utc: str
+
+
+@dataclass(frozen=True)
+class ShotTaken:
+    """Shot ``shot`` of point ``point`` at (x, t): x a coordinate vector (d,), t in s."""
+
+    point: int
+    shot: int
+    x: tuple[float, ...]
+    t: float
+    reading: Reading
+
+
+@dataclass(frozen=True)
+class ShotFailed:
+    """A failed attempt at shot ``shot`` of point ``point``; ``kind`` is "timeout" or
+    "instrument error"."""
+
+    point: int
+    shot: int
+    x: tuple[float, ...]
+    t: float
+    kind: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class MoreShots:
+    """Point ``point`` has ``rejected`` unusable shots and now wants ``wanted`` in all."""
+
+    point: int
+    wanted: int
+    rejected: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class PointCommitted:
+    """Point ``index`` (BO step ``step``, -1 for a seed point) with each shot's value."""
+
+    index: int
+    step: int
+    point: Point
+    values: tuple[ShotValue, ...]
+
+
+@dataclass(frozen=True)
+class Decided:
+    decision: Decision
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Final models after the last measurement: f mean and variance on the x grid (n_x,), the
+    noise sd on the fine t grid (N_FINE,), the final predicted optimal t (s) and the
+    hyperparameters."""
+
+    f_mean: np.ndarray
+    f_var: np.ndarray
+    noise_fine: np.ndarray
+    t_opt: float
+    hyperparameters: dict
+
+
+@dataclass(frozen=True)
+class Summarised:
+    summary: Summary
+
+
+@dataclass(frozen=True)
+class StatusChanged:
+    status: Status
+    reason: str = ""
+
+
+Event = Union[Started, ShotTaken, ShotFailed, MoreShots, PointCommitted, Decided, Summarised, StatusChanged]
+
+
+@dataclass(frozen=True)
+class ShotError:
+    """A shot attempt that failed in the instrument; the engine asks for the same shot again."""
+
+    kind: str
+    reason: str
+
+
+Outcome = Union[Reading, ShotError]
+
+
+@dataclass(frozen=True)
+class Request:
+    """Measure point ``point`` (BO step ``step``; -1: a seed point) at x (d,), t (s): shots
+    ``taken`` .. ``wanted - 1`` are still wanted. ``model_noise``: the noise model's single-shot
+    sd that the point will use (None: its noise is measured from its shots)."""
+
+    point: int
+    step: int
+    x: tuple[float, ...]
+    t: float
+    wanted: int
+    taken: int
+    model_noise: float | None
+
+    @property
+    def shots(self) -> range:
+        return range(self.taken, self.wanted)
+
+
+@dataclass(frozen=True)
+class DecisionDue:
+    """Nothing to measure until the engine decides BO step ``step`` (``final``: the summary)."""
+
+    step: int
+    final: bool = False
+
+
+@dataclass(frozen=True)
+class Done:
+    status: Status
+    reason: str = ""
