@@ -39,12 +39,12 @@ BASELINES = {"fixed 2 s": 2.0, "fixed 0.1 s": 0.1}
 def fit_speed(instrument, config, t: float, repeats: int = 60) -> float:
     """SHO fits per second of t-second sweeps (median over three timed batches)."""
     rng = np.random.default_rng(0)
-    readings = [instrument.measure(0.3, t, rng) for _ in range(repeats)]
+    readings = [instrument.simulate(np.array([0.3]), t, rng) for _ in range(repeats)]
     rates = []
     for _ in range(3):
         started = time.perf_counter()
         for r in readings:
-            shot_value(r, config.instrument)
+            shot_value(r, config.reduction)
         rates.append(repeats / (time.perf_counter() - started))
     return float(np.median(rates))
 
@@ -56,7 +56,7 @@ def law_check(instrument, config, ts=(0.1, 0.5, 2.0), positions=16, repeats=20) 
     for t in ts:
         var = []
         for x in rng.uniform(config.space.x_min, config.space.x_max, positions):
-            values = [shot_value(instrument.measure(x, t, rng), config.instrument).value for _ in range(repeats)]
+            values = [shot_value(instrument.simulate(np.array([x]), t, rng), config.reduction).value for _ in range(repeats)]
             var.append(np.nanvar(values, ddof=1))
         rows.append({"t": t, "empirical_sd": float(np.sqrt(np.mean(var))), "law_sd": float(instrument.noise_law(np.array([t]))[0])})
     return rows
@@ -104,7 +104,7 @@ def main(argv=None) -> int:
     for name, row in rows.items():
         rm, tm = row["rmse_f"], row["measurement_time_s"]
         print(f"| {name} | {rm[0]:.2f} [{rm[1]:.2f}, {rm[2]:.2f}] | {tm[0]:.0f} [{tm[1]:.0f}, {tm[2]:.0f}] |")
-    speeds = {n: fit_speed(instrument, base, n / base.instrument.sample_rate_hz) for n in (1000, 20000)}
+    speeds = {n: fit_speed(instrument, base, n / instrument.config.sample_rate_hz) for n in (1000, 20000)}
     print("\nSHO fits per second: " + ", ".join(f"{n} samples {v:.0f}/s" for n, v in speeds.items()))
     check = law_check(instrument, base)
     print("noise law vs fitted scatter (pooled over 16 random positions, 20 sweeps each): "

@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 
 from flows import runtime
-from noisebo.config import ConfigError, load_config
-from noisebo.failures import FailureBudgetExceeded
+from noisebo.config import CampaignConfig, ConfigError, load_config
+from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
 from storage.hdf5 import CampaignFileError, check_present
 from storage.isolated import call_isolated
 from storage.journal import JournalError, JournalWriter
@@ -58,8 +58,15 @@ def flow_settings():
     return settings()
 
 
+def _validated(path) -> CampaignConfig:
+    """A config file loaded, its instrument settings checked by the driver it names."""
+    from instruments.registry import validated
+
+    return validated(load_config(path), str(path))
+
+
 def _run(args) -> int:
-    config = load_config(args.config)
+    config = _validated(args.config)
     if args.policy:
         config = config.with_overrides(acquisition={"policy": args.policy})
     campaign_flows, _ = _prefect()
@@ -71,8 +78,18 @@ def _run(args) -> int:
     with flow_settings(), _abortable(path):
         path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd,
                                        live=args.live)
+    print(outcome_line(Path(path)))
     print(path)
     return 0
+
+
+def outcome_line(path: Path) -> str:
+    """One line of what a finished campaign found, from its file."""
+    summary = inspect_summary(path)  # a file this process has just written: no need to isolate
+    t_opt = summary["final_t_opt"]
+    return (f"{summary['status']}: {len(summary['points'])} points, {summary['n_shots']} shots, "
+            f"{summary['measurement_time_s']:.1f} s of instrument time; final predicted optimal t "
+            + ("none (no summary)" if t_opt is None else f"{t_opt:.4g} s"))
 
 
 def _resume(args) -> int:
@@ -83,12 +100,28 @@ def _resume(args) -> int:
         JournalWriter.open(path.with_suffix(".journal")).close()
     except JournalError as error:
         raise CampaignFileError(f"cannot resume {path}: {error}") from None
+    if _journal_status(path) == "completed":
+        print(f"{path} is already complete: nothing to resume", file=sys.stderr)
+        print(path)
+        return 0
     campaign_flows, _ = _prefect()
+    campaign_flows.driver_of(path)  # the driver it was made with is installed, or one line says which is missing
     print(f"resuming {path}", flush=True)
     with flow_settings(), _abortable(path):
         done = campaign_flows.resume(str(path), record_rrd=not args.no_rrd, live=args.live)
+    print(outcome_line(Path(done)))
     print(done)
     return 0
+
+
+def _journal_status(path: Path) -> str:
+    """The status the campaign's journal (its source of truth) ends with."""
+    from storage import journal, records
+
+    try:
+        return records.rebuild(journal.read(path.with_suffix(".journal"))[0]).status.value
+    except (records.CorruptJournal, OSError) as error:
+        raise CampaignFileError(f"cannot resume {path}: {error}") from None
 
 
 EXIT_SIGNAL = {"SIGINT": 130, "SIGTERM": 143}
@@ -130,7 +163,7 @@ def _serve(args) -> int:
     if args.interval is not None and args.interval <= 0:
         raise UsageError("--interval must be a positive number of seconds")
     for path in args.config:
-        load_config(path)  # every config validated before anything is registered
+        _validated(path)  # every config validated before anything is registered
     runtime.configure()
     from flows.deployments import deployments_for, serve_all
 
@@ -145,13 +178,30 @@ def _serve(args) -> int:
 def _deploy(args) -> int:
     _require_server("deploy needs a Prefect server")
     for path in args.config:
-        load_config(path)
+        _validated(path)
     runtime.configure()
     from flows.workers import deploy_campaign
 
     for path in args.config:
         name = deploy_campaign(path, args.pool, args.out)
         print(f"deployed {name} to work pool {args.pool!r}; start workers with: prefect worker start --pool {args.pool}")
+    return 0
+
+
+def _instruments(args) -> int:
+    from instruments.registry import DriverBroken, driver_class, installed
+
+    for name, found in installed().items():
+        try:
+            cls = driver_class(name)
+            doc = (cls.__doc__ or "").strip().splitlines()
+            version = cls.version
+            fields = ", ".join(cls.Settings.model_fields)
+            line = f"{name:<16} {version:<10} {found.distribution} {found.distribution_version}: {doc[0] if doc else ''}"
+            print(line.rstrip())
+            print(f"{'':<16} settings: {fields or '(none)'}")
+        except DriverBroken as error:
+            print(f"{name:<16} {'?':<10} {found.distribution} {found.distribution_version}: BROKEN: {error}")
     return 0
 
 
@@ -181,7 +231,7 @@ def _report(args) -> int:
 
 def _sweep(args) -> int:
     seeds = parse_seeds(args.seeds)
-    config = load_config(args.config)
+    config = _validated(args.config)
     policies = ["reward", "double"] if args.policy == "both" else [args.policy]
     if args.workers < 1:
         raise UsageError("--workers must be at least 1")
@@ -234,6 +284,8 @@ def inspect_summary(path: Path) -> dict:
         "status_reason": attrs["status_reason"],
         "seed": int(attrs["seed"]),
         "policy": attrs["policy"],
+        "driver": attrs["driver"],
+        "schema_version": int(attrs["schema_version"]),
         "config": attrs["config"],
         "first_converged_step": None if converged < 0 else converged,
         "final_t_opt": None if data["summary"] is None else data["summary"]["t_opt"],
@@ -250,10 +302,12 @@ def _inspect(args) -> int:
         print(json.dumps(summary, indent=1))
         return 0
     conv = summary["first_converged_step"]
+    driver = summary["driver"]
     print(f"{summary['file']}: {summary['config']['name']} seed {summary['seed']}, policy {summary['policy']}, "
           f"status {summary['status']}{' (' + summary['status_reason'] + ')' if summary['status_reason'] else ''}")
+    print(f"  instrument {driver['name']} {driver['version']}")
     print(f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
-          f"noise model converged at step {conv if conv is None else conv + 1}; "
+          f"noise model {'not converged' if conv is None else f'converged at step {conv + 1}'}; "
           f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s")
     print(f"  {'step':>5} {'x':>9} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
     for row in summary["points"]:
@@ -335,6 +389,9 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--dask-address", default=None, help="an existing Dask scheduler, e.g. tcp://host:8786")
     sweep.set_defaults(handler=_sweep)
 
+    instruments = commands.add_parser("instruments", help="list the installed instrument drivers")
+    instruments.set_defaults(handler=_instruments)
+
     inspect = commands.add_parser("inspect", help="summarise a campaign file")
     inspect.add_argument("file")
     inspect.add_argument("--json", action="store_true", help="machine-readable output")
@@ -354,6 +411,9 @@ def main(argv: list[str] | None = None) -> int:
         return stopped.code
     except FailureBudgetExceeded as error:
         print(f"noisebo: stopped: {error}; the file records status failed", file=sys.stderr)
+        return EXIT_FAILED
+    except InstrumentUnavailable as error:
+        print(f"noisebo: error: {error}; nothing was measured", file=sys.stderr)
         return EXIT_FAILED
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -14,15 +14,14 @@ from typing import Callable, Literal, Sequence
 from prefect import flow
 from prefect.utilities.annotations import quote
 
-import noisebo
 from flows import abort
-from instruments import build
+from instruments import build, registry
 from noisebo.config import CampaignConfig, load_config
 from noisebo.driver import drive, now_utc
 from noisebo.engine import EngineState, new_campaign
-from noisebo.events import Decided, DriverInfo, Event, MoreShots, PointCommitted, Status
-from noisebo.failures import FailureBudgetExceeded
-from storage.recorder import Recorder, package_versions
+from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status
+from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
+from storage.recorder import Recorder, package_versions, read_started
 from tasks import campaign as ops
 
 Progress = Callable[[str], None]
@@ -35,8 +34,10 @@ def campaign_path(config: CampaignConfig, seed: int, out_dir: str | Path) -> Pat
 
 
 def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> CampaignConfig:
-    """A validated config from a YAML path or a config object, with an optional policy override."""
+    """A validated config (its instrument settings checked by the driver) from a YAML path or a
+    config object, with an optional policy override."""
     cfg = config if isinstance(config, CampaignConfig) else load_config(config)
+    cfg = registry.validated(cfg, str(config) if not isinstance(config, CampaignConfig) else "config")
     return cfg.with_overrides(acquisition={"policy": policy}) if policy else cfg
 
 
@@ -93,24 +94,46 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
     return recorder.h5_path
 
 
-def driver_info(config: CampaignConfig) -> DriverInfo:
-    """The driver a config names, as the campaign file records it."""
-    return DriverInfo(config.instrument.kind, noisebo.__version__, config.instrument.model_dump(mode="json"))
+@contextmanager
+def opened(instrument):
+    """The instrument opened (its ``open()``, where it has one) for the campaign and closed after."""
+    try:
+        getattr(instrument, "open", lambda: None)()
+    except Exception as error:  # noqa: BLE001 - any driver's failure to connect
+        raise InstrumentUnavailable(f"instrument {getattr(instrument, 'name', '?')!r} could not be opened: "
+                                    f"{type(error).__name__}: {error}") from error
+    try:
+        yield instrument
+    finally:
+        getattr(instrument, "close", lambda: None)()
 
 
 def start_campaign(path: Path, config: CampaignConfig, seed: int) -> Recorder:
-    """A new campaign's recorder: its first event journaled, its file written."""
-    return Recorder.create(path, new_campaign(config, seed, driver_info(config), package_versions(), now_utc()))
+    """A new campaign's recorder: its first event (config, seed, the driver's name, version and
+    settings) journaled and its file written."""
+    started = new_campaign(config, seed, registry.driver_info(config.instrument), package_versions(), now_utc())
+    return Recorder.create(path, started)
+
+
+def driver_of(path: Path):
+    """The driver a campaign file was made with, built from the settings its journal recorded;
+    ``DriverNotInstalled`` says which driver and version the file needs."""
+    started = read_started(path)
+    try:
+        return build(started.config.instrument)
+    except registry.DriverNotInstalled as error:
+        d = started.driver
+        raise registry.DriverNotInstalled(f"{path} was made with the instrument driver {d.name!r} {d.version}, which "
+                                          f"is not installed here: {error}") from None
 
 
 @contextmanager
-def _viewed(recorder: Recorder, record_rrd: bool, live: str | None, warn: Progress):
-    """(instrument, observer) for a campaign: a Rerun recording beside its file and/or a live
-    viewer, or no observer at all when neither is asked for."""
+def _viewed(recorder: Recorder, instrument, record_rrd: bool, live: str | None, warn: Progress):
+    """The campaign's observer: a Rerun recording beside its file and/or a live viewer, or none
+    when neither is asked for."""
     config = recorder.state.config
-    instrument = build(config.instrument)
     if not record_rrd and live is None:
-        yield instrument, lambda progress: None
+        yield lambda state: None
         return
     from view.recording import CampaignRecording, instrument_curves, rrd_path_for
     from view.rerun_view import RerunView
@@ -120,7 +143,7 @@ def _viewed(recorder: Recorder, record_rrd: bool, live: str | None, warn: Progre
     view = RerunView(config, recorder.h5_path.stem, rrd=rrd, live=live, truth=truth, noise_law=law, warn=warn)
     recording = CampaignRecording(view, config)
     try:
-        yield instrument, recording.update
+        yield recording.update
     finally:
         recording.close()
 
@@ -136,20 +159,23 @@ def campaign(
     live: str | None = None,
 ) -> str:
     """Run one campaign and return the path of its HDF5 file. ``record_rrd``: also write a Rerun
-    recording beside it; ``live``: stream to a Rerun viewer ("spawn" or a gRPC url)."""
+    recording beside it; ``live``: stream to a Rerun viewer ("spawn" or a gRPC url). The
+    instrument is opened before the campaign's file is created."""
     cfg = resolve_config(config, policy)
-    with start_campaign(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
-        with _viewed(recorder, record_rrd, live, print) as (instrument, observe), abort.reclaimed():
-            return str(run(recorder, print if show_progress else _silent, observe, instrument))
+    with opened(build(cfg.instrument)) as instrument:
+        with start_campaign(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
+            with _viewed(recorder, instrument, record_rrd, live, print) as observe, abort.reclaimed():
+                return str(run(recorder, print if show_progress else _silent, observe, instrument))
 
 
 @flow(name="resume")
 def resume(path: str, show_progress: bool = True, record_rrd: bool = True, live: str | None = None) -> str:
-    """Continue a campaign from its file (after a crash, a kill or an abort); its recording is
-    rebuilt from the journal first, then continues."""
-    with Recorder.resume(Path(path)) as recorder:
-        with _viewed(recorder, record_rrd, live, print) as (instrument, observe), abort.reclaimed():
-            return str(run(recorder, print if show_progress else _silent, observe, instrument))
+    """Continue a campaign from its file (after a crash, a kill or an abort) with the driver it
+    was made with; its recording is rebuilt from the journal first, then continues."""
+    with opened(driver_of(Path(path))) as instrument:
+        with Recorder.resume(Path(path)) as recorder:
+            with _viewed(recorder, instrument, record_rrd, live, print) as observe, abort.reclaimed():
+                return str(run(recorder, print if show_progress else _silent, observe, instrument))
 
 
 def _silent(line: str) -> None:

@@ -1,4 +1,15 @@
-"""The Instrument protocol: what the campaign needs from any driver, simulated or real."""
+"""What the campaign needs from an instrument driver, simulated or real.
+
+Every driver provides ``Instrument``: a name, a version, and ``measure(x, t)`` for one shot at
+the coordinate vector x (d,) with exposure t (s), returning a ``Reading`` (a scalar, or a raw
+spectrum with a named reduction). ``open()`` and ``close()``, where a driver has them, are called
+once around a campaign (connect, home the stage, release the hardware).
+
+What only a simulator can provide is the separate ``Simulator`` capability: a shot drawn from a
+given random stream (so one campaign seed gives one campaign), and the ground truth and noise law
+that benchmarks and figures compare against. A driver is found by name through the entry-point
+group ``noisebo.instruments`` (``instruments.registry``) and built from its own ``Settings``.
+"""
 
 from __future__ import annotations
 
@@ -11,33 +22,35 @@ from noisebo.reduction import Reading  # noqa: F401 - the drivers' return type, 
 
 @runtime_checkable
 class Instrument(Protocol):
-    """A driver measures one shot at (x, t) with randomness only from ``rng``, so a simulated
-    driver is a pure function of (x, t, rng). ``truth`` and ``noise_law`` give the noiseless
-    property and the single-shot noise sd where the driver knows them (simulations), else None."""
-
     name: str
+    version: str
 
-    def measure(self, x: float, t: float, rng: np.random.Generator) -> Reading: ...
-
-    def truth(self, x: np.ndarray) -> np.ndarray | None: ...
-
-    def noise_law(self, t: np.ndarray) -> np.ndarray | None: ...
+    def measure(self, x: np.ndarray, t: float) -> Reading:
+        """One shot at x (d,) with exposure t (s); raise ``noisebo.failures.InstrumentError`` for
+        a failure that a retry may cure."""
 
 
-def build(config) -> Instrument:
-    """The driver for a validated instrument config (dispatch on its ``kind``), inside the
-    fault injector if ``faults`` is set, inside the timeout guard if ``timeout_s`` is."""
-    from instruments.faults import FaultyInstrument
-    from instruments.forrester import ForresterInstrument
-    from instruments.guard import TimeoutGuard
-    from instruments.pfm import PFMInstrument
+@runtime_checkable
+class Simulator(Protocol):
+    def simulate(self, x: np.ndarray, t: float, rng: np.random.Generator) -> Reading:
+        """One shot whose randomness comes only from ``rng``."""
 
-    drivers = {"forrester": ForresterInstrument, "pfm": PFMInstrument}
-    try:
-        driver = drivers[config.kind]
-    except KeyError:
-        raise ValueError(f"unknown instrument kind {config.kind!r}; known: {sorted(drivers)}") from None
-    instrument = driver(config)
-    if config.faults is not None:
-        instrument = FaultyInstrument(instrument, config.faults)
-    return TimeoutGuard(instrument, config.timeout_s) if config.timeout_s is not None else instrument
+    def truth(self, x: np.ndarray) -> np.ndarray:
+        """The noiseless property at positions x (n, d): (n,)."""
+
+    def noise_law(self, t: np.ndarray) -> np.ndarray:
+        """The single-shot noise sd at exposures t (any shape), in value units."""
+
+
+def is_simulator(instrument) -> bool:
+    """Whether the instrument (the fault injector and the timeout guard pass it through) is a
+    simulator."""
+    return isinstance(instrument, Simulator)
+
+
+def build(config):
+    """The driver of a validated instrument config (``noisebo.config.InstrumentConfig``), inside
+    the fault injector if ``faults`` is set, inside the timeout guard if ``timeout_s`` is."""
+    from instruments.registry import build as build_driver
+
+    return build_driver(config)

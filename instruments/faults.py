@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from instruments.base import Instrument, Reading
+from instruments.base import Instrument, Reading, is_simulator
 from noisebo.config import FAULT_KINDS, FaultsConfig
 from noisebo.failures import InstrumentError
 
@@ -23,7 +23,9 @@ class FaultyInstrument:
     """Wraps ``inner``; put the timeout guard around this wrapper so injected hangs are cut off."""
 
     def __init__(self, inner: Instrument, faults: FaultsConfig):
-        self.inner, self.faults, self.name = inner, faults, inner.name
+        self.inner, self.faults, self.name, self.version = inner, faults, inner.name, inner.version
+        if is_simulator(inner):  # a simulator stays one behind the injector
+            self.simulate, self.truth, self.noise_law = self._simulate, inner.truth, inner.noise_law
         self._rng = np.random.default_rng(faults.seed)
         self._lock = threading.Lock()
         self.calls = 0
@@ -42,8 +44,14 @@ class FaultyInstrument:
                     return kind
             return None
 
-    def measure(self, x: float, t: float, rng: np.random.Generator) -> Reading:
-        reading = self.inner.measure(x, t, rng)
+    def measure(self, x: np.ndarray, t: float) -> Reading:
+        return self._faulty(self.inner.measure(x, t), x, t)
+
+    def _simulate(self, x: np.ndarray, t: float, rng: np.random.Generator) -> Reading:
+        return self._faulty(self.inner.simulate(x, t, rng), x, t)
+
+    def _faulty(self, reading: Reading, x: np.ndarray, t: float) -> Reading:
+        x = float(np.asarray(x, dtype=np.float64).ravel()[0])
         kind = self._draw(x, t)
         if kind is None:
             return reading
@@ -58,29 +66,30 @@ class FaultyInstrument:
                 return Reading(bad)
             spectrum = np.array(reading.spectrum, copy=True)
             spectrum[1] = bad
-            return Reading(None, spectrum)
+            return Reading(None, spectrum, reading.reduction)
         if kind == "outlier":
             return self._outlier(reading, x, t, self.ledger[-1]["sign"])
-        return Reading(None, np.asarray(reading.spectrum)[:, :3])  # corrupt: a 3-sample stub
+        return Reading(None, np.asarray(reading.spectrum)[:, :3], reading.reduction)  # corrupt: a 3-sample stub
 
     def _outlier(self, reading: Reading, x: float, t: float, sign: float) -> Reading:
         """The reading moved by outlier_sd true noise sd: a scalar directly; a spectrum scaled
         so that its fitted amplitude moves by that much (the fit is linear in the scale)."""
-        noise = self.inner.noise_law(np.asarray([t]))
+        simulated = is_simulator(self.inner)
+        noise = self.inner.noise_law(np.asarray([t])) if simulated else None
         step = self.faults.outlier_sd * (float(noise[0]) if noise is not None else 1.0)
         if reading.spectrum is None:
             return Reading(float(reading.value) + sign * step)
-        truth = self.inner.truth(np.asarray([x]))
+        truth = self.inner.truth(np.asarray([[x]])) if simulated else None
         amplitude = max(abs(float(truth[0])), 1.0) if truth is not None else 1.0
         spectrum = np.array(reading.spectrum, copy=True)
         spectrum[1] *= max(1.0 + sign * step / amplitude, 0.0)
-        return Reading(None, spectrum)
+        return Reading(None, spectrum, reading.reduction)
 
-    def truth(self, x):
-        return self.inner.truth(x)
+    def open(self) -> None:
+        getattr(self.inner, "open", lambda: None)()
 
-    def noise_law(self, t):
-        return self.inner.noise_law(t)
+    def close(self) -> None:
+        getattr(self.inner, "close", lambda: None)()
 
     def counts(self) -> dict[str, int]:
         """Injected faults per kind."""

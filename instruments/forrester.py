@@ -4,9 +4,10 @@ of standard deviation A1/sqrt(t) + A0."""
 from __future__ import annotations
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
-from instruments.base import Reading
-from noisebo.config import ForresterInstrumentConfig
+import noisebo
+from noisebo.reduction import Reading
 
 
 def forrester(x: np.ndarray) -> np.ndarray:
@@ -15,21 +16,41 @@ def forrester(x: np.ndarray) -> np.ndarray:
     return (6.0 * x - 2.0) ** 2 * np.sin(12.0 * x - 4.0)
 
 
-class ForresterInstrument:
-    name = "forrester"
+class ForresterSettings(BaseModel):
+    """a0, a1: the noise law A1/sqrt(t) + A0 (value units); seed: the random stream of shots
+    measured outside a campaign (a campaign draws each shot from its own key)."""
 
-    def __init__(self, config: ForresterInstrumentConfig | None = None):
-        self.config = config or ForresterInstrumentConfig()
+    model_config = ConfigDict(frozen=True, extra="forbid")
+    a0: float = Field(0.1, ge=0, allow_inf_nan=False)
+    a1: float = Field(2.0, ge=0, allow_inf_nan=False)
+    seed: int = Field(0, ge=0)
+
+
+class ForresterInstrument:
+    """Simulator: one-dimensional x in [0, 1]."""
+
+    name = "forrester"
+    version = noisebo.__version__
+    Settings = ForresterSettings
+
+    def __init__(self, settings: ForresterSettings | None = None):
+        self.settings = settings or ForresterSettings()
+        self._rng = np.random.default_rng(self.settings.seed)
 
     def noise_law(self, t: np.ndarray) -> np.ndarray:
         """Single-shot noise sd at exposure t (s): A1/sqrt(t) + A0."""
         t = np.asarray(t, dtype=np.float64)
-        return self.config.a1 / np.sqrt(t) + self.config.a0
+        return self.settings.a1 / np.sqrt(t) + self.settings.a0
 
     def truth(self, x: np.ndarray) -> np.ndarray:
-        return forrester(x)
+        """f at positions x (n, 1): (n,)."""
+        return forrester(np.asarray(x, dtype=np.float64)[..., 0])
 
-    def measure(self, x: float, t: float, rng: np.random.Generator) -> Reading:
-        if not (np.isfinite(x) and np.isfinite(t) and t > 0):
-            raise ValueError(f"Forrester shot needs finite x and t > 0, got x={x}, t={t}")
-        return Reading(float(forrester(x) + self.noise_law(t) * rng.standard_normal()))
+    def simulate(self, x: np.ndarray, t: float, rng: np.random.Generator) -> Reading:
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (1,) or not (np.isfinite(x[0]) and np.isfinite(t) and t > 0):
+            raise ValueError(f"Forrester shot needs one finite coordinate and t > 0, got x={x.tolist()}, t={t}")
+        return Reading(float(forrester(x[0]) + self.noise_law(t) * rng.standard_normal()))
+
+    def measure(self, x: np.ndarray, t: float) -> Reading:
+        return self.simulate(x, t, self._rng)

@@ -11,7 +11,7 @@ import threading
 
 import numpy as np
 
-from instruments.base import Instrument, Reading
+from instruments.base import Instrument, Reading, is_simulator
 from noisebo.failures import InstrumentError, InstrumentTimeout  # noqa: F401 - re-exported
 
 
@@ -25,15 +25,23 @@ class TimeoutGuard:
         if not timeout_s > 0:
             raise ValueError(f"timeout_s must be positive, got {timeout_s}")
         self.inner = inner
-        self.name = inner.name
+        self.name, self.version = inner.name, inner.version
         self.timeout_s = float(timeout_s)
+        if is_simulator(inner):  # a simulator stays one behind the guard, its shots timed out too
+            self.simulate, self.truth, self.noise_law = self._simulate, inner.truth, inner.noise_law
 
-    def measure(self, x: float, t: float, rng: np.random.Generator) -> Reading:
+    def measure(self, x: np.ndarray, t: float) -> Reading:
+        return self._within_timeout(lambda: self.inner.measure(x, t), x, t)
+
+    def _simulate(self, x: np.ndarray, t: float, rng: np.random.Generator) -> Reading:
+        return self._within_timeout(lambda: self.inner.simulate(x, t, rng), x, t)
+
+    def _within_timeout(self, shot, x, t) -> Reading:
         outcome: dict = {}
 
         def call() -> None:
             try:
-                outcome["reading"] = self.inner.measure(x, t, rng)
+                outcome["reading"] = shot()
             except BaseException as error:  # noqa: BLE001 - re-raised in the caller's thread
                 outcome["error"] = error
 
@@ -41,16 +49,17 @@ class TimeoutGuard:
         worker.start()
         worker.join(self.timeout_s)
         if worker.is_alive():
-            raise InstrumentTimeout(f"{self.name}: no reading within {self.timeout_s:g} s at x={x:g}, t={t:g}")
+            where = ", ".join(f"{v:g}" for v in np.asarray(x, dtype=np.float64).ravel())
+            raise InstrumentTimeout(f"{self.name}: no reading within {self.timeout_s:g} s at x=({where}), t={t:g}")
         if "error" in outcome:
             raise outcome["error"]
         return outcome["reading"]
 
-    def truth(self, x):
-        return self.inner.truth(x)
+    def open(self) -> None:
+        getattr(self.inner, "open", lambda: None)()
 
-    def noise_law(self, t):
-        return self.inner.noise_law(t)
+    def close(self) -> None:
+        getattr(self.inner, "close", lambda: None)()
 
     def __getattr__(self, name: str):  # the wrapped driver's extras, e.g. a fault ledger
         if name == "inner":

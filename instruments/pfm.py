@@ -21,29 +21,72 @@ from functools import lru_cache
 
 import numpy as np
 
+from pydantic import Field, model_validator
+
+import noisebo
 from instruments.base import Reading
-from instruments.pfm_profile import build_profile
-from noisebo.config import PFMInstrumentConfig
+from instruments.pfm_profile import ProfileConfig, ScanProfileConfig, build_profile
+from noisebo.config import FrozenModel, NonNegativeFloat, PositiveFloat
 from noisebo.sho import model_and_jacobian, sho_amplitude, sho_phase
 
 MIN_SAMPLES = 16
 QUADRATURE_NODES = 24
 
 
-class PFMInstrument:
-    name = "pfm"
+class PFMSettings(FrozenModel):
+    """Simulated contact-resonance PFM along a line profile (x in um).
 
-    def __init__(self, config: PFMInstrumentConfig | None = None):
-        self.config = config or PFMInstrumentConfig()
+    A shot at (x, t) is a frequency sweep of ``round(sample_rate_hz * t)`` samples across
+    ``resonance_hz +- sweep_half_span_hz``: the amplitude spectrum of Eq. 8 with the local
+    response, ``q`` and the resonance, plus ``sample_noise_pm`` Gaussian noise per sample (the
+    source of the A1/sqrt(t) part once fitted); and a phase spectrum. Time-independent noise per
+    sweep: an electrostatic background response ``background_pm`` (sd, added to the local
+    response), relative gain jitter ``gain_jitter`` (drive and contact), tip-position jitter
+    ``position_jitter_um`` and resonance drift ``resonance_jitter_hz``. The defaults (those of
+    ``data/configs/pfm.yaml``) keep the time-independent noise nearly the same at every x, as the
+    noise model assumes; larger gain or landing jitter makes strong domains and walls noisier.
+    ``seed``: the random stream of sweeps measured outside a campaign (a campaign draws each
+    shot from its own key)."""
+
+    profile: ProfileConfig = ScanProfileConfig()
+    resonance_hz: PositiveFloat = 372_000.0
+    q: float = Field(250.0, gt=1, allow_inf_nan=False)
+    sweep_half_span_hz: PositiveFloat = 5_000.0
+    sample_rate_hz: PositiveFloat = 10_000.0
+    sample_noise_pm: NonNegativeFloat = 7_500.0
+    background_pm: NonNegativeFloat = 0.5
+    gain_jitter: NonNegativeFloat = 0.002
+    position_jitter_um: NonNegativeFloat = 0.0001
+    resonance_jitter_hz: NonNegativeFloat = 50.0
+    seed: int = Field(0, ge=0)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> PFMSettings:
+        if self.sweep_half_span_hz >= self.resonance_hz:
+            raise ValueError("sweep_half_span_hz must be below resonance_hz")
+        return self
+
+
+class PFMInstrument:
+    """Simulator: x in um along the profile; every shot a resonance sweep for the "sho" reduction."""
+
+    name = "pfm"
+    version = noisebo.__version__
+    Settings = PFMSettings
+    spectra = True
+
+    def __init__(self, settings: PFMSettings | None = None):
+        self.config = settings or PFMSettings()
         self.profile = build_profile(self.config.profile)
+        self._rng = np.random.default_rng(self.config.seed)
 
     @property
     def length_um(self) -> float:
         return self.profile.length_um
 
     def truth(self, x: np.ndarray) -> np.ndarray:
-        """Noiseless signed response (pm) at x (um)."""
-        return self.profile(x)
+        """Noiseless signed response (pm) at positions x (n, 1) in um: (n,)."""
+        return self.profile(np.asarray(x, dtype=np.float64)[..., 0])
 
     def frequencies(self, t: float) -> np.ndarray:
         """Sweep frequencies (Hz) of a t-second sweep."""
@@ -51,10 +94,15 @@ class PFMInstrument:
         n = max(MIN_SAMPLES, int(round(c.sample_rate_hz * t)))
         return np.linspace(c.resonance_hz - c.sweep_half_span_hz, c.resonance_hz + c.sweep_half_span_hz, n)
 
-    def measure(self, x: float, t: float, rng: np.random.Generator) -> Reading:
+    def measure(self, x: np.ndarray, t: float) -> Reading:
+        return self.simulate(x, t, self._rng)
+
+    def simulate(self, x: np.ndarray, t: float, rng: np.random.Generator) -> Reading:
         c = self.config
-        if not (np.isfinite(x) and np.isfinite(t) and t > 0):
-            raise ValueError(f"PFM sweep needs finite x and t > 0, got x={x}, t={t}")
+        coords = np.asarray(x, dtype=np.float64)
+        if coords.shape != (1,) or not (np.isfinite(coords[0]) and np.isfinite(t) and t > 0):
+            raise ValueError(f"PFM sweep needs one finite coordinate (um) and t > 0, got x={coords.tolist()}, t={t}")
+        x = float(coords[0])
         if not -1e-9 <= x <= self.length_um + 1e-9:
             raise ValueError(f"x={x} um lies outside the profile [0, {self.length_um:.4g}] um")
         jitter = rng.standard_normal(4)
@@ -68,7 +116,7 @@ class PFMInstrument:
         phase_sd = c.sample_noise_pm / (model + c.sample_noise_pm) if c.sample_noise_pm > 0 else 0.0
         phase = domain + sho_phase(freq, resonance, c.q) + phase_sd * rng.standard_normal(freq.size)
         phase_deg = np.rad2deg(np.angle(np.exp(1j * phase)))
-        return Reading(None, np.stack([freq, amplitude, phase_deg]).astype(np.float32))
+        return Reading(None, np.stack([freq, amplitude, phase_deg]).astype(np.float32), "sho")
 
     def noise_law(self, t: np.ndarray) -> np.ndarray:
         """Single-shot sd (pm) of the fitted signed amplitude at sweep time t (s), averaged over

@@ -8,14 +8,54 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated, Literal, Union
 
 import h5py
 import numpy as np
+from pydantic import Field, model_validator
 from scipy import ndimage
 
-from noisebo.config import ScanProfileConfig, SyntheticProfileConfig
+from noisebo.config import FiniteFloat, FrozenModel, NonNegativeFloat, PositiveFloat
+
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+class ScanProfileConfig(FrozenModel):
+    """A line across a real PFM scan (pyNSID layout: amplitude and phase channels). ``file`` is
+    resolved against the project root when relative; ``start_px``/``end_px`` are (row, column)
+    pixels; the response is amplitude (pm) signed by the phase against the scan's dominant
+    domain phase, after a Gaussian smoothing of ``smooth_px`` pixels (the scan's own noise)."""
+
+    source: Literal["scan"] = "scan"
+    file: str = "data/pfm/PTO_Funakubo0003.h5"
+    amplitude_channel: int = Field(1, ge=0)
+    phase_channel: int = Field(3, ge=0)
+    start_px: tuple[FiniteFloat, FiniteFloat] = (20.0, 120.0)
+    end_px: tuple[FiniteFloat, FiniteFloat] = (200.0, 255.0)
+    smooth_px: NonNegativeFloat = 1.0
+
+    @model_validator(mode="after")
+    def _distinct(self) -> ScanProfileConfig:
+        if self.start_px == self.end_px:
+            raise ValueError("start_px and end_px must differ")
+        return self
+
+
+class SyntheticProfileConfig(FrozenModel):
+    """Domains of alternating sign along ``length_um``, with walls of width ``wall_um`` where the
+    response passes through zero (tanh profile), and domain amplitudes ``amplitude_pm`` times a
+    per-domain factor drawn from ``seed``."""
+
+    source: Literal["synthetic"] = "synthetic"
+    length_um: PositiveFloat = 1.0
+    n_domains: int = Field(4, ge=1, le=1000)
+    amplitude_pm: PositiveFloat = 100.0
+    wall_um: PositiveFloat = 0.02
+    seed: int = 0
+
+
+ProfileConfig = Annotated[Union[ScanProfileConfig, SyntheticProfileConfig], Field(discriminator="source")]
 SAMPLES_PER_PIXEL = 4
 
 

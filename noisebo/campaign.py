@@ -8,7 +8,7 @@ from typing import Sequence
 
 import numpy as np
 
-from noisebo.config import CampaignConfig
+from noisebo.config import CampaignConfig, ReductionConfig
 from noisebo.decision import fit_key, fit_models, grids, hyperparameters, predict
 from noisebo.events import Summary
 from noisebo.keys import SEED_POINTS, numpy_rng
@@ -48,13 +48,14 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
 
 
 def make_point(
-    x: float, t: float, readings: Sequence, model_noise: float | None, instrument_config, clip_sd: float | None = None
+    x: float, t: float, readings: Sequence, model_noise: float | None, reduction: ReductionConfig,
+    clip_sd: float | None = None,
 ) -> tuple[Point, list[ShotValue]]:
     """A point from its readings (spectra are fitted here) and each shot's value. The point uses
     the ok shots only (after outlier clipping with ``clip_sd``, see ``ScheduleConfig``). With
     ``model_noise`` None the noise is measured (the sample sd of the ok shots, at least two
     needed), otherwise it is the given noise-model prediction."""
-    shots = clip_outliers(shot_values(readings, instrument_config), clip_sd)
+    shots = clip_outliers(shot_values(readings, reduction), clip_sd)
     measured = model_noise is None
     reduced = reduce_shots(usable(shots, 2 if measured else 1))
     return Point(

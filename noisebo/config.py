@@ -6,22 +6,28 @@ boundary (``load_config`` or ``CampaignConfig(...)``); the rest of the code trus
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 
 class ConfigError(ValueError):
     """A configuration that cannot be used; the message names the offending field."""
 
 
-class _Frozen(BaseModel):
+class FrozenModel(BaseModel):
+    """Base of every settings model: frozen, unknown keys refused (drivers' settings too)."""
+
     model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+_Frozen = FrozenModel
 
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
@@ -71,108 +77,53 @@ class FaultsConfig(_Frozen):
         return self
 
 
-class ForresterInstrumentConfig(_Frozen):
-    """Forrester benchmark: shots are f(x) + N(0, (a1/sqrt(t) + a0)^2).
+class InstrumentConfig(_Frozen):
+    """The instrument: ``kind`` names an installed driver (a Python entry point in the group
+    ``noisebo.instruments``; ``noisebo instruments`` lists them) and ``settings`` are that
+    driver's own settings, validated by its settings model when the campaign is loaded.
+    ``timeout_s`` (the instrument layer gives up on a shot after this long; None: no limit) and
+    ``faults`` (injected faults, for resilience tests) wrap any driver."""
 
-    ``timeout_s``: the instrument layer gives up on a shot after this long (None: no limit)."""
-
-    kind: Literal["forrester"] = "forrester"
-    a0: NonNegativeFloat = 0.1
-    a1: NonNegativeFloat = 2.0
+    kind: str = Field(min_length=1)
+    settings: dict[str, Any] = Field(default_factory=dict)
     timeout_s: PositiveFloat | None = None
     faults: FaultsConfig | None = None
 
+    def __hash__(self) -> int:  # settings is a mapping: hash its canonical JSON
+        return hash((self.kind, json.dumps(self.settings, sort_keys=True, default=str), self.timeout_s, self.faults))
+
     @model_validator(mode="after")
-    def _faults_fit(self) -> ForresterInstrumentConfig:
-        _check_faults(self.faults, self.timeout_s, spectra=False)
+    def _faults_fit(self) -> InstrumentConfig:
+        f = self.faults
+        if f is not None and f.timeout > 0 and (self.timeout_s is None or f.hang_s <= self.timeout_s):
+            raise ValueError("injected timeouts need timeout_s set and faults.hang_s above it")
         return self
 
 
-def _check_faults(faults: FaultsConfig | None, timeout_s: float | None, spectra: bool) -> None:
-    if faults is None:
-        return
-    if faults.timeout > 0 and (timeout_s is None or faults.hang_s <= timeout_s):
-        raise ValueError("injected timeouts need timeout_s set and faults.hang_s above it")
-    if faults.corrupt_spectrum > 0 and not spectra:
-        raise ValueError("faults.corrupt_spectrum needs an instrument that returns spectra")
+class SHOReductionConfig(_Frozen):
+    """The "sho" reduction of a resonance sweep: the fitted signed amplitude of Eq. 8, Q within
+    ``q_bounds``. ``nominal_resonance_hz`` and ``nominal_q`` (the instrument's tune), when both
+    are given, rescue a sweep whose free fit fails (see ``noisebo.sho.fit_sho``)."""
 
-
-class ScanProfileConfig(_Frozen):
-    """A line across a real PFM scan (pyNSID layout: amplitude and phase channels). ``file`` is
-    resolved against the project root when relative; ``start_px``/``end_px`` are (row, column)
-    pixels; the response is amplitude (pm) signed by the phase against the scan's dominant
-    domain phase, after a Gaussian smoothing of ``smooth_px`` pixels (the scan's own noise)."""
-
-    source: Literal["scan"] = "scan"
-    file: str = "data/pfm/PTO_Funakubo0003.h5"
-    amplitude_channel: int = Field(1, ge=0)
-    phase_channel: int = Field(3, ge=0)
-    start_px: tuple[FiniteFloat, FiniteFloat] = (20.0, 120.0)
-    end_px: tuple[FiniteFloat, FiniteFloat] = (200.0, 255.0)
-    smooth_px: NonNegativeFloat = 1.0
-
-    @model_validator(mode="after")
-    def _distinct(self) -> ScanProfileConfig:
-        if self.start_px == self.end_px:
-            raise ValueError("start_px and end_px must differ")
-        return self
-
-
-class SyntheticProfileConfig(_Frozen):
-    """Domains of alternating sign along ``length_um``, with walls of width ``wall_um`` where the
-    response passes through zero (tanh profile), and domain amplitudes ``amplitude_pm`` times a
-    per-domain factor drawn from ``seed``."""
-
-    source: Literal["synthetic"] = "synthetic"
-    length_um: PositiveFloat = 1.0
-    n_domains: int = Field(4, ge=1, le=1000)
-    amplitude_pm: PositiveFloat = 100.0
-    wall_um: PositiveFloat = 0.02
-    seed: int = 0
-
-
-ProfileConfig = Annotated[Union[ScanProfileConfig, SyntheticProfileConfig], Field(discriminator="source")]
-
-
-class PFMInstrumentConfig(_Frozen):
-    """Simulated contact-resonance PFM along a line profile (x in um).
-
-    A shot at (x, t) is a frequency sweep of ``round(sample_rate_hz * t)`` samples across
-    ``resonance_hz +- sweep_half_span_hz``: the amplitude spectrum of Eq. 8 with the local
-    response, ``q`` and the resonance, plus ``sample_noise_pm`` Gaussian noise per sample (the
-    source of the A1/sqrt(t) part once fitted); and a phase spectrum. Time-independent noise per
-    sweep: an electrostatic background response ``background_pm`` (sd, added to the local
-    response), relative gain jitter ``gain_jitter`` (drive and contact), tip-position jitter
-    ``position_jitter_um`` and resonance drift ``resonance_jitter_hz``. The defaults (those of
-    ``data/configs/pfm.yaml``) keep the time-independent noise nearly the same at every x, as the
-    noise model assumes; larger gain or landing jitter makes strong domains and walls noisier."""
-
-    kind: Literal["pfm"] = "pfm"
-    profile: ProfileConfig = ScanProfileConfig()
-    resonance_hz: PositiveFloat = 372_000.0
-    q: float = Field(250.0, gt=1, allow_inf_nan=False)
-    sweep_half_span_hz: PositiveFloat = 5_000.0
-    sample_rate_hz: PositiveFloat = 10_000.0
-    sample_noise_pm: NonNegativeFloat = 7_500.0
-    background_pm: NonNegativeFloat = 0.5
-    gain_jitter: NonNegativeFloat = 0.002
-    position_jitter_um: NonNegativeFloat = 0.0001
-    resonance_jitter_hz: NonNegativeFloat = 50.0
     q_bounds: tuple[PositiveFloat, PositiveFloat] = (5.0, 5000.0)
-    timeout_s: PositiveFloat | None = None
-    faults: FaultsConfig | None = None
+    nominal_resonance_hz: PositiveFloat | None = None
+    nominal_q: PositiveFloat | None = None
 
     @model_validator(mode="after")
-    def _consistent(self) -> PFMInstrumentConfig:
-        _check_faults(self.faults, self.timeout_s, spectra=True)
-        if self.sweep_half_span_hz >= self.resonance_hz:
-            raise ValueError("sweep_half_span_hz must be below resonance_hz")
-        if not self.q_bounds[0] < self.q < self.q_bounds[1]:
-            raise ValueError(f"q ({self.q}) must lie inside q_bounds {self.q_bounds}")
+    def _consistent(self) -> SHOReductionConfig:
+        if not self.q_bounds[0] < self.q_bounds[1]:
+            raise ValueError(f"q_bounds {self.q_bounds} must be increasing")
+        if (self.nominal_resonance_hz is None) != (self.nominal_q is None):
+            raise ValueError("give both nominal_resonance_hz and nominal_q, or neither")
+        if self.nominal_q is not None and not self.q_bounds[0] < self.nominal_q < self.q_bounds[1]:
+            raise ValueError(f"nominal_q ({self.nominal_q}) must lie inside q_bounds {self.q_bounds}")
         return self
 
 
-InstrumentConfig = Annotated[Union[ForresterInstrumentConfig, PFMInstrumentConfig], Field(discriminator="kind")]
+class ReductionConfig(_Frozen):
+    """How a raw spectrum becomes a shot's value, per named reduction (a reading names its own)."""
+
+    sho: SHOReductionConfig = SHOReductionConfig()
 
 
 class SpaceConfig(_Frozen):
@@ -307,7 +258,8 @@ class CampaignConfig(_Frozen):
 
     schema_version: int = SCHEMA_VERSION
     name: str = "campaign"
-    instrument: InstrumentConfig = ForresterInstrumentConfig()
+    instrument: InstrumentConfig = InstrumentConfig(kind="forrester")
+    reduction: ReductionConfig = ReductionConfig()
     space: SpaceConfig = SpaceConfig()
     reward: RewardConfig = RewardConfig()
     acquisition: AcquisitionConfig = AcquisitionConfig()
@@ -332,46 +284,79 @@ class CampaignConfig(_Frozen):
 
     def with_overrides(self, **sections: Any) -> CampaignConfig:
         """A new validated config with some fields replaced, e.g. ``acquisition={"policy": "double"}``.
-        A section dict merges into the old one, unless it names another instrument ``kind``."""
+        A section dict merges into the old one (and ``instrument.settings`` into the old settings),
+        unless it names another instrument ``kind``."""
         data = self.model_dump()
         for key, value in sections.items():
             old = data.get(key)
             if isinstance(value, dict) and isinstance(old, dict) and value.get("kind", old.get("kind")) == old.get("kind"):
-                data[key] = {**data[key], **value}
+                merged = {**old, **value}
+                if key == "instrument" and isinstance(value.get("settings"), dict):
+                    merged["settings"] = {**old.get("settings", {}), **value["settings"]}
+                data[key] = merged
             else:
                 data[key] = value
         return parse_config(data)
 
 
-def _describe(error: ValidationError) -> str:
+def describe_errors(error: ValidationError, prefix: str = "") -> str:
+    """pydantic's errors as "field.path: message" joined by "; " (paths under ``prefix``)."""
     parts = []
     for item in error.errors():
-        loc = ".".join(str(p) for p in item["loc"]) or "<root>"
+        loc = ".".join(str(p) for p in ((prefix,) if prefix else ()) + tuple(item["loc"])) or "<root>"
         if item["type"] == "union_tag_not_found":  # pydantic's words for a missing discriminator
             field = str(item.get("ctx", {}).get("discriminator", "kind")).strip("'")
             parts.append(f"{loc}.{field}: Field required")
             continue
-        parts.append(f"{loc}: {item['msg']}")
+        hint = ""
+        if item["type"] == "extra_forbidden" and tuple(item["loc"][:1]) == ("instrument",) and len(item["loc"]) == 2:
+            hint = " (a driver's own settings go under instrument.settings)"
+        parts.append(f"{loc}: {item['msg']}{hint}")
     return "; ".join(parts)
 
 
+V1_GENERIC = ("kind", "timeout_s", "faults")
+
+
+def migrate_v1(data: dict) -> dict:
+    """A schema-1 config as schema 2: the instrument's own keys move under ``settings``, and a
+    PFM instrument's tune (resonance_hz, q, q_bounds) becomes the "sho" reduction's settings."""
+    data = dict(data, schema_version=SCHEMA_VERSION)
+    instrument = dict(data.get("instrument") or {"kind": "forrester"})
+    settings = {k: v for k, v in instrument.items() if k not in V1_GENERIC}
+    data["instrument"] = {k: v for k, v in instrument.items() if k in V1_GENERIC} | {"settings": settings}
+    if instrument.get("kind") == "pfm":
+        sho = {"nominal_resonance_hz": settings.get("resonance_hz", 372_000.0), "nominal_q": settings.get("q", 250.0)}
+        if "q_bounds" in settings:
+            sho["q_bounds"] = settings.pop("q_bounds")
+        data["reduction"] = {"sho": sho}
+    return data
+
+
 def parse_config(data: Any, source: str = "config") -> CampaignConfig:
-    """Validate a mapping into a ``CampaignConfig``; raise ``ConfigError`` naming the field."""
+    """Validate a mapping into a ``CampaignConfig`` (a schema-1 mapping is migrated first); raise
+    ``ConfigError`` naming the field. The instrument's settings are checked by its driver (see
+    ``instruments.registry.validated``)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a mapping of settings, got {type(data).__name__}")
+    if data.get("schema_version") == 1:
+        data = migrate_v1(data)
     try:
         return CampaignConfig.model_validate(data)
     except ValidationError as error:
-        raise ConfigError(f"{source}: {_describe(error)}") from None
+        raise ConfigError(f"{source}: {describe_errors(error)}") from None
 
 
 def load_config(path: str | Path) -> CampaignConfig:
     """Read and validate a YAML campaign configuration."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as error:
         raise ConfigError(f"{path}: cannot read config ({error.strerror or error})") from None
+    except UnicodeDecodeError as error:
+        raise ConfigError(f"{path}: not a text (UTF-8) file: byte {error.start} cannot be decoded; "
+                          "a campaign config is YAML text") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as error:

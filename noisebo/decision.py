@@ -16,7 +16,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from noisebo import inference, noise_model, primary
-from noisebo.config import CampaignConfig
+from noisebo.config import (
+    AcquisitionConfig, CampaignConfig, NoiseModelConfig, PrimaryModelConfig, RewardConfig, SpaceConfig,
+)
 from noisebo.keys import FIT, jax_key
 from noisebo.policies import Posterior, acquisition_map, argmax_2d
 from noisebo.reward import optimal_index, reward
@@ -40,7 +42,10 @@ class Grids(NamedTuple):
 
 
 def grids(config: CampaignConfig) -> Grids:
-    s = config.space
+    return space_grids(config.space)
+
+
+def space_grids(s: SpaceConfig) -> Grids:
     return Grids(
         np.linspace(s.x_min, s.x_max, s.n_x), np.linspace(s.t_min, s.t_max, s.n_t), np.linspace(s.t_min, s.t_max, N_FINE)
     )
@@ -57,9 +62,13 @@ class Fitted(NamedTuple):
     noise_scale: float
 
 
-@lru_cache(maxsize=None)
 def _models(config: CampaignConfig):
-    return primary.make_model(config.primary_model), noise_model.make_model(config.noise_model)
+    return _models_for(config.primary_model, config.noise_model)
+
+
+@lru_cache(maxsize=None)
+def _models_for(primary_config: PrimaryModelConfig, noise_config: NoiseModelConfig):
+    return primary.make_model(primary_config), noise_model.make_model(noise_config)
 
 
 def _fit_one(config: CampaignConfig, model, data, key, guess: dict, laplace: int, quadrature: int) -> inference.Samples:
@@ -114,10 +123,13 @@ class Prediction(NamedTuple):
     noise_fine: jnp.ndarray
 
 
-@lru_cache(maxsize=None)
 def _predict_program(config: CampaignConfig):
-    g = grids(config)
-    s, rew, kind = config.space, config.reward, config.noise_model.mean
+    return _predict_compiled(config.space, config.reward, config.noise_model.mean)
+
+
+@lru_cache(maxsize=None)
+def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str):
+    g = space_grids(s)
     xs = jnp.asarray((g.x - s.x_min) / (s.x_max - s.x_min))
     n_t = g.t.shape[0]
 
@@ -156,10 +168,13 @@ def _predict_program(config: CampaignConfig):
     return jax.jit(predict, static_argnums=(1, 2))
 
 
-@lru_cache(maxsize=None)
 def _propose_program(config: CampaignConfig):
-    acq, rew = config.acquisition, config.reward
-    g = grids(config)
+    return _propose_compiled(config.acquisition, config.reward, config.space)
+
+
+@lru_cache(maxsize=None)
+def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig):
+    g = space_grids(space)
     allowed = np.ones(g.t.size, dtype=bool)
     if acq.fixed_t is not None:
         allowed = np.arange(g.t.size) == int(np.argmin(np.abs(g.t - acq.fixed_t)))

@@ -11,6 +11,8 @@ import datetime as dt
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
+import numpy as np
+
 from noisebo import engine
 from noisebo.config import CampaignConfig
 from noisebo.decision import Decision
@@ -26,15 +28,27 @@ Decide = Callable[[EngineState], Sequence[Event]]
 
 
 def take_shot(instrument, seed: int, request: Request) -> Outcome:
-    """One attempt at the next wanted shot of ``request``, with the random stream keyed by
-    (seed, point, shot): a retried shot gets the reading it would have had. An
+    """One attempt at the next wanted shot of ``request``: ``measure(x, t)`` on a device, or on a
+    simulator (an instrument with ``simulate``) a shot drawn from the random stream keyed by
+    (seed, point, shot), so a retried shot gets the reading it would have had. An
     ``InstrumentError`` becomes a ``ShotError`` (the engine asks for the shot again)."""
-    rng = numpy_rng(seed, MEASURE, request.point, request.taken)
+    x = np.asarray(request.x, dtype=np.float64)
     try:
-        return instrument.measure(request.x[0], request.t, rng)
+        if simulates(instrument):
+            return instrument.simulate(x, request.t, numpy_rng(seed, MEASURE, request.point, request.taken))
+        return instrument.measure(x, request.t)
     except InstrumentError as error:
         kind = "timeout" if isinstance(error, InstrumentTimeout) else "instrument error"
         return ShotError(kind, str(error))
+
+
+SIMULATOR_METHODS = ("simulate", "truth", "noise_law")
+
+
+def simulates(instrument) -> bool:
+    """Whether the instrument is a simulator: it has ``simulate``, ``truth`` and ``noise_law``
+    (see ``instruments.base.Simulator``; a wrapper has them only when what it wraps does)."""
+    return all(callable(getattr(instrument, name, None)) for name in SIMULATOR_METHODS)
 
 
 def in_memory(state: EngineState, events: Sequence[Event]) -> EngineState:

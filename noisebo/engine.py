@@ -203,7 +203,7 @@ def _record(state: EngineState, request: Request, shot: int, outcome: Outcome) -
     cfg = state.config
     readings = [s.reading for s in state.taken]
     try:
-        point, values = make_point(x[0], t, readings, request.model_noise, cfg.instrument, cfg.schedule.clip_sd)
+        point, values = make_point(x[0], t, readings, request.model_noise, cfg.reduction, cfg.schedule.clip_sd)
     except NoUsableShots as short:
         more = MoreShots(request.point, len(readings) + short.missing, short.rejected, str(short))
         return [taken, more, *_budget(apply(state, more))]

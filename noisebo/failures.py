@@ -11,6 +11,10 @@ class InstrumentTimeout(InstrumentError):
     """The instrument did not answer within its timeout."""
 
 
+class InstrumentUnavailable(RuntimeError):
+    """The instrument could not be opened for a campaign; nothing was measured."""
+
+
 class FailureBudgetExceeded(RuntimeError):
     """Too many shots failed: the campaign stops instead of looping."""
 

@@ -50,10 +50,13 @@ def campaign_figures(
 
     s, rew, sched = config.space, config.reward, config.schedule
     t_star = None
-    if instrument.noise_law(np.array([s.t_min])) is not None:
+    from noisebo.driver import simulates
+
+    simulator = simulates(instrument)
+    if simulator:
         t_star = true_optimal_t(instrument.noise_law, s.t_min, s.t_max, rew.alpha, rew.beta)
     x_eval = np.linspace(s.x_min, s.x_max, RMSE_POINTS)
-    truth = instrument.truth(x_eval)
+    truth = instrument.truth(x_eval[:, None]) if simulator else None
     history = [float(v) for v in t_opt_history]
     return {
         "policy": config.acquisition.policy,

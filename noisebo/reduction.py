@@ -9,6 +9,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from noisebo.config import ReductionConfig, SHOReductionConfig
 from noisebo.sho import SHOFit, fit_sho
 
 
@@ -53,23 +54,38 @@ class NoUsableShots(ValueError):
         self.missing, self.rejected = missing, rejected
 
 
-def shot_value(reading, instrument_config) -> ShotValue:
-    """The value of one reading (``instruments.base.Reading``) for this instrument's config."""
-    if reading.spectrum is None:
-        value = float(reading.value)
-        ok = bool(np.isfinite(value))
-        return ShotValue(value if ok else float("nan"), ok, "" if ok else "non-finite reading", None)
-    spectrum = np.asarray(reading.spectrum)
+def sho_value(spectrum: np.ndarray, config: SHOReductionConfig) -> ShotValue:
+    """The "sho" reduction: the signed amplitude of Eq. 8 fitted to a sweep (2 or 3, N): rows
+    frequency (Hz), amplitude (value units) and optionally phase (deg) for the sign."""
     if spectrum.ndim != 2 or spectrum.shape[0] not in (2, 3):
         return ShotValue(float("nan"), False, f"spectrum of shape {spectrum.shape}, expected (2 or 3, N)", None)
     phase = spectrum[2] if spectrum.shape[0] == 3 else None
-    nominal = (instrument_config.resonance_hz, instrument_config.q)
-    fit = fit_sho(spectrum[0], spectrum[1], phase, tuple(instrument_config.q_bounds), 0.0, nominal)
+    nominal = None
+    if config.nominal_resonance_hz is not None and config.nominal_q is not None:
+        nominal = (config.nominal_resonance_hz, config.nominal_q)
+    fit = fit_sho(spectrum[0], spectrum[1], phase, tuple(config.q_bounds), 0.0, nominal)
     return ShotValue(fit.value if fit.ok else float("nan"), fit.ok, fit.reason if not fit.ok else "", fit)
 
 
-def shot_values(readings: Sequence, instrument_config) -> list[ShotValue]:
-    return [shot_value(r, instrument_config) for r in readings]
+REDUCTIONS = {"sho": lambda spectrum, config: sho_value(spectrum, config.sho)}
+DEFAULT_REDUCTION = "sho"
+
+
+def shot_value(reading: Reading, config: ReductionConfig) -> ShotValue:
+    """The value of one reading: a scalar is its own value; a spectrum goes through the
+    reduction it names (default "sho"), configured by ``config``."""
+    if reading.spectrum is None:
+        value = float(reading.value) if reading.value is not None else float("nan")
+        ok = bool(np.isfinite(value))
+        return ShotValue(value if ok else float("nan"), ok, "" if ok else "non-finite reading", None)
+    name = reading.reduction or DEFAULT_REDUCTION
+    if name not in REDUCTIONS:
+        return ShotValue(float("nan"), False, f"unknown reduction {name!r} (known: {', '.join(sorted(REDUCTIONS))})", None)
+    return REDUCTIONS[name](np.asarray(reading.spectrum), config)
+
+
+def shot_values(readings: Sequence[Reading], config: ReductionConfig) -> list[ShotValue]:
+    return [shot_value(r, config) for r in readings]
 
 
 ROBUST_SD = 1.4826  # median absolute deviation -> standard deviation, for Gaussian data

@@ -22,7 +22,8 @@ from storage.journal import _fsync_dir
 from noisebo.engine import EngineState
 
 SCHEMA = "noisebo.campaign"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+READABLE_VERSIONS = (1, 2)  # version 1: no driver record; its config is migrated when parsed
 LIBVER = ("v110", "v114")
 STEP_COLUMNS = {
     "step": ("1", "0-based BO step"),
@@ -108,6 +109,8 @@ def _fill(f: h5py.File, state: EngineState) -> None:
         seed=state.seed,
         policy=config.acquisition.policy,
         instrument=config.instrument.kind,
+        driver_json=json.dumps({"name": state.driver.name, "version": state.driver.version,
+                                "settings": state.driver.settings}),
         status=state.status.value,
         status_reason=state.reason,
         created_utc=state.created_utc,
@@ -311,8 +314,9 @@ def read_campaign(path: Path) -> dict:
         if attrs.get("schema") != SCHEMA:
             raise CampaignFileError(f"{path}: an HDF5 file but not a noisebo campaign (no schema {SCHEMA!r})")
         version = int(attrs.get("schema_version", -1))
-        if version != SCHEMA_VERSION:
-            raise CampaignFileError(f"{path}: campaign schema version {version}; this noisebo reads {SCHEMA_VERSION}")
+        if version not in READABLE_VERSIONS:
+            raise CampaignFileError(f"{path}: campaign schema version {version}; this noisebo reads "
+                                    f"{', '.join(map(str, READABLE_VERSIONS))}")
         try:
             out = {
                 "attrs": {k: (v.item() if hasattr(v, "item") else v) for k, v in attrs.items()},
@@ -328,6 +332,8 @@ def read_campaign(path: Path) -> dict:
                 out["summary"] = {k: v[()] for k, v in s.items()} | {
                     "t_opt": float(s.attrs["t_opt"]), "hyperparameters": json.loads(s.attrs["hyperparameters_json"])}
             out["attrs"]["config"] = json.loads(out["attrs"]["config_json"])
+            out["attrs"]["driver"] = json.loads(out["attrs"]["driver_json"]) if "driver_json" in attrs else {
+                "name": out["attrs"]["instrument"], "version": "not recorded (schema 1)", "settings": {}}
         except (KeyError, ValueError, OSError) as error:
             raise CampaignFileError(f"{path}: damaged campaign file ({error})") from None
     return out

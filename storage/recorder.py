@@ -37,6 +37,24 @@ def package_versions() -> dict[str, str]:
     return out
 
 
+def read_started(h5_path: Path) -> Started:
+    """The first event of a campaign's journal (its config, seed and driver), read without
+    taking the journal's lock."""
+    h5_path = Path(h5_path)
+    jpath = journal_path(h5_path)
+    if not jpath.exists():
+        what = "no campaign file" if not h5_path.exists() else "no journal beside it"
+        raise CampaignFileError(f"cannot resume {h5_path}: {what} ({jpath} is missing)")
+    found, _ = journal.read(jpath)
+    try:
+        started = records.decode(found[0]) if found else None
+    except records.CorruptJournal as error:
+        raise CampaignFileError(f"cannot resume {h5_path}: {error}") from None
+    if not isinstance(started, Started):
+        raise CampaignFileError(f"cannot resume {h5_path}: the journal does not start with a campaign record")
+    return started
+
+
 SNAPSHOT_AFTER = (Started, PointCommitted, Summarised, StatusChanged)
 
 

@@ -25,17 +25,33 @@ def rrd_path_for(h5_path: Path) -> Path:
     return Path(h5_path).with_suffix(".rrd")
 
 
-def instrument_curves(config: CampaignConfig, instrument=None) -> tuple[np.ndarray | None, Callable | None]:
-    """The instrument's truth on the x grid and its noise law, where it knows them (else None)."""
+def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[str], None] | None = None,
+                      source: tuple[Path, dict] | None = None) -> tuple[np.ndarray | None, Callable | None]:
+    """The instrument's truth on the x grid and its noise law where it is a simulator (else
+    None): a device, a driver that is not installed here or a scan that is not on this machine
+    gives None."""
     try:
         if instrument is None:
             from instruments import build
+            from instruments.registry import DriverNotInstalled
 
-            instrument = build(config.instrument)
-        truth = instrument.truth(grids(config).x)
-        law = instrument.noise_law
-        law = law if law(np.asarray([config.space.t_min])) is not None else None
-        return (None if truth is None else np.asarray(truth, dtype=np.float64)), law
+            try:
+                instrument = build(config.instrument)
+            except DriverNotInstalled as error:
+                if warn is not None:
+                    what = error
+                    if source is not None:
+                        path, driver = source
+                        what = (f"{path} was made with the instrument driver {driver['name']!r} {driver['version']}, "
+                                "which is not installed here")
+                    warn(f"{what}: drawn without the instrument's ground truth and noise law")
+                return None, None
+        from instruments.base import is_simulator
+
+        if not is_simulator(instrument):
+            return None, None
+        truth = instrument.truth(grids(config).x[:, None])
+        return np.asarray(truth, dtype=np.float64), instrument.noise_law
     except Exception:  # noqa: BLE001 - e.g. a replayed PFM file whose scan is not on this machine
         return None, None
 
@@ -94,7 +110,7 @@ def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], No
     data = read_campaign(h5_path)
     config = parse_config(data["attrs"]["config"])
     rrd_path = Path(rrd_path) if rrd_path is not None else rrd_path_for(h5_path)
-    truth, law = instrument_curves(config)
+    truth, law = instrument_curves(config, warn=warn, source=(h5_path, data["attrs"]["driver"]))
     name = f"{h5_path.stem}"
     view = RerunView(config, name, rrd=rrd_path, truth=truth, noise_law=law, warn=warn, wall_clock=False)
     all_frames = frames(data, config)

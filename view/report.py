@@ -25,6 +25,12 @@ from view.style import step_colours
 DPI = 130
 
 
+def _warn(line: str) -> None:
+    import sys
+
+    print(f"noisebo: {line}", file=sys.stderr, flush=True)
+
+
 def report(target: Path, out_dir: Path | None = None) -> list[Path]:
     """Write the figures of a campaign file or a sweep directory; returns the files written."""
     target = Path(target)
@@ -43,7 +49,7 @@ def _units(config: CampaignConfig) -> tuple[str, str]:
 def campaign_report(path: Path, out_dir: Path) -> list[Path]:
     data = read_campaign(path)
     config = parse_config(data["attrs"]["config"])
-    truth, law = instrument_curves(config)
+    truth, law = instrument_curves(config, warn=_warn, source=(path, data["attrs"]["driver"]))
     out_dir.mkdir(parents=True, exist_ok=True)
     fig = Figure(figsize=(12, 8.5), layout="constrained")
     (ax_map, ax_t), (ax_f, ax_noise) = fig.subplots(2, 2)

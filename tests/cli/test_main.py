@@ -8,6 +8,10 @@ import pytest
 
 from cli.main import main, parse_seeds
 from flows.campaign import start_campaign
+from noisebo.config import CampaignConfig
+from noisebo.engine import new_campaign
+from noisebo.events import DriverInfo
+from storage.recorder import Recorder
 
 
 def snapshot(folder):
@@ -34,6 +38,10 @@ def setup_files(tmp_path, tiny_yaml):
         f.attrs["schema"] = "noisebo.campaign"
         f.attrs["schema_version"] = 99
     (tmp_path / "nothing").mkdir()
+    (tmp_path / "binary.yaml").write_bytes(b"\x89HDF\r\n\x1a\n\x00\xff\xfe")
+    foreign = CampaignConfig().with_overrides(instrument={"kind": "gramacy-lee", "settings": {"a": 1}})
+    started = new_campaign(foreign, 0, DriverInfo("gramacy-lee", "0.3", {"a": 1}), {}, "2026-01-01T00:00:00+00:00")
+    Recorder.create(tmp_path / "elsewhere.h5", started).close()
     runs = tmp_path / "runs"
     runs.mkdir()
     (runs / "tiny_reward_s0000.h5").write_bytes(b"existing results")
@@ -48,6 +56,9 @@ BAD_CONFIGS = {  # file -> text; each is also a CASES row
     "negative_shots.yaml": "schedule: {shots_before: -3}\n",
     "future.yaml": "schema_version: 99\n",
     "empty.yaml": "",
+    "bad_setting.yaml": "instrument: {kind: forrester, settings: {a0: -1}}\n",
+    "unknown_setting.yaml": "instrument: {kind: forrester, settings: {colour: red}}\n",
+    "v1_layout.yaml": "instrument: {kind: forrester, a0: 0.1}\n",
 }
 
 CASES = [
@@ -61,7 +72,13 @@ CASES = [
     (["run", "empty.yaml"], "empty.yaml: the file is empty"),
     (["run", "broken.yaml"], "broken.yaml: not valid YAML at line 2"),
     (["run", "inverted.yaml"], "t_min (5.0) must be below t_max (1.0)"),
-    (["run", "laser.yaml"], "instrument"),
+    (["run", "laser.yaml"], "instrument.kind: no installed instrument driver 'laser'; installed: forrester, pfm"),
+    (["run", "bad_setting.yaml"], "instrument.settings.a0: Input should be greater than or equal to 0"),
+    (["run", "unknown_setting.yaml"], "instrument.settings.colour: Extra inputs are not permitted"),
+    (["run", "v1_layout.yaml"], "instrument.a0: Extra inputs are not permitted (a driver's own settings go under"),
+    (["run", "binary.yaml"], "not a text (UTF-8) file"),
+    (["resume", "elsewhere.h5"], "was made with the instrument driver 'gramacy-lee' 0.3, which is not installed here"),
+    (["sweep", "laser.yaml", "--seeds", "1"], "no installed instrument driver 'laser'"),
     (["run", "extra.yaml"], "colour: Extra inputs are not permitted"),
     (["run", "absent.yaml"], "cannot read config"),
     (["run", "TINY", "--policy", "greedy"], "invalid choice: 'greedy'"),
@@ -167,3 +184,16 @@ def test_a_file_held_by_a_running_campaign_is_not_resumed_but_can_be_read(tiny_c
         assert main(["inspect", str(path)]) == 0  # its last snapshot, written whole, is readable
         assert "status running" in capsys.readouterr().out
         assert snapshot(tmp_path) == before
+
+
+def test_a_schema_1_file_opens_for_inspect_report_and_replay(tmp_path, capsys):
+    from pathlib import Path
+
+    old = tmp_path / "forrester_schema1.h5"
+    shutil.copy(Path(__file__).resolve().parents[1] / "data" / "forrester_schema1.h5", old)
+    assert main(["inspect", str(old), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["schema_version"] == 1 and data["status"] == "completed" and len(data["points"]) == 7
+    assert data["driver"] == {"name": "forrester", "version": "not recorded (schema 1)", "settings": {}}
+    assert main(["report", str(old)]) == 0 and (tmp_path / "forrester_schema1_report.png").stat().st_size > 20_000
+    assert main(["replay", str(old)]) == 0 and old.with_suffix(".rrd").stat().st_size > 10_000

@@ -16,7 +16,8 @@ from storage.hdf5 import read_campaign, read_spectra
 
 PFM_TINY = CampaignConfig().with_overrides(
     name="pfm-tiny",
-    instrument={"kind": "pfm", "profile": {"source": "synthetic", "length_um": 1.0, "n_domains": 3}},
+    instrument={"kind": "pfm", "settings": {"profile": {"source": "synthetic", "length_um": 1.0, "n_domains": 3}}},
+    reduction={"sho": {"nominal_resonance_hz": 372_000.0, "nominal_q": 250.0}},
     space={"x_min": 0.0, "x_max": 1.0, "t_min": 0.1, "t_max": 0.4, "n_x": 40, "n_t": 16},
     reward={"alpha": 1.0, "beta": 2.0},
     acquisition={"policy": "double"},

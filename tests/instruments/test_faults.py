@@ -10,14 +10,13 @@ import pytest
 from instruments import build
 from instruments.faults import FaultyInstrument
 from instruments.forrester import ForresterInstrument
-from noisebo.config import FAULT_KINDS, CampaignConfig, ForresterInstrumentConfig
+from noisebo.config import FAULT_KINDS, CampaignConfig, FaultsConfig, InstrumentConfig
 from noisebo.failures import FailureBudgetExceeded, InstrumentError, InstrumentTimeout, check_budget
 from storage.hdf5 import read_campaign
 
 
 def faulty(**rates):
-    return FaultyInstrument(ForresterInstrument(ForresterInstrumentConfig()), ForresterInstrumentConfig(
-        faults=rates).faults)
+    return FaultyInstrument(ForresterInstrument(), FaultsConfig(**rates))
 
 
 def test_the_ledger_counts_every_fault_and_rates_hold():
@@ -26,11 +25,11 @@ def test_the_ledger_counts_every_fault_and_rates_hold():
     rng = np.random.default_rng(0)
     for _ in range(2000):
         try:
-            value = inst.measure(0.5, 1.0, rng).value
+            value = inst.simulate(np.array([0.5]), 1.0, rng).value
         except InstrumentError:
             outcomes["exception"] += 1
             continue
-        truth = float(inst.truth(np.array([0.5]))[0])
+        truth = float(inst.truth(np.array([[0.5]]))[0])
         outcomes["nan" if np.isnan(value) else "outlier" if abs(value - truth) > 30 else "ok"] += 1
     counts = inst.counts()
     assert {k: counts[k] for k in ("exception", "nan", "outlier")} == {k: outcomes[k] for k in ("exception", "nan", "outlier")}
@@ -39,24 +38,25 @@ def test_the_ledger_counts_every_fault_and_rates_hold():
 
 
 def test_a_retried_shot_gets_its_real_reading():
-    clean = ForresterInstrument(ForresterInstrumentConfig())
+    clean = ForresterInstrument()
     inst = faulty(exception=0.5, seed=1)
-    expected = clean.measure(0.3, 2.0, np.random.default_rng(7)).value
+    x = np.array([0.3])
+    expected = clean.simulate(x, 2.0, np.random.default_rng(7)).value
     readings = []
     for _ in range(20):
         try:
-            readings.append(inst.measure(0.3, 2.0, np.random.default_rng(7)).value)
+            readings.append(inst.simulate(x, 2.0, np.random.default_rng(7)).value)
         except InstrumentError:
             pass
     assert 0 < len(readings) < 20 and readings == [expected] * len(readings)
 
 
 def test_an_injected_hang_is_cut_off_by_the_guard_within_half_a_second():
-    config = ForresterInstrumentConfig(timeout_s=0.3, faults={"timeout": 1.0, "hang_s": 5.0})
+    config = InstrumentConfig(kind="forrester", timeout_s=0.3, faults={"timeout": 1.0, "hang_s": 5.0})
     inst = build(config)
     started = time.perf_counter()
     with pytest.raises(InstrumentTimeout):
-        inst.measure(0.5, 1.0, np.random.default_rng(0))
+        inst.simulate(np.array([0.5]), 1.0, np.random.default_rng(0))
     assert time.perf_counter() - started < 0.3 + 0.5
     assert inst.ledger[0]["kind"] == "timeout"  # the guard passes the ledger through
 
@@ -92,10 +92,12 @@ def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tin
     assert kinds.count("timeout") == counts["timeout"] and kinds.count("instrument error") == counts["exception"]
     assert reasons.count("non-finite reading") == counts["nan"] + counts["inf"]
     assert data["attrs"]["status"] == "completed" and sum(counts.values()) > 10
-    # instrument errors and timeouts are retried with the same key: points equal the clean run's
-    # wherever no NaN or inf reading was rejected
-    clean = run_campaign(tiny_config, build(tiny_config.instrument), 2)
-    assert len(data["points"]["x"]) == len(clean.state.points)
+    # the same campaign in this process, with the same faults injected, is the same shot for shot,
+    # failed attempt for failed attempt
+    alone = run_campaign(config, build(config.instrument), 2).final
+    np.testing.assert_array_equal(data["points"]["value"], [p.value for p in alone.data.points])
+    np.testing.assert_array_equal(data["shots"]["value"], [v.value for p in alone.points for v in p.committed.values])
+    assert kinds == [f.kind for f in alone.failures] and len(alone.failures) > 3
 
 
 def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config, prefect_harness, tmp_path):
@@ -119,17 +121,17 @@ def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config
 
 @pytest.mark.parametrize("kind, reason", [("corrupt_spectrum", ""), ("nan", ""), ("outlier", None)])
 def test_spectrum_faults_never_give_a_usable_wrong_value_silently(kind, reason):
-    from noisebo.config import PFMInstrumentConfig
+    from noisebo.config import ReductionConfig
     from noisebo.reduction import shot_value
 
-    config = PFMInstrumentConfig(profile={"source": "synthetic", "length_um": 1.0, "n_domains": 3},
-                                 faults={kind: 1.0, "outlier_sd": 20.0})
+    config = InstrumentConfig(kind="pfm", settings={"profile": {"source": "synthetic", "length_um": 1.0, "n_domains": 3}},
+                              faults={kind: 1.0, "outlier_sd": 20.0})
     inst = build(config)
-    reading = inst.measure(0.4, 0.2, np.random.default_rng(0))
-    shot = shot_value(reading, config)
+    reading = inst.simulate(np.array([0.4]), 0.2, np.random.default_rng(0))
+    shot = shot_value(reading, ReductionConfig(sho={"nominal_resonance_hz": 372_000.0, "nominal_q": 250.0}))
     assert inst.ledger[0]["kind"] == kind
     if reason is None:  # an outlier is a fine sweep of a wrong amplitude: caught by clipping, not here
-        truth = float(inst.truth(np.array([0.4]))[0])
+        truth = float(inst.truth(np.array([[0.4]]))[0])
         assert shot.ok and abs(abs(shot.value) - abs(truth)) > 10 * float(inst.noise_law(np.array([0.2]))[0])
     else:
         assert not shot.ok and shot.reason and np.isnan(shot.value)

@@ -2,8 +2,11 @@ import numpy as np
 import pytest
 
 from instruments import Instrument, build
-from instruments.forrester import ForresterInstrument, forrester
-from noisebo.config import ForresterInstrumentConfig
+from instruments.base import Simulator
+from instruments.forrester import ForresterInstrument, ForresterSettings, forrester
+from noisebo.config import InstrumentConfig
+
+X = np.array([0.5])
 
 
 def test_forrester_values_by_hand():
@@ -12,27 +15,34 @@ def test_forrester_values_by_hand():
 
 
 def test_driver_satisfies_the_protocol_and_is_built_from_config():
-    inst = build(ForresterInstrumentConfig(a0=0.3, a1=1.0))
-    assert isinstance(inst, Instrument) and isinstance(inst, ForresterInstrument)
+    inst = build(InstrumentConfig(kind="forrester", settings={"a0": 0.3, "a1": 1.0}))
+    assert isinstance(inst, Instrument) and isinstance(inst, Simulator) and isinstance(inst, ForresterInstrument)
     assert inst.noise_law(np.array([4.0]))[0] == pytest.approx(0.8)
 
 
 def test_shots_have_the_configured_mean_and_noise():
-    inst = ForresterInstrument(ForresterInstrumentConfig(a0=0.1, a1=2.0))
+    inst = ForresterInstrument(ForresterSettings(a0=0.1, a1=2.0))
     rng = np.random.default_rng(0)
-    shots = np.array([inst.measure(0.5, 1.0, rng).value for _ in range(4000)])
+    shots = np.array([inst.simulate(X, 1.0, rng).value for _ in range(4000)])
     assert shots.mean() == pytest.approx(forrester(0.5), abs=4 * 2.1 / np.sqrt(4000))
     assert shots.std(ddof=1) == pytest.approx(2.1, rel=0.05)
 
 
 def test_same_key_same_shot():
     inst = ForresterInstrument()
-    a = inst.measure(0.3, 2.0, np.random.default_rng(7)).value
-    b = inst.measure(0.3, 2.0, np.random.default_rng(7)).value
+    a = inst.simulate(np.array([0.3]), 2.0, np.random.default_rng(7)).value
+    b = inst.simulate(np.array([0.3]), 2.0, np.random.default_rng(7)).value
     assert a == b
+    # measure(x, t), as a device would be called, draws from the driver's own seeded stream
+    assert ForresterInstrument().measure(X, 1.0) == ForresterInstrument().measure(X, 1.0)
 
 
-@pytest.mark.parametrize("x, t", [(0.5, 0.0), (0.5, -1.0), (float("nan"), 1.0), (0.5, float("inf"))])
+def test_truth_takes_positions_as_rows_of_coordinates():
+    np.testing.assert_allclose(ForresterInstrument().truth(np.array([[0.0], [1 / 3]])), [4 * np.sin(-4), 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("x, t", [([0.5], 0.0), ([0.5], -1.0), ([float("nan")], 1.0), ([0.5], float("inf")),
+                                  ([0.5, 0.5], 1.0)])
 def test_bad_coordinates_are_rejected(x, t):
     with pytest.raises(ValueError, match="Forrester shot"):
-        ForresterInstrument().measure(x, t, np.random.default_rng(0))
+        ForresterInstrument().measure(np.array(x), t)

@@ -7,27 +7,22 @@ import pytest
 from instruments import build
 from instruments.base import Reading
 from instruments.guard import InstrumentTimeout, TimeoutGuard
-from noisebo.config import ForresterInstrumentConfig
+from noisebo.config import InstrumentConfig
 
 
 class Sticky:
     """Hangs on calls whose x is negative (until released), answers otherwise."""
 
     name = "sticky"
+    version = "1"
 
     def __init__(self):
         self.release = threading.Event()
 
-    def measure(self, x, t, rng):
-        if x < 0:
+    def measure(self, x, t):
+        if x[0] < 0:
             self.release.wait(30)
-        return Reading(float(x))
-
-    def truth(self, x):
-        return None
-
-    def noise_law(self, t):
-        return None
+        return Reading(float(x[0]))
 
 
 def test_a_hanging_call_is_cut_off_at_the_timeout_and_the_next_call_works():
@@ -35,18 +30,19 @@ def test_a_hanging_call_is_cut_off_at_the_timeout_and_the_next_call_works():
     guard = TimeoutGuard(inner, 0.3)
     started = time.monotonic()
     with pytest.raises(InstrumentTimeout, match="no reading within 0.3 s"):
-        guard.measure(-1.0, 1.0, np.random.default_rng(0))
+        guard.measure(np.array([-1.0]), 1.0)
     assert time.monotonic() - started < 0.3 + 0.5
-    assert guard.measure(2.0, 1.0, np.random.default_rng(0)).value == 2.0
+    assert guard.measure(np.array([2.0]), 1.0).value == 2.0
     inner.release.set()
 
 
 def test_build_wraps_a_driver_when_a_timeout_is_configured():
-    guarded = build(ForresterInstrumentConfig(timeout_s=5.0))
+    guarded = build(InstrumentConfig(kind="forrester", timeout_s=5.0))
     assert isinstance(guarded, TimeoutGuard) and guarded.name == "forrester"
-    plain = build(ForresterInstrumentConfig())
+    plain = build(InstrumentConfig(kind="forrester"))
     rng = lambda: np.random.default_rng(3)  # noqa: E731
-    assert guarded.measure(0.4, 2.0, rng()).value == plain.measure(0.4, 2.0, rng()).value
+    x = np.array([0.4])
+    assert guarded.simulate(x, 2.0, rng()).value == plain.simulate(x, 2.0, rng()).value
 
 
 def test_timeout_must_be_positive():
@@ -56,8 +52,8 @@ def test_timeout_must_be_positive():
 
 def test_driver_errors_reach_the_caller():
     class Broken(Sticky):
-        def measure(self, x, t, rng):
+        def measure(self, x, t):
             raise RuntimeError("laser interlock open")
 
     with pytest.raises(RuntimeError, match="laser interlock open"):
-        TimeoutGuard(Broken(), 1.0).measure(0.1, 1.0, np.random.default_rng(0))
+        TimeoutGuard(Broken(), 1.0).measure(np.array([0.1]), 1.0)

@@ -2,12 +2,14 @@ import numpy as np
 import pytest
 
 from instruments import Instrument, build
-from instruments.pfm import PFMInstrument
-from instruments.pfm_profile import ProfileError, scan_profile, synthetic_profile
-from noisebo.config import ConfigError, PFMInstrumentConfig, ScanProfileConfig, SyntheticProfileConfig, parse_config
+from instruments.pfm import PFMInstrument, PFMSettings
+from instruments.pfm_profile import ProfileError, ScanProfileConfig, SyntheticProfileConfig, scan_profile, synthetic_profile
+from instruments.registry import validated
+from noisebo.config import ConfigError, InstrumentConfig, ReductionConfig, parse_config
 from noisebo.reduction import shot_value
 
-SYNTH = PFMInstrumentConfig(profile=SyntheticProfileConfig(length_um=1.0, n_domains=2, amplitude_pm=100.0, seed=0))
+SYNTH = PFMSettings(profile=SyntheticProfileConfig(length_um=1.0, n_domains=2, amplitude_pm=100.0, seed=0))
+TUNED = ReductionConfig(sho={"nominal_resonance_hz": 372_000.0, "nominal_q": 250.0})
 
 
 def test_scan_profile_is_the_signed_amplitude_along_the_line():
@@ -23,11 +25,12 @@ def test_synthetic_profile_alternates_sign_and_vanishes_at_walls():
 
 
 def test_driver_fits_the_protocol_and_is_deterministic():
-    inst = build(SYNTH)
+    inst = build(InstrumentConfig(kind="pfm", settings=SYNTH.model_dump(mode="json")))
     assert isinstance(inst, Instrument) and inst.name == "pfm"
-    a = inst.measure(0.25, 0.3, np.random.default_rng(5))
-    b = inst.measure(0.25, 0.3, np.random.default_rng(5))
+    a = inst.simulate(np.array([0.25]), 0.3, np.random.default_rng(5))
+    b = inst.simulate(np.array([0.25]), 0.3, np.random.default_rng(5))
     assert a.value is None and a.spectrum.shape == (3, 3000) and a.spectrum.dtype == np.float32
+    assert a.reduction == "sho"
     np.testing.assert_array_equal(a.spectrum, b.spectrum)
 
 
@@ -35,8 +38,8 @@ def test_fitted_sweep_measures_the_local_response():
     inst = PFMInstrument(SYNTH)
     rng = np.random.default_rng(0)
     for x in (0.25, 0.75):
-        values = [shot_value(inst.measure(x, 1.0, rng), SYNTH).value for _ in range(20)]
-        assert np.mean(values) == pytest.approx(inst.truth(x), abs=3 * inst.noise_law(np.array([1.0]))[0])
+        values = [shot_value(inst.simulate(np.array([x]), 1.0, rng), TUNED).value for _ in range(20)]
+        assert np.mean(values) == pytest.approx(inst.truth(np.array([[x]]))[0], abs=3 * inst.noise_law(np.array([1.0]))[0])
 
 
 def test_noise_law_falls_with_sweep_time_towards_the_time_independent_floor():
@@ -53,7 +56,7 @@ def test_time_independent_noise_by_hand_and_at_the_walls():
     # Without landing error: sd = sqrt(g^2 r(x)^2 + b^2) exactly (the quadrature of a constant).
     still = PFMInstrument(SYNTH.model_copy(update={"position_jitter_um": 0.0, "gain_jitter": 0.01, "background_pm": 0.5}))
     x = np.array([0.1, 0.25, 0.5])
-    np.testing.assert_allclose(still.static_sd(x), np.sqrt((0.01 * still.truth(x)) ** 2 + 0.25), rtol=1e-9)
+    np.testing.assert_allclose(still.static_sd(x), np.sqrt((0.01 * still.truth(x[:, None])) ** 2 + 0.25), rtol=1e-9)
     # With it, a domain wall (x = 0.5) is noisier than a domain's middle.
     shaky = PFMInstrument(SYNTH.model_copy(update={"position_jitter_um": 0.005}))
     middle, wall = shaky.static_sd(np.array([0.25, 0.5]))
@@ -69,24 +72,26 @@ def test_time_independent_noise_by_hand_and_at_the_walls():
 )
 def test_bad_profiles_name_the_problem(change, message):
     with pytest.raises(ProfileError, match=message):
-        PFMInstrument(PFMInstrumentConfig(**change))
+        PFMInstrument(PFMSettings(**change))
 
 
 @pytest.mark.parametrize(
     "instrument, field",
     [
-        ({"kind": "pfm", "q": 0.5}, "instrument.pfm.q"),
-        ({"kind": "pfm", "sweep_half_span_hz": 400000.0}, "sweep_half_span_hz must be below"),
-        ({"kind": "pfm", "profile": {"source": "scan", "start_px": [3, 3], "end_px": [3, 3]}}, "must differ"),
-        ({"kind": "pfm", "profile": {"source": "film"}}, "instrument.pfm.profile"),
-        ({"kind": "pfm", "sample_noise_pm": -1}, "sample_noise_pm"),
+        ({"q": 0.5}, "instrument.settings.q"),
+        ({"sweep_half_span_hz": 400000.0}, "sweep_half_span_hz must be below"),
+        ({"profile": {"source": "scan", "start_px": [3, 3], "end_px": [3, 3]}}, "must differ"),
+        ({"profile": {"source": "film"}}, "instrument.settings.profile"),
+        ({"sample_noise_pm": -1}, "instrument.settings.sample_noise_pm"),
+        ({"q_bounds": [5, 500]}, "instrument.settings.q_bounds: Extra inputs are not permitted"),
     ],
 )
-def test_bad_pfm_config_is_rejected_naming_the_field(instrument, field):
+def test_bad_pfm_settings_are_rejected_by_the_driver_naming_the_field(instrument, field):
+    config = parse_config({"instrument": {"kind": "pfm", "settings": instrument}})
     with pytest.raises(ConfigError, match=field):
-        parse_config({"instrument": instrument})
+        validated(config)
 
 
 def test_measuring_outside_the_profile_is_an_error():
     with pytest.raises(ValueError, match="outside the profile"):
-        PFMInstrument(SYNTH).measure(1.5, 0.1, np.random.default_rng(0))
+        PFMInstrument(SYNTH).measure(np.array([1.5]), 0.1)

@@ -68,7 +68,7 @@ def test_no_recompilation_after_the_first_step(short_run):
 
 
 def test_measured_noise_needs_two_usable_shots():
-    forrester = CampaignConfig().instrument
+    forrester = CampaignConfig().reduction
     with pytest.raises(NoUsableShots, match="1 of 1 shots usable, 2 needed"):
         make_point(0.1, 1.0, [Reading(2.0)], None, forrester)
     with pytest.raises(NoUsableShots, match="1 of 2 shots usable, 2 needed .non-finite reading"):
@@ -106,10 +106,10 @@ def test_clipping_ignores_shots_already_rejected_and_the_point_uses_the_rest():
 
     from instruments.base import Reading
     from noisebo.campaign import make_point
-    from noisebo.config import ForresterInstrumentConfig
+    from noisebo.config import ReductionConfig
 
     readings = [Reading(v) for v in (9.5, 10.0, 10.5, 11.0, 16.0, float("nan"))]
-    point, shots = make_point(0.5, 1.0, readings, None, ForresterInstrumentConfig(), clip_sd=3.0)
+    point, shots = make_point(0.5, 1.0, readings, None, ReductionConfig(), clip_sd=3.0)
     assert [s.ok for s in shots] == [True, True, True, True, False, False]
     assert shots[5].reason == "non-finite reading"
     assert point.value == pytest.approx(10.25) and point.n_shots == 4

@@ -9,7 +9,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_shipped_forrester_config_has_the_papers_settings():
     cfg = load_config(ROOT / "data" / "configs" / "forrester.yaml")
-    assert (cfg.instrument.a0, cfg.instrument.a1) == (0.1, 2.0)
+    assert cfg.instrument.kind == "forrester" and cfg.instrument.settings == {"a0": 0.1, "a1": 2.0}
     assert (cfg.reward.alpha, cfg.reward.beta, cfg.reward.gamma) == (0.1, 2.0, 5.0)
     assert (cfg.space.x_min, cfg.space.x_max, cfg.space.t_min, cfg.space.t_max) == (0.0, 1.0, 0.2, 10.0)
     s = cfg.schedule
@@ -23,6 +23,23 @@ def test_config_is_frozen_and_hashable():
     with pytest.raises(Exception):
         cfg.name = "other"
     assert hash(cfg) == hash(CampaignConfig())
+    one = cfg.with_overrides(instrument={"settings": {"a0": 0.2, "a1": 1.0}})
+    assert hash(one) == hash(cfg.with_overrides(instrument={"settings": {"a1": 1.0, "a0": 0.2}})) != hash(cfg)
+
+
+def test_a_schema_1_config_is_migrated():
+    v1 = {"schema_version": 1, "instrument": {"kind": "pfm", "q": 300.0, "q_bounds": [10, 1000], "timeout_s": 5.0}}
+    cfg = parse_config(v1)
+    assert cfg.schema_version == 2 and cfg.instrument.settings == {"q": 300.0} and cfg.instrument.timeout_s == 5.0
+    assert cfg.reduction.sho.q_bounds == (10, 1000) and cfg.reduction.sho.nominal_q == 300.0
+    assert parse_config({"schema_version": 1, "instrument": {"kind": "forrester", "a0": 0.3}}).instrument.settings == {"a0": 0.3}
+
+
+def test_a_config_that_is_not_text_is_one_clear_error(tmp_path):
+    path = tmp_path / "scan.yaml"
+    path.write_bytes(b"\x89HDF\r\n\x1a\n\x00\xff\xfe")
+    with pytest.raises(ConfigError, match="not a text .UTF-8. file: byte 0 cannot be decoded"):
+        load_config(path)
 
 
 def test_overrides_validate_and_leave_the_original_alone():
@@ -48,7 +65,10 @@ BAD = [
     ({"reward": {"alpha": -0.1}}, "reward.alpha"),
     ({"colour": "blue"}, "colour: Extra inputs are not permitted"),
     ({"space": {"n_z": 3}}, "space.n_z"),
-    ({"instrument": {"kind": "laser"}}, "instrument"),
+    ({"instrument": {"kind": ""}}, "instrument.kind"),
+    ({"instrument": {"kind": "forrester", "a0": 0.1}}, "instrument.a0: Extra inputs are not permitted"),
+    ({"instrument": {"kind": "forrester", "settings": [1]}}, "instrument.settings"),
+    ({"reduction": {"sho": {"nominal_q": 3.0}}}, "give both nominal_resonance_hz and nominal_q"),
     ({"instrument": {"a0": 0.1}}, "instrument.kind: Field required"),
     ({"acquisition": {"f_acquisition": "pi"}}, "acquisition.f_acquisition"),
     ({"noise_model": {"a1_prior": {"low": 5, "high": 1}}}, "noise_model.a1_prior"),

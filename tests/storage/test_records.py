@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from noisebo.config import CampaignConfig, PFMInstrumentConfig
+from noisebo.config import CampaignConfig, ReductionConfig
 from noisebo.decision import Decision
 from noisebo.events import (
     Decided, DriverInfo, MoreShots, PointCommitted, ShotFailed, ShotTaken, Started, Status, StatusChanged, Summarised,
@@ -36,11 +36,11 @@ def decision():
 
 
 def pfm_point():
-    config = PFMInstrumentConfig(profile={"source": "synthetic"})
-    from instruments.pfm import PFMInstrument
+    from instruments.pfm import PFMInstrument, PFMSettings
 
-    reading = PFMInstrument(config).measure(0.3, 0.2, np.random.default_rng(0))
-    return reading, PointCommitted(3, 1, POINT, (shot_value(reading, config), ShotValue(np.nan, False, "non-finite reading", None)))
+    reading = PFMInstrument(PFMSettings(profile={"source": "synthetic"})).simulate(np.array([0.3]), 0.2, np.random.default_rng(0))
+    value = shot_value(reading, ReductionConfig())
+    return reading, PointCommitted(3, 1, POINT, (value, ShotValue(np.nan, False, "non-finite reading", None)))
 
 
 @pytest.mark.parametrize("event", [

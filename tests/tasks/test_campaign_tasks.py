@@ -10,6 +10,7 @@ from noisebo import driver, engine
 from noisebo.events import Decided, Request, ShotError
 from noisebo.failures import InstrumentError
 from noisebo.keys import MEASURE, numpy_rng
+from noisebo.reduction import Reading
 from storage import journal
 from tasks import campaign as ops
 
@@ -24,18 +25,36 @@ class Flaky:
     def __init__(self, config, failures, error):
         self.inner, self.failures, self.error, self.calls = build(config.instrument), failures, error, 0
 
-    def measure(self, x, t, rng):
+    def measure(self, x, t):
         self.calls += 1
         if self.calls <= self.failures:
             raise self.error
-        return self.inner.measure(x, t, rng)
+        return self.inner.measure(x, t)
 
 
 def test_measure_takes_the_next_shot_with_its_own_key(tiny_config):
     inst = build(tiny_config.instrument)
     reading = ops.measure.fn(inst, 7, REQUEST)
-    expected = inst.measure(0.3, 2.0, numpy_rng(7, MEASURE, 2, 1))
+    expected = inst.simulate(np.array([0.3]), 2.0, numpy_rng(7, MEASURE, 2, 1))
     assert reading == expected
+
+
+class Device:
+    """A device: measure(x, t) only, no simulate."""
+
+    name, version = "device", "1"
+
+    def __init__(self):
+        self.calls = []
+
+    def measure(self, x, t):
+        self.calls.append((x.tolist(), t))
+        return Reading(1.0)
+
+
+def test_a_device_is_asked_to_measure_at_the_coordinate_vector():
+    device = Device()
+    assert ops.measure.fn(device, 7, REQUEST) == Reading(1.0) and device.calls == [([0.3], 2.0)]
 
 
 def test_an_instrument_error_is_a_shot_error_not_an_exception(tiny_config):

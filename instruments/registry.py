@@ -1,0 +1,116 @@
+"""Instrument drivers found by name: the entry-point group ``noisebo.instruments``.
+
+A driver package declares, in its pyproject.toml,
+
+    [project.entry-points."noisebo.instruments"]
+    my-device = "my_package.driver:MyDevice"
+
+where ``MyDevice`` has a pydantic ``Settings`` model, ``name`` and ``version`` attributes, a
+constructor taking its settings, and ``measure(x, t)`` (see ``instruments.base``). The built-in
+drivers register the same way in noisebo's own pyproject.toml.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib.metadata import EntryPoint, entry_points
+
+from pydantic import BaseModel, ValidationError
+
+from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
+from noisebo.events import DriverInfo
+
+GROUP = "noisebo.instruments"
+
+
+class DriverNotInstalled(ConfigError):
+    """No installed driver has the name a config or a campaign file asks for."""
+
+
+class DriverBroken(ConfigError):
+    """An installed driver that cannot be loaded or does not provide what a driver must."""
+
+
+@dataclass(frozen=True)
+class Installed:
+    """One installed driver: its name, the object path its entry point names, and the
+    distribution (package) that provides it."""
+
+    name: str
+    target: str
+    distribution: str
+    distribution_version: str
+
+
+def installed() -> dict[str, Installed]:
+    """Every installed driver by name."""
+    out = {}
+    for ep in entry_points(group=GROUP):
+        dist = getattr(ep, "dist", None)
+        out[ep.name] = Installed(ep.name, ep.value, dist.name if dist else "?", dist.version if dist else "?")
+    return dict(sorted(out.items()))
+
+
+def _entry_point(kind: str) -> EntryPoint:
+    found = [ep for ep in entry_points(group=GROUP) if ep.name == kind]
+    if not found:
+        names = ", ".join(installed()) or "none"
+        raise DriverNotInstalled(f"instrument.kind: no installed instrument driver {kind!r}; installed: {names} "
+                                 "(`noisebo instruments` lists them; a driver package registers itself in the "
+                                 f"entry-point group {GROUP!r})")
+    return found[0]
+
+
+def driver_class(kind: str) -> type:
+    """The driver class registered as ``kind``."""
+    ep = _entry_point(kind)
+    try:
+        cls = ep.load()
+    except Exception as error:  # noqa: BLE001 - any import failure of a third-party package
+        raise DriverBroken(f"instrument driver {kind!r} ({ep.value}) could not be loaded: "
+                           f"{type(error).__name__}: {error}") from None
+    missing = [a for a in ("Settings", "name", "version", "measure") if not hasattr(cls, a)]
+    if missing or not (isinstance(cls.Settings, type) and issubclass(cls.Settings, BaseModel)):
+        raise DriverBroken(f"instrument driver {kind!r} ({ep.value}) lacks {', '.join(missing) or 'a pydantic Settings model'}")
+    return cls
+
+
+def settings_of(config: InstrumentConfig) -> BaseModel:
+    """The instrument's settings validated by its driver's own model."""
+    cls = driver_class(config.kind)
+    try:
+        return cls.Settings.model_validate(config.settings)
+    except ValidationError as error:
+        raise ConfigError(describe_errors(error, prefix="instrument.settings")) from None
+
+
+def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
+    """``config`` with its instrument settings checked by the driver and completed with the
+    driver's defaults; ``ConfigError`` naming the field (or the missing driver) otherwise."""
+    try:
+        settings = settings_of(config.instrument)
+        cls = driver_class(config.instrument.kind)
+    except ConfigError as error:
+        raise type(error)(f"{source}: {error}") from None
+    faults = config.instrument.faults
+    if faults is not None and faults.corrupt_spectrum > 0 and not getattr(cls, "spectra", False):
+        raise ConfigError(f"{source}: instrument.faults.corrupt_spectrum needs an instrument that returns spectra")
+    return config.with_overrides(instrument={"settings": settings.model_dump(mode="json")})
+
+
+def driver_info(config: InstrumentConfig) -> DriverInfo:
+    """What a campaign file records of its driver: name, version and the complete settings."""
+    cls = driver_class(config.kind)
+    return DriverInfo(config.kind, str(cls.version), settings_of(config).model_dump(mode="json"))
+
+
+def build(config: InstrumentConfig):
+    """The driver of ``config``, inside the fault injector if ``faults`` is set and the timeout
+    guard if ``timeout_s`` is."""
+    from instruments.faults import FaultyInstrument
+    from instruments.guard import TimeoutGuard
+
+    instrument = driver_class(config.kind)(settings_of(config))
+    if config.faults is not None:
+        instrument = FaultyInstrument(instrument, config.faults)
+    return TimeoutGuard(instrument, config.timeout_s) if config.timeout_s is not None else instrument
