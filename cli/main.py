@@ -69,18 +69,29 @@ def _run(args) -> int:
     config = _validated(args.config)
     if args.policy:
         config = config.with_overrides(acquisition={"policy": args.policy})
-    campaign_flows, _ = _prefect()
-    path = campaign_flows.campaign_path(config, args.seed, args.out)
+    from storage.recorder import campaign_path
+
+    path = campaign_path(config, args.seed, args.out)
     if path.exists() or path.with_suffix(".journal").exists():
         raise CampaignFileError(f"{path} already exists; continue it with `noisebo resume {path}`")
-    print(f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}: "
-          f"{config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}", flush=True)
+    print(f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}, instrument "
+          f"{config.instrument.kind}: {config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}",
+          flush=True)
+    _starting()
+    campaign_flows, _ = _prefect()
     with flow_settings(), _abortable(path):
         path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd,
                                        live=args.live)
     print(outcome_line(Path(path)))
     print(path)
     return 0
+
+
+def _starting() -> None:
+    """Say what the silent first seconds are for."""
+    server = os.environ.get("PREFECT_API_URL")
+    where = f"the Prefect server at {server}" if server else "Prefect's temporary local server (about 10 s)"
+    print(f"starting: loading Prefect and JAX, then {where}", flush=True)
 
 
 def outcome_line(path: Path) -> str:
@@ -104,6 +115,7 @@ def _resume(args) -> int:
         print(f"{path} is already complete: nothing to resume", file=sys.stderr)
         print(path)
         return 0
+    _starting()
     campaign_flows, _ = _prefect()
     campaign_flows.driver_of(path)  # the driver it was made with is installed, or one line says which is missing
     print(f"resuming {path}", flush=True)

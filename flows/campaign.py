@@ -21,16 +21,12 @@ from noisebo.driver import drive, now_utc
 from noisebo.engine import EngineState, new_campaign
 from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
-from storage.recorder import Recorder, package_versions, read_started
+from storage.recorder import Recorder, campaign_path, package_versions, read_started
 from tasks import campaign as ops
 
 Progress = Callable[[str], None]
+_COMPILED: list[bool] = []  # set once this process has made a decision (and compiled its programs)
 Observer = Callable[[EngineState], None]
-
-
-def campaign_path(config: CampaignConfig, seed: int, out_dir: str | Path) -> Path:
-    """Where a campaign's HDF5 file goes: OUT/NAME_POLICY_sSEED.h5."""
-    return Path(out_dir) / f"{config.name}_{config.acquisition.policy}_s{seed:04d}.h5"
 
 
 def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> CampaignConfig:
@@ -78,6 +74,10 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
         return ops.measure(quote(instrument), seed, request)
 
     def decide(state):
+        if not _COMPILED:
+            say(f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
+                "(about 10 s)")
+            _COMPILED.append(True)
         return ops.decide(quote(state))
 
     def stop_requested() -> str | None:

@@ -27,7 +27,7 @@ class ForresterSettings(BaseModel):
 
 
 class ForresterInstrument:
-    """Simulator: one-dimensional x in [0, 1]."""
+    """Forrester benchmark (simulator): f(x) = (6x-2)^2 sin(12x-4), x in [0, 1], shot noise a1/sqrt(t) + a0."""
 
     name = "forrester"
     version = noisebo.__version__

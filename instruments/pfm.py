@@ -68,7 +68,7 @@ class PFMSettings(FrozenModel):
 
 
 class PFMInstrument:
-    """Simulator: x in um along the profile; every shot a resonance sweep for the "sho" reduction."""
+    """Simulated contact-resonance PFM along a line of a scan (x in um); each shot a resonance sweep ("sho")."""
 
     name = "pfm"
     version = noisebo.__version__

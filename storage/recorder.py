@@ -23,6 +23,11 @@ from storage.journal import JournalError, JournalWriter
 PACKAGES = ("noisebo", "numpy", "scipy", "jax", "jaxlib", "numpyro", "h5py", "prefect", "pydantic", "rerun-sdk")
 
 
+def campaign_path(config, seed: int, out_dir: str | Path) -> Path:
+    """Where a campaign's HDF5 file goes: OUT/NAME_POLICY_sSEED.h5 (its journal beside it)."""
+    return Path(out_dir) / f"{config.name}_{config.acquisition.policy}_s{seed:04d}.h5"
+
+
 def journal_path(h5_path: Path) -> Path:
     return Path(h5_path).with_suffix(".journal")
 
