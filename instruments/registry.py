@@ -6,8 +6,10 @@ A driver package declares, in its pyproject.toml,
     my-device = "my_package.driver:MyDevice"
 
 where ``MyDevice`` has a pydantic ``Settings`` model, ``name`` and ``version`` attributes, a
-constructor taking its settings, and ``measure(x, t)`` (see ``instruments.base``). The built-in
-drivers register the same way in noisebo's own pyproject.toml.
+constructor taking its settings, and ``measure(x, t)`` (see ``instruments.base``). A driver whose
+readings are spectra with a reduction of its own declares it as ``reductions = {"name":
+function(spectrum) -> value}``. The built-in drivers register the same way in noisebo's own
+pyproject.toml.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from pydantic import BaseModel, ValidationError
 
 from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
 from noisebo.events import DriverInfo
+from noisebo.reduction import register_reduction
 
 GROUP = "noisebo.instruments"
 
@@ -72,6 +75,11 @@ def driver_class(kind: str) -> type:
     missing = [a for a in ("Settings", "name", "version", "measure") if not hasattr(cls, a)]
     if missing or not (isinstance(cls.Settings, type) and issubclass(cls.Settings, BaseModel)):
         raise DriverBroken(f"instrument driver {kind!r} ({ep.value}) lacks {', '.join(missing) or 'a pydantic Settings model'}")
+    for name, reduce in dict(getattr(cls, "reductions", {})).items():
+        try:
+            register_reduction(name, reduce)
+        except ValueError as error:
+            raise DriverBroken(f"instrument driver {kind!r}: {error}") from None
     return cls
 
 

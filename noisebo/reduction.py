@@ -5,7 +5,7 @@ trustworthy value is kept with ok False and the reason, and never reaches a mode
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -69,6 +69,27 @@ def sho_value(spectrum: np.ndarray, config: SHOReductionConfig) -> ShotValue:
 
 REDUCTIONS = {"sho": lambda spectrum, config: sho_value(spectrum, config.sho)}
 DEFAULT_REDUCTION = "sho"
+
+
+def register_reduction(name: str, reduce: Callable[[np.ndarray], float]) -> None:
+    """Make the reduction ``name`` available to readings that name it: ``reduce(spectrum)``
+    returns the shot's value; a non-finite value or a ``ValueError`` rejects the shot with its
+    reason. Drivers declare theirs as a ``reductions`` mapping (see ``instruments.registry``).
+    The built-in "sho" cannot be replaced; registering the same function again changes nothing."""
+    if name in REDUCTIONS and getattr(REDUCTIONS[name], "user_function", None) is not reduce:
+        raise ValueError(f"a reduction named {name!r} is registered already")
+
+    def reduction(spectrum: np.ndarray, config: ReductionConfig) -> ShotValue:
+        try:
+            value = float(reduce(spectrum))
+        except ValueError as error:
+            return ShotValue(float("nan"), False, f"{name}: {error}", None)
+        if not np.isfinite(value):
+            return ShotValue(float("nan"), False, f"{name}: non-finite value", None)
+        return ShotValue(value, True, "", None)
+
+    reduction.user_function = reduce
+    REDUCTIONS[name] = reduction
 
 
 def shot_value(reading: Reading, config: ReductionConfig) -> ShotValue:

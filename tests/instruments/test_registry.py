@@ -4,6 +4,8 @@ campaign whose driver is not installed."""
 
 import textwrap
 
+import numpy as np
+
 import pytest
 
 from flows.campaign import InstrumentUnavailable, campaign, opened
@@ -47,6 +49,32 @@ DRIVERS = {
             def measure(self, x, t):
                 raise AssertionError("never measured")
         ''',
+    "counter": '''
+        import numpy as np
+        from pydantic import BaseModel
+        from noisebo.reduction import Reading
+
+        def counts_per_s(spectrum):
+            if spectrum.shape[0] != 2:
+                raise ValueError(f"expected rows (time, counts), got {spectrum.shape[0]} rows")
+            return spectrum[1].sum() / np.ptp(spectrum[0])
+
+        class Counter:
+            """A photon counter: each shot a count trace, reduced to a rate."""
+            name, version = "counter", "0.1"
+            reductions = {"rate": counts_per_s}
+
+            class Settings(BaseModel):
+                rows: int = 2
+
+            def __init__(self, settings):
+                self.rows, self.rng = settings.rows, np.random.default_rng(0)
+
+            def measure(self, x, t):
+                counts = 10.0 * x[0] + self.rng.normal(0.0, 1.0, 11)
+                trace = np.stack([np.linspace(0.0, t, 11), counts] + [np.zeros(11)] * (self.rows - 2))
+                return Reading(None, trace, "rate")
+        ''',
     "halfdone": '''
         class HalfDone:
             name = "halfdone"
@@ -55,7 +83,7 @@ DRIVERS = {
         import a_module_that_is_not_there
         ''',
 }
-TARGETS = {"lamp": "Lamp", "jammed": "Jammed", "halfdone": "HalfDone", "typo": "Typo"}
+TARGETS = {"lamp": "Lamp", "jammed": "Jammed", "counter": "Counter", "halfdone": "HalfDone", "typo": "Typo"}
 
 
 @pytest.fixture
@@ -93,7 +121,7 @@ def config_of(kind, **settings):
 
 
 @pytest.mark.parametrize("config, error, message", [
-    (config_of("laser"), registry.DriverNotInstalled, "no installed instrument driver 'laser'; installed: forrester, "),
+    (config_of("laser"), registry.DriverNotInstalled, "no installed instrument driver 'laser'; installed: counter, forrester, halfdone, "),
     (config_of("lamp", watts=-1), ConfigError, "instrument.settings.watts: Input should be greater than 0"),
     (config_of("lamp", colour="red"), ConfigError, "instrument.settings.colour: Extra inputs are not permitted"),
     (config_of("forrester", a1="loud"), ConfigError, "instrument.settings.a1: Input should be a valid number"),
@@ -131,3 +159,22 @@ def test_opened_closes_the_instrument_after_the_campaign_even_on_error(drivers):
         with opened(Device()):
             raise RuntimeError("mid-campaign")
     assert events == ["open", "close"]
+
+
+def test_a_driver_brings_its_own_named_reduction(drivers):
+    from noisebo import driver
+    from noisebo.events import Status
+
+    config = registry.validated(config_of("counter").with_overrides(schedule={"n_seed": 2, "n_steps": 0,
+                                                                                "shots_before": 2}))
+    run = driver.run_campaign(config, registry.build(config.instrument), 1).final
+    assert run.status is Status.COMPLETED
+    for entry in run.points:
+        rates = [s.reading.spectrum[1].sum() / s.t for s in entry.shots]  # counts over the trace's t s
+        assert entry.committed.point.value == pytest.approx(np.mean(rates))
+    broken = registry.build(registry.validated(config_of("counter", rows=3)).instrument)
+    reading = broken.measure([0.5], 1.0)
+    from noisebo.reduction import shot_value
+
+    value = shot_value(reading, config.reduction)
+    assert not value.ok and value.reason == "rate: expected rows (time, counts), got 3 rows"
