@@ -1,11 +1,11 @@
-"""The campaign flow: seed points, then fit -> acquire -> measure -> reduce -> record per step.
+"""The campaign flow: the engine's loop (``noisebo.driver.drive``) with each shot a ``measure``
+task, each decision a ``decide`` task, and every event journaled before it counts.
 
-The journal is the campaign's memory: the flow reads where it stands from the recorder, so the
-same code starts a new campaign and resumes a killed one, and a resumed campaign proposes and
+The journal is the campaign's memory: the flow starts from the state the recorder replayed, so
+the same code starts a new campaign and resumes a killed one, and a resumed campaign proposes and
 measures exactly what the uninterrupted one would have. Large arguments are passed ``quote``d:
 Prefect then skips walking them for futures, which otherwise costs milliseconds per task.
 """
-
 
 from contextlib import contextmanager
 from pathlib import Path

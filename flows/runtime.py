@@ -3,7 +3,7 @@
 already set win. The cache is off by default: it saves only about 1 s per process here, and
 XLA:CPU prints alarming (harmless) machine-feature warnings when it loads cached programs.
 
-Call ``configure()`` before Prefect is imported (the CLI and the tests do).
+``configure()`` runs when the ``flows`` package is imported, before Prefect is.
 """
 
 from __future__ import annotations

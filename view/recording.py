@@ -1,6 +1,6 @@
 """A campaign's Rerun recording, live (frame by frame as the journal grows) or rebuilt from a file.
 
-``CampaignRecording.update(progress)`` is the campaign flow's observer: it logs every frame the
+``CampaignRecording.update(state)`` is the campaign flow's observer: it logs every frame the
 campaign has reached and not logged yet, so a resumed campaign first replays its history into a
 fresh recording. ``replay(h5_path, rrd_path)`` rebuilds the same frames from the HDF5 file alone.
 """
