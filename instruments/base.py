@@ -17,6 +17,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from noisebo.driver import simulates
 from noisebo.reduction import Reading  # noqa: F401 - the drivers' return type, re-exported
 
 
@@ -44,8 +45,8 @@ class Simulator(Protocol):
 
 def is_simulator(instrument) -> bool:
     """Whether the instrument (the fault injector and the timeout guard pass it through) is a
-    simulator."""
-    return isinstance(instrument, Simulator)
+    ``Simulator``: the same check the campaign loop makes before drawing a shot."""
+    return simulates(instrument)
 
 
 def build(config):

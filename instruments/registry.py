@@ -83,9 +83,10 @@ def driver_class(kind: str) -> type:
     return cls
 
 
-def settings_of(config: InstrumentConfig) -> BaseModel:
-    """The instrument's settings validated by its driver's own model."""
-    cls = driver_class(config.kind)
+def settings_of(config: InstrumentConfig, cls: type | None = None) -> BaseModel:
+    """The instrument's settings validated by its driver's own model (``cls``, or the driver
+    registered as ``config.kind``)."""
+    cls = cls or driver_class(config.kind)
     try:
         return cls.Settings.model_validate(config.settings)
     except ValidationError as error:
@@ -96,8 +97,8 @@ def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
     """``config`` with its instrument settings checked by the driver and completed with the
     driver's defaults; ``ConfigError`` naming the field (or the missing driver) otherwise."""
     try:
-        settings = settings_of(config.instrument)
         cls = driver_class(config.instrument.kind)
+        settings = settings_of(config.instrument, cls)
     except ConfigError as error:
         raise type(error)(f"{source}: {error}") from None
     faults = config.instrument.faults
@@ -109,7 +110,7 @@ def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
 def driver_info(config: InstrumentConfig) -> DriverInfo:
     """What a campaign file records of its driver: name, version and the complete settings."""
     cls = driver_class(config.kind)
-    return DriverInfo(config.kind, str(cls.version), settings_of(config).model_dump(mode="json"))
+    return DriverInfo(config.kind, str(cls.version), settings_of(config, cls).model_dump(mode="json"))
 
 
 def build(config: InstrumentConfig):
@@ -118,7 +119,8 @@ def build(config: InstrumentConfig):
     from instruments.faults import FaultyInstrument
     from instruments.guard import TimeoutGuard
 
-    instrument = driver_class(config.kind)(settings_of(config))
+    cls = driver_class(config.kind)
+    instrument = cls(settings_of(config, cls))
     if config.faults is not None:
         instrument = FaultyInstrument(instrument, config.faults)
     return TimeoutGuard(instrument, config.timeout_s) if config.timeout_s is not None else instrument

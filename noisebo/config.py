@@ -27,15 +27,13 @@ class FrozenModel(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
-_Frozen = FrozenModel
-
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 
 
-class UniformPrior(_Frozen):
+class UniformPrior(FrozenModel):
     """Uniform(low, high) prior on a non-negative parameter, in the parameter's own units."""
 
     low: NonNegativeFloat = 0.0
@@ -52,7 +50,7 @@ Rate = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
 FAULT_KINDS = ("timeout", "exception", "nan", "inf", "outlier", "corrupt_spectrum")
 
 
-class FaultsConfig(_Frozen):
+class FaultsConfig(FrozenModel):
     """Injected instrument faults, for testing a campaign's resilience: each call to the
     instrument is, with these probabilities (drawn from the injector's own stream seeded by
     ``seed``), a hang of ``hang_s`` (longer than the instrument's timeout), an instrument error,
@@ -77,7 +75,7 @@ class FaultsConfig(_Frozen):
         return self
 
 
-class InstrumentConfig(_Frozen):
+class InstrumentConfig(FrozenModel):
     """The instrument: ``kind`` names an installed driver (a Python entry point in the group
     ``noisebo.instruments``; ``noisebo instruments`` lists them) and ``settings`` are that
     driver's own settings, validated by its settings model when the campaign is loaded.
@@ -100,7 +98,7 @@ class InstrumentConfig(_Frozen):
         return self
 
 
-class SHOReductionConfig(_Frozen):
+class SHOReductionConfig(FrozenModel):
     """The "sho" reduction of a resonance sweep: the fitted signed amplitude of Eq. 8, Q within
     ``q_bounds``. ``nominal_resonance_hz`` and ``nominal_q`` (the instrument's tune), when both
     are given, rescue a sweep whose free fit fails (see ``noisebo.sho.fit_sho``)."""
@@ -120,13 +118,13 @@ class SHOReductionConfig(_Frozen):
         return self
 
 
-class ReductionConfig(_Frozen):
+class ReductionConfig(FrozenModel):
     """How a raw spectrum becomes a shot's value, per named reduction (a reading names its own)."""
 
     sho: SHOReductionConfig = SHOReductionConfig()
 
 
-class SpaceConfig(_Frozen):
+class SpaceConfig(FrozenModel):
     """The (x, t) search space and the candidate grid over it. t is in seconds (> 0)."""
 
     x_min: FiniteFloat = 0.0
@@ -145,7 +143,7 @@ class SpaceConfig(_Frozen):
         return self
 
 
-class RewardConfig(_Frozen):
+class RewardConfig(FrozenModel):
     """R(t, Noise) = -alpha*t^2 - beta*Noise, normalised to [0, 1]; gamma weights it (Eq. 6)."""
 
     alpha: PositiveFloat = 0.1
@@ -153,7 +151,7 @@ class RewardConfig(_Frozen):
     gamma: NonNegativeFloat = 5.0
 
 
-class AcquisitionConfig(_Frozen):
+class AcquisitionConfig(FrozenModel):
     """Policy and acquisition functions.
 
     ``policy``: "reward" (acq_x * Norm(R)^gamma) or "double" ((Norm(acq_t) + Norm(acq_x)) / 2).
@@ -171,7 +169,7 @@ class AcquisitionConfig(_Frozen):
     (s), chosen by the policy's acquisition over x alone; None (default) optimises t."""
 
 
-class PrimaryModelConfig(_Frozen):
+class PrimaryModelConfig(FrozenModel):
     """LogNormal(loc, scale) priors of the Matern 5/2 GP for f, on standardised f and x scaled to
     [0, 1]. The default length prior puts 95 % of its mass between 0.075 and 0.53 of the x range:
     features much shorter cannot be resolved by a few dozen points, much longer ones are flat."""
@@ -182,7 +180,7 @@ class PrimaryModelConfig(_Frozen):
     length_scale: PositiveFloat = 0.5
 
 
-class NoiseModelConfig(_Frozen):
+class NoiseModelConfig(FrozenModel):
     """Structured GP for the single-shot noise standard deviation Noise(t).
 
     ``mean``: "inv_sqrt" is the paper's A1/sqrt(t) + A0; "power" is A1/t^p + A0 with p inferred;
@@ -202,7 +200,7 @@ class NoiseModelConfig(_Frozen):
     learn_after_convergence: bool = True
 
 
-class InferenceConfig(_Frozen):
+class InferenceConfig(FrozenModel):
     """How model hyperparameters are inferred.
 
     "map": multi-start BFGS to the posterior mode; the noise model adds a Laplace approximation
@@ -222,7 +220,7 @@ class InferenceConfig(_Frozen):
     primary_quadrature: int = Field(0, ge=0, le=15)
 
 
-class ScheduleConfig(_Frozen):
+class ScheduleConfig(FrozenModel):
     """Seed points, BO steps, repeated shots and the noise-model convergence rule.
 
     Seed points are random: a Latin hypercube (or uniform draws) with t on a log or linear scale.
@@ -253,7 +251,7 @@ class ScheduleConfig(_Frozen):
     tolerated_rate: Rate = 0.5
 
 
-class CampaignConfig(_Frozen):
+class CampaignConfig(FrozenModel):
     """One campaign: instrument, space, reward, policy, models, inference and schedule."""
 
     schema_version: int = SCHEMA_VERSION

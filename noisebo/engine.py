@@ -131,11 +131,16 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
     raise EngineError(f"unknown event {type(event).__name__}")
 
 
-def replay(events: Sequence[Event]) -> EngineState:
-    """The state that ``events`` (a campaign's whole journal, from its start) describe."""
-    state = None
+def apply_all(state: EngineState | None, events: Sequence[Event]) -> EngineState | None:
+    """``state`` after ``events``, in order."""
     for event in events:
         state = apply(state, event)
+    return state
+
+
+def replay(events: Sequence[Event]) -> EngineState:
+    """The state that ``events`` (a campaign's whole journal, from its start) describe."""
+    state = apply_all(None, events)
     if state is None:
         raise EngineError("no events: a campaign starts with its start")
     return state
