@@ -99,6 +99,8 @@ def opened(instrument):
     """The instrument opened (its ``open()``, where it has one) for the campaign and closed after."""
     try:
         getattr(instrument, "open", lambda: None)()
+    except InstrumentUnavailable:
+        raise
     except Exception as error:  # noqa: BLE001 - any driver's failure to connect
         raise InstrumentUnavailable(f"instrument {getattr(instrument, 'name', '?')!r} could not be opened: "
                                     f"{type(error).__name__}: {error}") from error

@@ -18,7 +18,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from noisebo.driver import simulates
-from noisebo.reduction import Reading  # noqa: F401 - the drivers' return type, re-exported
+from noisebo.reduction import Reading
 
 
 @runtime_checkable
@@ -41,6 +41,14 @@ class Simulator(Protocol):
 
     def noise_law(self, t: np.ndarray) -> np.ndarray:
         """The single-shot noise sd at exposures t (any shape), in value units."""
+
+
+@runtime_checkable
+class Follower(Protocol):
+    def committed(self, state) -> None:
+        """Sees the campaign (``noisebo.engine.EngineState``) when the loop starts and after
+        every commit, once its events are journaled: the network bridge serves the shot the
+        state wants next and acknowledges a reading once the state holds it."""
 
 
 def is_simulator(instrument) -> bool:

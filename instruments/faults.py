@@ -91,6 +91,9 @@ class FaultyInstrument:
     def close(self) -> None:
         getattr(self.inner, "close", lambda: None)()
 
+    def committed(self, state) -> None:
+        getattr(self.inner, "committed", lambda state: None)(state)
+
     def counts(self) -> dict[str, int]:
         """Injected faults per kind."""
         return {kind: sum(1 for f in self.ledger if f["kind"] == kind) for kind in FAULT_KINDS}

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 import h5py
 import numpy as np
@@ -16,7 +16,6 @@ from pydantic import Field, model_validator
 from scipy import ndimage
 
 from noisebo.config import FiniteFloat, FrozenModel, NonNegativeFloat, PositiveFloat
-
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,7 +54,7 @@ class SyntheticProfileConfig(FrozenModel):
     seed: int = 0
 
 
-ProfileConfig = Annotated[Union[ScanProfileConfig, SyntheticProfileConfig], Field(discriminator="source")]
+ProfileConfig = Annotated[ScanProfileConfig | SyntheticProfileConfig, Field(discriminator="source")]
 SAMPLES_PER_PIXEL = 4
 
 

@@ -8,8 +8,8 @@ are committed (memory, or a journal and an HDF5 file), how a shot is measured an
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -17,7 +17,17 @@ from noisebo import engine
 from noisebo.config import CampaignConfig
 from noisebo.decision import Decision
 from noisebo.engine import EngineState
-from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
+from noisebo.events import (
+    DecisionDue,
+    Done,
+    DriverInfo,
+    Event,
+    Outcome,
+    Request,
+    ShotError,
+    Status,
+    Summary,
+)
 from noisebo.failures import InstrumentError, InstrumentTimeout
 from noisebo.keys import MEASURE, numpy_rng
 from noisebo.state import CampaignState
@@ -64,21 +74,30 @@ def drive(
 ) -> EngineState:
     """Step the campaign from ``state`` until the engine says it is done, and return the final
     state. After each committed point, ``stop_requested()`` may name a reason to stop: the
-    campaign is then committed as aborted with that reason."""
+    campaign is then committed as aborted with that reason. An instrument with ``committed``
+    (``instruments.base.Follower``) sees the state at the start and after every commit."""
+    follow = getattr(instrument, "committed", lambda state: None)
+
+    def committed(state: EngineState, events: Sequence[Event]) -> EngineState:
+        state = commit(state, events)
+        follow(state)
+        return state
+
+    follow(state)
     while True:
         step = engine.ask(state)
         if isinstance(step, Done):
             return state
         if isinstance(step, DecisionDue):
-            state = commit(state, decide(state))
+            state = committed(state, decide(state))
             continue
         outcome = measure(instrument, state.seed, step)
         before = len(state.points)
-        state = commit(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
+        state = committed(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
         if len(state.points) > before:
             reason = stop_requested()
             if reason is not None:
-                state = commit(state, engine.stop(state, Status.ABORTED, reason))
+                state = committed(state, engine.stop(state, Status.ABORTED, reason))
 
 
 @dataclass(frozen=True)
@@ -110,7 +129,7 @@ class CampaignRun:
 
 
 def now_utc() -> str:
-    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+    return dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
 
 
 def run_campaign(

@@ -1,0 +1,159 @@
+"""The instrument PC's side of the noisebo bridge: standard library only (Python 3.8+), one file
+to copy next to the instrument's own software.
+
+    from client import serve_instrument
+
+    def measure(request):              # request.x (list of coordinates), request.t (seconds)
+        return my_instrument.acquire(request.x, request.t)    # a number, or rows of a spectrum
+
+    serve_instrument("http://campaign-pc:8765", "TOKEN", measure)
+
+``serve_instrument`` pulls one shot request at a time, calls ``measure``, and posts the reading
+until the campaign ends. It keeps a reading until the campaign has acknowledged it (the campaign
+journals it first), resending it after a network error or a restart of the campaign; a reading
+sent twice is recorded once. An exception in ``measure`` is reported to the campaign as a failed
+attempt, and the same shot is asked for again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+__all__ = ["CampaignRefused", "ShotRequest", "Spectrum", "serve_instrument"]
+
+
+class ShotRequest(NamedTuple):
+    """One wanted shot: measure at ``x`` (coordinates) for ``t`` seconds. ``point`` and ``shot``
+    number it (shot ``shot`` of ``wanted`` at the point); ``seed``, ``point``, ``shot`` also key
+    a simulator's random draws; ``reading``: "scalar" or "spectrum"."""
+
+    campaign: str
+    point: int
+    shot: int
+    step: int
+    x: list
+    t: float
+    wanted: int
+    attempt: int
+    seed: int
+    reading: str
+
+
+class Spectrum(NamedTuple):
+    """A raw spectrum: ``rows`` (e.g. frequency Hz, amplitude, phase deg), each one entry per
+    sample; ``reduction`` names how the campaign turns it into the shot's value."""
+
+    rows: Any
+    reduction: str = "sho"
+
+
+class CampaignRefused(RuntimeError):
+    """The campaign refused a call for a reason a retry cannot cure (bad token, bad reading)."""
+
+
+Measure = Callable[[ShotRequest], Any]
+
+
+def serve_instrument(url: str, token: str, measure: Measure, poll_s: float = 25.0, retry_s: float = 10.0,
+                     log: Callable[[str], None] | None = None) -> str:
+    """Measure the shots the campaign at ``url`` asks for until it ends; returns its final
+    status ("completed", "failed", "aborted"). ``measure(request)`` returns a number, a
+    ``Spectrum``, or rows (a list of lists or a 2-D array) for a spectrum with the "sho"
+    reduction. Network errors and a campaign that is restarting are waited out (retrying at most
+    every ``retry_s`` s); ``CampaignRefused`` is raised for a wrong token or a reading the
+    campaign rejects."""
+    say = log or (lambda line: print(line, file=sys.stderr, flush=True))
+    link = _Link(url.rstrip("/"), token, poll_s, retry_s, say)
+    while True:
+        answer = link.call("GET", f"/next?wait={poll_s:g}")
+        kind = answer.get("kind")
+        if kind == "done":
+            say("campaign ended: " + answer.get("status", "?") + (": " + answer["reason"] if answer.get("reason") else ""))
+            return answer.get("status", "?")
+        if kind != "shot":
+            continue
+        request = ShotRequest(**{k: answer[k] for k in ShotRequest._fields})
+        body = reading_body(request, measure)
+        answer = link.call("POST", f"/shots/{request.point}/{request.shot}", body)
+        if answer.get("stale"):
+            say(f"point {request.point} shot {request.shot} was no longer wanted: {answer['error']}")
+
+
+def reading_body(request: ShotRequest, measure: Measure) -> dict:
+    """The body to post for ``request``: its reading, or the error ``measure`` raised."""
+    try:
+        result = measure(request)
+    except Exception as error:  # noqa: BLE001 - reported to the campaign, which asks again
+        return {"error": f"{type(error).__name__}: {error}", "attempt": request.attempt,
+                "campaign": request.campaign}
+    body = {"campaign": request.campaign}
+    if isinstance(result, Spectrum):
+        body.update(spectrum=_rows(result.rows), reduction=result.reduction)
+    elif isinstance(result, (int, float)) or (hasattr(result, "ndim") and result.ndim == 0):
+        value = float(result)
+        if not math.isfinite(value):
+            return {"error": f"measure returned {value!r}", "attempt": request.attempt, "campaign": request.campaign}
+        body["value"] = value
+    else:
+        body.update(spectrum=_rows(result), reduction="sho")
+    return body
+
+
+def _rows(rows: Any) -> list:
+    rows = rows.tolist() if hasattr(rows, "tolist") else rows
+    return [[float(v) for v in row] for row in rows]
+
+
+class _Link:
+    """HTTP calls to the campaign that wait out network errors and restarts."""
+
+    def __init__(self, url: str, token: str, poll_s: float, retry_s: float, say: Callable[[str], None]):
+        self.url, self.token, self.poll_s, self.retry_s, self.say = url, token, poll_s, retry_s, say
+        self.connected = False
+        self.waiting_said = False
+
+    def call(self, method: str, path: str, body: dict | None = None) -> dict:
+        """The JSON answer of a call, retried until the campaign answers it; a 409 (the shot is
+        no longer wanted) comes back as ``{"stale": True, "error": ...}``."""
+        data = None if body is None else json.dumps(body, allow_nan=False).encode()
+        delay = 0.25
+        while True:
+            request = urllib.request.Request(self.url + path, data=data, method=method, headers={
+                "Authorization": "Bearer " + self.token, "Content-Type": "application/json"})
+            try:
+                with urllib.request.urlopen(request, timeout=self.poll_s + 30.0) as response:
+                    answer = json.loads(response.read() or b"{}")
+                if not self.connected:
+                    self.say("connected to the campaign at " + self.url)
+                    self.connected = True
+                return answer
+            except urllib.error.HTTPError as error:
+                message = _error_text(error)
+                if error.code == 409:
+                    return {"stale": True, "error": message}
+                if error.code != 503 and error.code < 500:
+                    raise CampaignRefused(f"{method} {path}: {error.code} {message}") from None
+                self._lost(f"the campaign answered {error.code} ({message})")
+            except (urllib.error.URLError, ConnectionError, TimeoutError, OSError) as error:
+                self._lost(f"cannot reach {self.url} ({getattr(error, 'reason', error)})")
+            time.sleep(delay)
+            delay = min(delay * 2, self.retry_s)
+
+    def _lost(self, why: str) -> None:
+        if self.connected or not self.waiting_said:
+            self.say(why + "; retrying")
+            self.connected, self.waiting_said = False, True
+
+
+def _error_text(error: urllib.error.HTTPError) -> str:
+    try:
+        return json.loads(error.read()).get("error", error.reason)
+    except (ValueError, AttributeError, OSError):
+        return str(error.reason)

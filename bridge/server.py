@@ -1,0 +1,162 @@
+"""The bridge's HTTP face (FastAPI, served by uvicorn on a thread of the campaign's process).
+
+    GET  /next?wait=S             the next wanted shot (long poll: waits up to S s, at most 60)
+    POST /shots/{point}/{shot}    its reading; answered once the campaign has journaled it
+    GET  /status                  progress as JSON;  GET /  the same as a page for a person
+    GET  /docs, /openapi.json     this API
+
+Every campaign call needs ``Authorization: Bearer TOKEN`` (the pages also take ``?token=``).
+Errors are ``{"error": "..."}`` with a 4xx or 503 status; 503 means "send it again".
+"""
+
+from __future__ import annotations
+
+import html
+import secrets
+import socket
+import threading
+
+import uvicorn
+from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import HTMLResponse, JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from bridge.exchange import Exchange
+from bridge.wire import ReadingBody, WireError, parse_body
+
+MAX_WAIT_S = 60.0
+
+
+def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
+    """The bridge's API over ``exchange``, guarded by ``token``; bodies over ``max_body_bytes``
+    are refused unread."""
+    app = FastAPI(title="noisebo instrument bridge", version="1",
+                  description="The instrument PC pulls shot requests and posts readings. Every campaign call needs "
+                              "`Authorization: Bearer TOKEN`. A reading is acknowledged only after the campaign has "
+                              "journaled it; posting it again is safe.", redoc_url=None)
+
+    def authorised(request: Request, token_query: str | None = Query(None, alias="token", include_in_schema=False)):
+        header = request.headers.get("authorization", "")
+        given = header[7:].strip() if header.lower().startswith("bearer ") else token_query
+        if not given:
+            raise HTTPException(401, "missing token: send the header `Authorization: Bearer TOKEN`",
+                                headers={"WWW-Authenticate": "Bearer"})
+        if not secrets.compare_digest(given.encode(), token.encode()):
+            raise HTTPException(403, "wrong token")
+        exchange.contact()
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, error: StarletteHTTPException):
+        return JSONResponse({"error": error.detail}, error.status_code, headers=error.headers)
+
+    @app.exception_handler(WireError)
+    async def _wire_error(request: Request, error: WireError):
+        return JSONResponse({"error": str(error)}, error.status)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, error: RequestValidationError):
+        where = "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in error.errors())
+        return JSONResponse({"error": where}, 422)
+
+    @app.get("/next", dependencies=[Depends(authorised)], summary="The next wanted shot (long poll)")
+    async def next_shot(wait: float = Query(25.0, ge=0.0, le=MAX_WAIT_S, description="seconds to wait for one")):
+        """`{"kind": "shot", "campaign", "point", "shot", "step", "x", "t", "wanted", "attempt", "seed",
+        "reading"}`: measure at x for t seconds and post to /shots/{point}/{shot}. `{"kind": "wait"}`:
+        nothing wanted yet (ask again). `{"kind": "done", "status", "reason"}`: the campaign has ended."""
+        return await run_in_threadpool(exchange.next_shot, wait)
+
+    @app.post("/shots/{point}/{shot}", dependencies=[Depends(authorised)], summary="Post a shot's reading",
+              openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
+                  "schema": ReadingBody.model_json_schema()}}}})
+    async def post_shot(request: Request, point: int = Path(ge=0), shot: int = Path(ge=0)):
+        """Body: `{"value": number}`, `{"spectrum": [[...], ...], "reduction": "sho"}` (rows × samples)
+        or `{"error": "what went wrong", "attempt": n}`. 200 once journaled (`"duplicate": true` when it
+        was already); 409 when the shot is not wanted; 413, 400, 422 for a bad body; nothing is
+        recorded on an error."""
+        raw = await _body_within(request, max_body_bytes)
+        body = parse_body(raw)
+        return await run_in_threadpool(exchange.hand_in, point, shot, body)
+
+    @app.get("/status", dependencies=[Depends(authorised)], summary="Campaign progress")
+    async def status():
+        return exchange.status()
+
+    @app.get("/", dependencies=[Depends(authorised)], response_class=HTMLResponse, include_in_schema=False)
+    async def page():
+        return status_page(exchange.status())
+
+    return app
+
+
+async def _body_within(request: Request, limit: int) -> bytes:
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit:
+        raise WireError(413, f"the body of {int(declared)} bytes is over the bridge's limit of {limit} bytes")
+    chunks, size = [], 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            raise WireError(413, f"the body is over the bridge's limit of {limit} bytes")
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def status_page(status: dict) -> str:
+    """The status as a small self-refreshing HTML page."""
+    rows = []
+    for key, value in status.items():
+        if isinstance(value, dict):
+            value = ", ".join(f"{k}: {v}" for k, v in value.items())
+        rows.append(f"<tr><th>{html.escape(str(key))}</th><td>{html.escape(str(value))}</td></tr>")
+    done, total = status.get("points", 0), status.get("points_total") or 1
+    return ("<!doctype html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='2'>"
+            "<title>noisebo campaign</title><style>body{font-family:sans-serif;margin:2em}th{text-align:left;"
+            "padding-right:1em}</style></head><body><h1>noisebo campaign</h1>"
+            f"<progress value='{done}' max='{total}'></progress> {done}/{total} points"
+            f"<table>{''.join(rows)}</table></body></html>")
+
+
+class BridgeServer:
+    """The API served on ``host:port`` from a background thread. The port is bound in
+    ``start`` (``OSError`` when taken), so a campaign whose port is taken stops before its
+    file is created."""
+
+    def __init__(self, exchange: Exchange, token: str, host: str, port: int, max_body_bytes: int):
+        self.exchange = exchange
+        self.host, self.port = host, port
+        app = make_app(exchange, token, max_body_bytes)
+        self._server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off", access_log=False,
+                                                     timeout_graceful_shutdown=2))
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}"
+
+    def start(self) -> None:
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((self.host, self.port))
+        except OSError:
+            sock.close()
+            raise
+        sock.listen(64)
+        self.port = sock.getsockname()[1]
+        self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="noisebo-bridge",
+                                        daemon=True)
+        self._thread.start()
+        while not self._server.started:
+            if not self._thread.is_alive():
+                raise OSError(f"the bridge could not start on {self.url}")
+            self._thread.join(0.01)
+
+    def stop(self) -> None:
+        self.exchange.close()
+        self._server.should_exit = True
+        if self._thread is not None:
+            self._thread.join(5.0)

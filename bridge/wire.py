@@ -1,0 +1,150 @@
+"""What travels between a campaign and the instrument PC, as JSON, and how a posted reading is
+checked before anything is recorded.
+
+A shot request (``GET /next``):
+
+    {"kind": "shot", "campaign": ID, "point": 3, "shot": 1, "step": 0, "x": [0.41], "t": 0.5,
+     "wanted": 3, "attempt": 0, "seed": 0, "reading": "spectrum"}
+
+A reading (``POST /shots/{point}/{shot}``), one of
+
+    {"value": 1.25}
+    {"spectrum": [[f0, f1, ...], [a0, a1, ...], [p0, p1, ...]], "reduction": "sho"}
+    {"error": "stage did not settle", "attempt": 0}
+
+optionally with "campaign": ID, which must then be this campaign's. The same checks serve
+``noisebo tell`` at the command line.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, ValidationError, model_validator
+
+from noisebo.config import FrozenModel, describe_errors
+from noisebo.engine import EngineState
+from noisebo.events import Request, ShotError
+from noisebo.reduction import Reading
+
+
+class WireError(ValueError):
+    """A request the campaign refuses: ``status`` is the HTTP status, the message names the
+    problem."""
+
+    def __init__(self, status: int, message: str):
+        super().__init__(message)
+        self.status = status
+
+
+class ReadingShape(FrozenModel):
+    """What a shot reading must look like. ``reading``: "scalar" (one number per shot) or
+    "spectrum" (rows × samples, e.g. frequency Hz, amplitude, phase deg); ``reduction``: the
+    named reduction that turns a spectrum into the shot's value; ``spectrum_rows``: the row
+    counts accepted; ``min_samples``/``max_samples``: the samples per row accepted."""
+
+    reading: Literal["scalar", "spectrum"] = "scalar"
+    reduction: str = Field(default="sho", min_length=1)
+    spectrum_rows: tuple[int, ...] = (2, 3)
+    min_samples: int = Field(default=8, ge=1)
+    max_samples: int = Field(default=1_000_000, ge=1)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ReadingShape:
+        if not self.spectrum_rows or min(self.spectrum_rows) < 1:
+            raise ValueError("spectrum_rows must list positive row counts")
+        if self.min_samples > self.max_samples:
+            raise ValueError(f"min_samples ({self.min_samples}) is above max_samples ({self.max_samples})")
+        return self
+
+
+class ReadingBody(FrozenModel):
+    """A posted reading: exactly one of ``value``, ``spectrum`` or ``error``."""
+
+    value: float | None = None
+    spectrum: list[list[float]] | None = None
+    reduction: str | None = None
+    error: str | None = Field(default=None, min_length=1, max_length=2000)
+    attempt: int = Field(default=0, ge=0)
+    campaign: str | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> ReadingBody:
+        given = [name for name in ("value", "spectrum", "error") if getattr(self, name) is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of value, spectrum or error" + (f" (got {', '.join(given)})" if given else ""))
+        return self
+
+
+def campaign_id(state: EngineState) -> str:
+    """The campaign's name on the wire: NAME/POLICY/sSEED@START (UTC)."""
+    c = state.config
+    return f"{c.name}/{c.acquisition.policy}/s{state.seed}@{state.created_utc}"
+
+
+def attempts_at(state: EngineState, point: int, shot: int) -> int:
+    """Failed attempts journaled so far at shot ``shot`` of point ``point``."""
+    return sum(1 for f in state.failures if f.point == point and f.shot == shot)
+
+
+def request_json(state: EngineState, request: Request, shape: ReadingShape) -> dict:
+    """The shot request for the next wanted shot of ``request``."""
+    return {"kind": "shot", "campaign": campaign_id(state), "point": request.point, "shot": request.taken,
+            "step": request.step, "x": list(request.x), "t": request.t, "wanted": request.wanted,
+            "attempt": attempts_at(state, request.point, request.taken), "seed": state.seed, "reading": shape.reading}
+
+
+def parse_body(raw: bytes) -> ReadingBody:
+    """A posted body parsed and checked for form; ``WireError`` 400 (not JSON) or 422 (a field
+    names what is wrong)."""
+    try:
+        data = json.loads(raw)
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise WireError(400, f"the body is not JSON: {error}") from None
+    if not isinstance(data, dict):
+        raise WireError(422, f"the body must be a JSON object, got {type(data).__name__}")
+    try:
+        return ReadingBody.model_validate(data)
+    except ValidationError as error:
+        raise WireError(422, describe_errors(error, prefix="body")) from None
+
+
+def outcome_of(body: ReadingBody, shape: ReadingShape) -> Reading | ShotError:
+    """The shot outcome a checked body describes; ``WireError`` 422 for a non-finite number, a
+    reading of the wrong kind or a spectrum of the wrong shape."""
+    if body.error is not None:
+        return ShotError("instrument error", f"instrument PC: {body.error}")
+    if body.value is not None:
+        if shape.reading != "scalar":
+            raise WireError(422, "value: this campaign's instrument returns spectra; post \"spectrum\" (rows × samples)")
+        if not math.isfinite(body.value):
+            raise WireError(422, f"value: {body.value} is not a finite number; post an \"error\" for a failed shot")
+        return Reading(float(body.value))
+    if shape.reading != "spectrum":
+        raise WireError(422, "spectrum: this campaign's instrument returns one number per shot; post \"value\"")
+    return Reading(None, spectrum_of(body.spectrum, shape), body.reduction or shape.reduction)
+
+
+def spectrum_of(rows: list[list[float]], shape: ReadingShape) -> np.ndarray:
+    """Rows × samples as an array, or ``WireError`` 422 naming the problem."""
+    lengths = sorted({len(r) for r in rows})
+    if len(lengths) > 1:
+        raise WireError(422, f"spectrum: rows of different lengths {lengths}; every row has one entry per sample")
+    n = lengths[0] if lengths else 0
+    if len(rows) not in shape.spectrum_rows:
+        accepted = " or ".join(str(k) for k in shape.spectrum_rows)
+        raise WireError(422, f"spectrum: {len(rows)} rows × {n} samples; expected {accepted} rows "
+                             "(e.g. frequency Hz, amplitude, phase deg)")
+    if not shape.min_samples <= n <= shape.max_samples:
+        raise WireError(422, f"spectrum: {n} samples per row; expected {shape.min_samples} to {shape.max_samples}")
+    array = np.asarray(rows, dtype=np.float64)
+    bad = np.argwhere(~np.isfinite(array))
+    if bad.size:
+        row, col = (int(v) for v in bad[0])
+        raise WireError(422, f"spectrum: {len(bad)} non-finite entries, the first at row {row}, sample {col} "
+                             f"({array[row, col]}); post an \"error\" for a failed shot")
+    return array
+
