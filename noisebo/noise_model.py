@@ -115,6 +115,9 @@ def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
     exponents = np.linspace(bounds[2, 0], bounds[2, 1], 29) if cfg.mean == "power" else np.array([0.5])
     best = None
     power = 2.0 if cfg.mean == "quadrature" else 1.0
+    # Readings with no shot-to-shot scatter (a quantised or saturated sensor) measure a noise of 0:
+    # weigh them as a thousandth of the largest measured noise rather than infinitely.
+    y = np.maximum(y, max(1e-3 * float(y.max(initial=0.0)), 1e-12))
     for p in exponents:
         design = np.column_stack([np.ones_like(t), t ** (-p * power)]) / y[:, None] ** power  # relative errors
         coef, residual = optimize.nnls(design, np.ones_like(y))

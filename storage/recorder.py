@@ -90,6 +90,18 @@ class Recorder:
     def resume(cls, h5_path: Path) -> Recorder:
         """The campaign of ``h5_path`` from its journal, its status set back to running (unless
         it completed): a torn tail is cut off and stray half-written snapshots removed."""
+        recorder = cls.attach(h5_path)
+        events = engine.resumed(recorder.state)
+        recorder.commit(recorder.state, events)
+        if not events:
+            recorder.snapshot()
+        return recorder
+
+    @classmethod
+    def attach(cls, h5_path: Path) -> Recorder:
+        """The campaign of ``h5_path`` from its journal as it stands (its lock taken, a torn tail
+        cut off, stray half-written snapshots removed), for a few more events: ``noisebo ask``
+        and ``noisebo tell`` between a person's shots."""
         h5_path = Path(h5_path)
         jpath = journal_path(h5_path)
         if not jpath.exists():
@@ -108,12 +120,7 @@ class Recorder:
         writer.truncate_to(valid_length)
         for tmp in stray_temporaries(h5_path):
             tmp.unlink()
-        recorder = cls(h5_path, writer, state)
-        events = engine.resumed(state)
-        recorder.commit(state, events)
-        if not events:
-            recorder.snapshot()
-        return recorder
+        return cls(h5_path, writer, state)
 
     def commit(self, state: EngineState, events: Sequence[Event]) -> EngineState:
         """Journal and apply ``events`` to ``state`` in order; returns the new state."""

@@ -9,7 +9,7 @@ import pytest
 
 CORE = Path(__file__).resolve().parents[2] / "noisebo"
 FORBIDDEN = {"prefect", "h5py", "rerun", "fastapi", "uvicorn", "instruments", "flows", "tasks", "storage", "view",
-             "cli", "matplotlib", "httpx", "prefect_dask", "dask"}
+             "cli", "bridge", "starlette", "matplotlib", "httpx", "prefect_dask", "dask"}
 
 
 def imported_roots(path: Path) -> set[str]:

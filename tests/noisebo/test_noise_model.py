@@ -75,3 +75,11 @@ def test_padding_does_not_change_predictions():
 def test_unknown_law_is_an_error():
     with pytest.raises(ValueError, match="unknown noise law"):
         noise_model.mean_law("exp", np.ones(2), 0.1, 2.0)
+
+
+@pytest.mark.parametrize("shot_std", [[0.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.5, 0.0]])
+def test_points_without_shot_to_shot_scatter_still_give_a_finite_fit(shot_std):
+    # A quantised sensor can give identical shots: a measured noise of exactly 0.
+    t = np.array([0.2, 1.0, 4.0, 10.0])
+    params = fit(NoiseModelConfig(), t, np.array(shot_std), np.full(4, 5))
+    assert all(np.isfinite(v) for v in params.values())
