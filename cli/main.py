@@ -331,6 +331,85 @@ def _inspect(args) -> int:
     return 0
 
 
+def _start(args) -> int:
+    from bridge import manual
+    from instruments.registry import driver_info
+    from noisebo import engine
+    from noisebo.driver import now_utc
+    from storage.recorder import Recorder, campaign_path, package_versions
+
+    config = _validated(args.config)
+    if args.policy:
+        config = config.with_overrides(acquisition={"policy": args.policy})
+    path = campaign_path(config, args.seed, args.out)
+    if path.exists() or path.with_suffix(".journal").exists():
+        raise CampaignFileError(f"{path} already exists; continue it with `noisebo ask {path}`")
+    started = engine.new_campaign(config, args.seed, driver_info(config.instrument), package_versions(), now_utc())
+    with Recorder.create(path, started) as recorder:
+        first = engine.ask(recorder.state)
+    print(f"created {path}")
+    for line in manual.describe(recorder.state, first, path):
+        print(line)
+    return 0
+
+
+def _ask(args) -> int:
+    from bridge import manual
+
+    state, step = _manually(lambda: manual.ask(Path(args.file), _warn, resume=args.resume))
+    _show_next(args, state, step)
+    return 0
+
+
+def _tell(args) -> int:
+    from bridge import manual
+    from flows.campaign import progress_lines
+    from noisebo import engine
+    from storage.recorder import read_started
+
+    path = Path(args.file)
+    given = sum(bool(v) for v in (args.values, args.spectrum, args.error))
+    if given != 1:
+        raise UsageError("give the shots' readings as VALUE..., or --spectrum FILE..., or one --error REASON")
+    shape = _manually(lambda: manual.reading_shape(engine.start(read_started(path))))
+    if args.error:
+        from noisebo.events import ShotError
+
+        outcomes = [ShotError("instrument error", f"operator: {args.error}")]
+    elif args.spectrum:
+        outcomes = _manually(lambda: [manual.load_spectrum(p, shape, args.reduction) for p in args.spectrum])
+    else:
+        outcomes = _manually(lambda: manual.parse_values(args.values, shape))
+
+    def report(state, events):
+        for line in progress_lines(state, events):
+            print(line, flush=True)
+
+    state, step = _manually(lambda: manual.tell(path, args.point, outcomes, _warn, report))
+    print(f"recorded {len(outcomes)} shot{'s' * (len(outcomes) != 1)}", file=sys.stderr)
+    _show_next(args, state, step)
+    return 0
+
+
+def _manually(call):
+    from bridge.manual import ManualError
+
+    try:
+        return call()
+    except ManualError as error:
+        raise UsageError(str(error)) from None
+
+
+def _show_next(args, state, step) -> None:
+    from bridge import manual
+
+    if args.json:
+        print(json.dumps(manual.as_json(state, step)))
+        return
+    for line in manual.describe(state, step, Path(args.file)):
+        print(line)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse, but a usage mistake is one line, like every other error."""
 
@@ -401,6 +480,33 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--dask-address", default=None, help="an existing Dask scheduler, e.g. tcp://host:8786")
     sweep.set_defaults(handler=_sweep)
 
+    start = commands.add_parser("start", help="create a campaign's file without running it (to measure by hand)")
+    start.add_argument("config", help="campaign YAML, e.g. data/configs/forrester_manual.yaml")
+    start.add_argument("--seed", type=int, default=0)
+    start.add_argument("--policy", choices=["reward", "double"], default=None)
+    start.add_argument("--out", type=Path, default=Path("data/runs"))
+    start.set_defaults(handler=_start)
+
+    ask = commands.add_parser("ask", help="print what a campaign wants measured next (deciding it if due)")
+    ask.add_argument("file", help="the campaign's .h5 file")
+    ask.add_argument("--json", action="store_true", help="the request as JSON (the bridge's request format)")
+    ask.add_argument("--resume", action="store_true", help="set an aborted or failed campaign running again first")
+    ask.set_defaults(handler=_ask)
+
+    tell = commands.add_parser("tell", help="record readings of the shots a campaign asked for")
+    tell.add_argument("file", help="the campaign's .h5 file")
+    tell.add_argument("values", nargs="*", help="one number per shot, for the next wanted shots in order")
+    tell.add_argument("--point", type=int, default=None, help="the point they belong to (refused if it is not the "
+                                                               "one being measured)")
+    tell.add_argument("--spectrum", action="append", type=Path, default=[], metavar="FILE",
+                      help="one shot's spectrum (repeat for more shots): .npy rows × samples, or .csv/.txt one "
+                           "sample per line (frequency, amplitude[, phase])")
+    tell.add_argument("--reduction", default=None, help="the reduction of the spectra (default: the campaign's)")
+    tell.add_argument("--error", default=None, metavar="REASON", help="the next shot failed (counts against the "
+                                                                      "failure budget; it is asked again)")
+    tell.add_argument("--json", action="store_true", help="print the next request as JSON")
+    tell.set_defaults(handler=_tell)
+
     instruments = commands.add_parser("instruments", help="list the installed instrument drivers")
     instruments.set_defaults(handler=_instruments)
 
@@ -412,7 +518,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    if extra and args.command == "tell":  # values after an option: `tell FILE --point 3 1.2 1.4`
+        args.values = [*args.values, *extra]
+    elif extra:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         return args.handler(args)
     except (ConfigError, CampaignFileError, UsageError) as error:
