@@ -7,8 +7,8 @@ commits what it adds (journal first, then the HDF5 file) and lets go.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 

@@ -67,6 +67,9 @@ def _validated(path) -> CampaignConfig:
 
 def _run(args) -> int:
     config = _validated(args.config)
+    if config.instrument.kind == "manual":
+        raise UsageError(f"{args.config} is measured by hand: create its file with `noisebo start {args.config}`, "
+                         "then repeat `noisebo ask FILE` and `noisebo tell FILE --point P VALUE...`")
     if args.policy:
         config = config.with_overrides(acquisition={"policy": args.policy})
     from storage.recorder import campaign_path

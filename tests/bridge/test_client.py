@@ -6,7 +6,13 @@ from pathlib import Path
 import pytest
 
 from bridge import client
-from bridge.client import CampaignRefused, ShotRequest, Spectrum, reading_body, serve_instrument
+from bridge.client import (
+    CampaignRefused,
+    ShotRequest,
+    Spectrum,
+    reading_body,
+    serve_instrument,
+)
 from tests.bridge.conftest import TOKEN, remote_config, served
 
 CLIENT = Path(client.__file__)
