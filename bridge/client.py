@@ -17,6 +17,8 @@ attempt, and the same shot is asked for again.
 
 from __future__ import annotations
 
+import array
+import base64
 import json
 import math
 import sys
@@ -71,13 +73,15 @@ def serve_instrument(url: str, token: str, measure: Measure, poll_s: float = 25.
     campaign rejects."""
     say = log or (lambda line: print(line, file=sys.stderr, flush=True))
     link = _Link(url.rstrip("/"), token, poll_s, retry_s, say)
+    answer: dict = {}
     while True:
-        answer = link.call("GET", f"/next?wait={poll_s:g}")
+        answer = answer.get("next") or link.call("GET", f"/next?wait={poll_s:g}")
         kind = answer.get("kind")
         if kind == "done":
             say("campaign ended: " + answer.get("status", "?") + (": " + answer["reason"] if answer.get("reason") else ""))
             return answer.get("status", "?")
         if kind != "shot":
+            answer = {}
             continue
         request = ShotRequest(**{k: answer[k] for k in ShotRequest._fields})
         body = reading_body(request, measure)
@@ -93,22 +97,42 @@ def reading_body(request: ShotRequest, measure: Measure) -> dict:
     except Exception as error:  # noqa: BLE001 - reported to the campaign, which asks again
         return {"error": f"{type(error).__name__}: {error}", "attempt": request.attempt,
                 "campaign": request.campaign}
-    body = {"campaign": request.campaign}
-    if isinstance(result, Spectrum):
-        body.update(spectrum=_rows(result.rows), reduction=result.reduction)
-    elif isinstance(result, (int, float)) or (hasattr(result, "ndim") and result.ndim == 0):
+    failed = {"attempt": request.attempt, "campaign": request.campaign}
+    if isinstance(result, (int, float)) or (hasattr(result, "ndim") and result.ndim == 0):
         value = float(result)
         if not math.isfinite(value):
-            return {"error": f"measure returned {value!r}", "attempt": request.attempt, "campaign": request.campaign}
-        body["value"] = value
+            return {"error": f"measure returned {value!r}", **failed}
+        return {"value": value, "campaign": request.campaign}
+    rows, reduction = (result.rows, result.reduction) if isinstance(result, Spectrum) else (result, "sho")
+    packed = packed_spectrum(rows)
+    if packed is None:
+        return {"error": "measure returned a spectrum with non-finite values", **failed}
+    return {"spectrum": packed, "reduction": reduction, "campaign": request.campaign}
+
+
+def packed_spectrum(rows: Any) -> Optional[dict]:
+    """Rows × samples (lists, or a 2-D numpy array) as the bridge's packed spectrum: base64 of
+    little-endian float64 values (float32 for a float32 array), row after row; None when a
+    value is not finite. ``ValueError`` for rows of different lengths."""
+    if hasattr(rows, "astype") and hasattr(rows, "dtype"):
+        if getattr(rows, "ndim", 2) != 2:
+            raise ValueError(f"measure returned an array of shape {rows.shape}; a spectrum is rows × samples")
+        code = "f" if str(rows.dtype) == "float32" else "d"
+        flat = array.array(code)
+        flat.frombytes(rows.astype("=f4" if code == "f" else "=f8").tobytes())
+        n_rows, lengths = len(rows), {rows.shape[1]}
     else:
-        body.update(spectrum=_rows(result), reduction="sho")
-    return body
-
-
-def _rows(rows: Any) -> list:
-    rows = rows.tolist() if hasattr(rows, "tolist") else rows
-    return [[float(v) for v in row] for row in rows]
+        rows = [list(row) for row in rows]
+        code, n_rows, lengths = "d", len(rows), {len(row) for row in rows}
+        flat = array.array("d", (float(v) for row in rows for v in row))
+    if len(lengths) != 1:
+        raise ValueError(f"measure returned spectrum rows of different lengths {sorted(lengths)}")
+    if not all(map(math.isfinite, flat)):
+        return None
+    if sys.byteorder == "big":
+        flat.byteswap()
+    return {"rows": n_rows, "dtype": "float32" if code == "f" else "float64",
+            "data": base64.b64encode(flat.tobytes()).decode("ascii")}
 
 
 class _Link:

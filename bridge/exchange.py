@@ -144,16 +144,9 @@ class Exchange:
             try:
                 while True:
                     self._last_contact = self._clock()
-                    state = self._state
-                    if state is not None:
-                        step = engine.ask(state)
-                        if isinstance(step, Done):
-                            self._told_done = True
-                            return {"kind": "done", "campaign": campaign_id(state), "status": step.status.value,
-                                    "reason": step.reason}
-                        if isinstance(step, Request) and (step.point, step.taken) not in self._handed:
-                            self._taken_at[(step.point, step.taken)] = self._clock()
-                            return request_json(state, step, self.shape)
+                    answer = self._hand_out()
+                    if answer is not None:
+                        return answer
                     left = deadline - self._clock()
                     if left <= 0 or self.closed:
                         return {"kind": "wait"}
@@ -162,10 +155,26 @@ class Exchange:
                 self._polling -= 1
                 self._last_contact = self._clock()
 
+    def _hand_out(self) -> dict | None:
+        """The next wanted shot's request, or the end; None while nothing is wanted (a decision
+        is being made, or the wanted shot's reading is being journaled). Holds the lock."""
+        state = self._state
+        if state is None:
+            return None
+        step = engine.ask(state)
+        if isinstance(step, Done):
+            self._told_done = True
+            return {"kind": "done", "campaign": campaign_id(state), "status": step.status.value, "reason": step.reason}
+        if isinstance(step, Request) and (step.point, step.taken) not in self._handed:
+            self._taken_at[(step.point, step.taken)] = self._clock()
+            return request_json(state, step, self.shape)
+        return None
+
     def hand_in(self, point: int, shot: int, body: ReadingBody) -> dict:
         """Record a reading for shot ``shot`` of point ``point``: returns once the campaign has
-        journaled it (``{"recorded": true}``), at once for one journaled before
-        (``"duplicate": true``); ``WireError`` (409, 422, 503) otherwise, with nothing recorded."""
+        journaled it (``{"recorded": true}``, with the next wanted shot as ``"next"`` when one is
+        wanted at once), at once for one journaled before (``"duplicate": true``); ``WireError``
+        (409, 422, 503) otherwise, with nothing recorded."""
         outcome = outcome_of(body, self.shape)
         with self._cond:
             self._last_contact = self._clock()
@@ -190,7 +199,9 @@ class Exchange:
                 if left <= 0 or self.closed:
                     raise WireError(503, f"point {point} shot {shot}: not journaled yet; send the reading again")
                 self._cond.wait(min(left, 1.0))
-            return {"recorded": True, "duplicate": False, "point": point, "shot": shot}
+            reply = {"recorded": True, "duplicate": False, "point": point, "shot": shot}
+            following = self._hand_out()
+            return reply if following is None else {**reply, "next": following}
 
     def _duplicate(self, state: EngineState, point: int, shot: int, handed: _Handed) -> dict:
         if isinstance(handed.outcome, Reading):

@@ -3,6 +3,7 @@ import sys
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bridge import client
@@ -26,18 +27,28 @@ def test_the_client_needs_nothing_but_the_standard_library():
     assert roots <= set(sys.stdlib_module_names) | {"__future__"}
 
 
+# 1, 2, 3, 4 as little-endian float64, base64 (by hand: 1.0 = 00 00 00 00 00 00 f0 3f, ...)
+PACKED = {"rows": 2, "dtype": "float64", "data": "AAAAAAAA8D8AAAAAAAAAQAAAAAAAAAhAAAAAAAAAEEA="}
 REQUEST = ShotRequest("c", 2, 1, 0, [0.5], 1.0, 3, 4, 0, "scalar")
 
 
 @pytest.mark.parametrize("result, body", [
     (lambda r: 1.25, {"value": 1.25}),
-    (lambda r: Spectrum([[1, 2], [3, 4]], "mine"), {"spectrum": [[1.0, 2.0], [3.0, 4.0]], "reduction": "mine"}),
-    (lambda r: [[1, 2], [3, 4]], {"spectrum": [[1.0, 2.0], [3.0, 4.0]], "reduction": "sho"}),
+    (lambda r: Spectrum([[1, 2], [3, 4]], "mine"), {"spectrum": PACKED, "reduction": "mine"}),
+    (lambda r: [[1, 2], [3, 4]], {"spectrum": PACKED, "reduction": "sho"}),
+    (lambda r: np.array([[1, 2], [3, 4]], dtype=np.float32),
+     {"spectrum": {"rows": 2, "dtype": "float32", "data": "AACAPwAAAEAAAEBAAACAQA=="}, "reduction": "sho"}),
     (lambda r: float("nan"), {"error": "measure returned nan", "attempt": 4}),
+    (lambda r: [[1.0, float("inf")]], {"error": "measure returned a spectrum with non-finite values", "attempt": 4}),
     (lambda r: 1 / 0, {"error": "ZeroDivisionError: division by zero", "attempt": 4}),
 ])
 def test_what_measure_returns_or_raises_becomes_the_body(result, body):
     assert reading_body(REQUEST, result) == {"campaign": "c", **body}
+
+
+def test_rows_of_different_lengths_are_a_bug_in_measure():
+    with pytest.raises(ValueError, match=r"rows of different lengths \[1, 2\]"):
+        reading_body(REQUEST, lambda r: [[1.0, 2.0], [3.0]])
 
 
 def test_a_failing_measure_is_reported_and_the_shot_asked_again(tmp_path):

@@ -62,7 +62,8 @@ def test_the_next_shot_is_what_the_engine_asks_for():
 def test_a_reading_is_acknowledged_once_journaled_and_a_repeat_is_a_duplicate():
     exchange, state = fresh()
     answer, state = hand_in_while_campaign_waits(exchange, state, 0, 0, ReadingBody(value=1.5))
-    assert answer == {"recorded": True, "duplicate": False, "point": 0, "shot": 0}
+    assert answer == {"recorded": True, "duplicate": False, "point": 0, "shot": 0, "next": answer["next"]}
+    assert (answer["next"]["point"], answer["next"]["shot"]) == (0, 1)  # handed out with the acknowledgement
     assert state.taken[0].reading == Reading(1.5)
     assert exchange.hand_in(0, 0, ReadingBody(value=1.5))["duplicate"] is True
     with pytest.raises(WireError, match="already recorded with a different reading") as refused:

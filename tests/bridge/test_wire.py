@@ -1,3 +1,4 @@
+import base64
 import json
 
 import numpy as np
@@ -18,12 +19,19 @@ def rows(n_rows=3, n=5, bad=None):
     return data
 
 
+def packed(values: np.ndarray, dtype="<f8") -> str:
+    return base64.b64encode(np.asarray(values, dtype=dtype).tobytes()).decode()
+
+
 def test_a_value_a_spectrum_and_an_error_become_their_outcomes():
     assert outcome_of(parse_body(b'{"value": 1.5}'), SCALAR) == Reading(1.5)
     spectrum = outcome_of(parse_body(json.dumps({"spectrum": rows()}).encode()), SPECTRUM)
     assert spectrum == Reading(None, np.array(rows()), "sho")
     named = outcome_of(parse_body(json.dumps({"spectrum": rows(), "reduction": "mine"}).encode()), SPECTRUM)
     assert named.reduction == "mine"
+    body = {"spectrum": {"rows": 3, "dtype": "float32", "data": packed(np.array(rows()).ravel(), "<f4")}}
+    unpacked = outcome_of(parse_body(json.dumps(body).encode()), SPECTRUM)
+    assert unpacked == spectrum and unpacked.spectrum.dtype == np.float32
     failed = outcome_of(parse_body(b'{"error": "stage stuck", "attempt": 2}'), SCALAR)
     assert failed == ShotError("instrument error", "instrument PC: stage stuck")
 
@@ -44,7 +52,12 @@ def test_a_value_a_spectrum_and_an_error_become_their_outcomes():
     (json.dumps({"spectrum": rows(3, 9)}).encode(), SPECTRUM, 422, "9 samples per row; expected 4 to 6"),
     (json.dumps({"spectrum": [[1.0, 2.0, 3.0, 4.0], [1.0, 2.0, 3.0, 4.0], [1.0]]}).encode(), SPECTRUM, 422,
      "rows of different lengths [1, 4]"),
-    (json.dumps({"spectrum": [1.0, 2.0]}).encode(), SPECTRUM, 422, "body.spectrum.0"),
+    (json.dumps({"spectrum": [1.0, 2.0]}).encode(), SPECTRUM, 422, "body.spectrum.rows.0: Input should be a valid array"),
+    (json.dumps({"spectrum": {"rows": 3, "data": "%%%"}}).encode(), SPECTRUM, 422, "spectrum.data: not base64"),
+    (json.dumps({"spectrum": {"rows": 3, "data": packed(np.zeros(7))}}).encode(), SPECTRUM, 422,
+     "56 bytes do not make 3 equal rows of float64"),
+    (json.dumps({"spectrum": {"rows": 3, "dtype": "int8", "data": ""}}).encode(), SPECTRUM, 422, "body.spectrum.packed.dtype"),
+    (json.dumps({"spectrum": {"rows": 3, "data": packed(np.full(15, np.inf))}}).encode(), SPECTRUM, 422, "15 non-finite"),
     (json.dumps({"spectrum": rows(bad=float("nan"))}).encode(), SPECTRUM, 422, "1 non-finite entries, the first at row 1, sample 2"),
     (b'{"error": ""}', SCALAR, 422, "body.error"),
     (b'{"error": "x", "attempt": -1}', SCALAR, 422, "body.attempt"),

@@ -66,6 +66,7 @@ def test_the_installed_example_is_listed(target, prefect_harness):
     assert "gramacy-lee" not in noisebo(["instruments"], environment(prefect_harness)).stdout
 
 
+@pytest.mark.e2e  # about 90 s: run, kill, resume and report through the CLI (CI runs it)
 def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(target, config_path, tmp_path, prefect_harness,
                                                                          monkeypatch):
     env = environment(prefect_harness, target)
