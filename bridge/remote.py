@@ -63,9 +63,10 @@ def bridge_token(token_file: str, say=print) -> str:
 
 
 class RemoteInstrument:
-    """An instrument on another computer: each shot is served to it over HTTP and its reading
-    waited for (see ``bridge.server``). Opening starts the server; the campaign tells it what
-    it has journaled through ``committed``."""
+    """An instrument on another computer, served shot by shot over HTTP (the network bridge).
+
+    Each shot's request waits for the instrument PC's reading (see ``bridge.server``). Opening
+    starts the server; the campaign tells it what it has journaled through ``committed``."""
 
     name = "remote"
     version = noisebo.__version__
@@ -121,8 +122,9 @@ class ManualSettings(FrozenModel):
 
 
 class ManualInstrument:
-    """A person at the instrument, with ``noisebo ask`` and ``noisebo tell``: nothing here
-    measures, so running such a campaign says how to drive it."""
+    """Readings typed in by a person with `noisebo ask` and `noisebo tell` (nothing measures).
+
+    Running such a campaign says how to drive it instead."""
 
     name = "manual"
     version = noisebo.__version__
