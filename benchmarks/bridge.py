@@ -26,16 +26,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bridge.client import Spectrum, serve_instrument  # noqa: E402
-from instruments import build  # noqa: E402
-from instruments.registry import driver_info, validated  # noqa: E402
-from noisebo.config import load_config  # noqa: E402
-from noisebo.driver import drive, now_utc  # noqa: E402
-from noisebo.engine import new_campaign  # noqa: E402
-from noisebo.events import DriverInfo, ShotTaken  # noqa: E402
-from noisebo.keys import MEASURE, numpy_rng  # noqa: E402
-from noisebo.reduction import Reading  # noqa: E402
-from storage.recorder import Recorder  # noqa: E402
+from bridge.client import Spectrum, serve_instrument
+from instruments import build
+from instruments.registry import driver_info, validated
+from noisebo.config import load_config
+from noisebo.driver import drive, now_utc
+from noisebo.engine import new_campaign
+from noisebo.events import DriverInfo, ShotTaken
+from noisebo.keys import MEASURE, numpy_rng
+from noisebo.reduction import Reading
+from storage.recorder import Recorder
 
 TOKEN = "benchmark-token"
 DISTINCT = 16  # distinct prerecorded readings, cycled

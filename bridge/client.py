@@ -25,8 +25,7 @@ import sys
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 __all__ = ["CampaignRefused", "ShotRequest", "Spectrum", "serve_instrument"]
 
@@ -110,7 +109,7 @@ def reading_body(request: ShotRequest, measure: Measure) -> dict:
     return {"spectrum": packed, "reduction": reduction, "campaign": request.campaign}
 
 
-def packed_spectrum(rows: Any) -> Optional[dict]:
+def packed_spectrum(rows: Any) -> dict | None:
     """Rows × samples (lists, or a 2-D numpy array) as the bridge's packed spectrum: base64 of
     little-endian float64 values (float32 for a float32 array), row after row; None when a
     value is not finite. ``ValueError`` for rows of different lengths."""

@@ -94,3 +94,23 @@ def test_the_client_waits_for_a_campaign_that_is_not_up_yet(tmp_path):
         assert running.final().status.value == "completed"
     assert outcome["status"] == "completed"
     assert any(line.startswith("connected to the campaign") for line in lines)
+
+
+def test_the_client_file_copied_alone_serves_a_campaign(tmp_path):
+    import shutil
+    import subprocess
+
+    pc = tmp_path / "instrument_pc"
+    pc.mkdir()
+    shutil.copy(CLIENT, pc / "client.py")
+    (pc / "measure.py").write_text(
+        "import sys\nfrom client import serve_instrument\n"
+        "print(serve_instrument(sys.argv[1], sys.argv[2], lambda request: 10.0 * request.point + request.shot))\n")
+    config = remote_config("data/configs/forrester.yaml", SMALL)
+    with served(config, tmp_path / "c.h5") as running:
+        done = subprocess.run([sys.executable, "-E", "-s", "measure.py", running.url, TOKEN], cwd=pc,
+                              capture_output=True, text=True, timeout=120, check=False)
+        final = running.final()
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "completed"
+    assert [s.reading.value for p in final.points for s in p.shots] == [0.0, 1.0, 10.0, 11.0]

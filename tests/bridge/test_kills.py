@@ -6,7 +6,14 @@ import signal
 import numpy as np
 
 from tests.bridge.conftest import remote_config, served
-from tests.bridge.kills import OVERRIDES, SOURCE, assert_same_campaign, reference, start_client, wait_for_length
+from tests.bridge.kills import (
+    OVERRIDES,
+    SOURCE,
+    assert_same_campaign,
+    reference,
+    start_client,
+    wait_for_length,
+)
 
 SEED = 11
 
@@ -17,11 +24,11 @@ def test_the_instrument_pc_killed_at_random_moments_and_restarted(tmp_path):
     with served(config, tmp_path / "c.h5", seed=SEED) as running:
         for moment in moments:
             client = start_client(running.url)
-            wait_for_length(running.path, moment, lambda: client.poll() is None)
+            wait_for_length(running.path, moment, lambda process=client: process.poll() is None)
             client.send_signal(signal.SIGKILL)
             client.wait()
         client = start_client(running.url, capture=True)
-        out, err = client.communicate(timeout=240)
+        _, err = client.communicate(timeout=240)
         assert client.returncode == 0, err
         final = running.final()
     assert not final.failures

@@ -10,7 +10,14 @@ import sys
 import numpy as np
 import pytest
 
-from tests.bridge.kills import assert_same_campaign, free_port, reference, start_client, wait_for_length, write_remote_config
+from tests.bridge.kills import (
+    assert_same_campaign,
+    free_port,
+    reference,
+    start_client,
+    wait_for_length,
+    write_remote_config,
+)
 
 SEED = 12
 pytestmark = pytest.mark.e2e
@@ -33,7 +40,7 @@ def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_
     try:
         for command, moment in zip(commands, moments):
             campaign = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            wait_for_length(path, moment, lambda: campaign.poll() is None)
+            wait_for_length(path, moment, lambda process=campaign: process.poll() is None)
             campaign.send_signal(signal.SIGKILL)
             campaign.wait()
         done = subprocess.run([*cli, "resume", str(path), "--no-rrd"], env=env, capture_output=True, text=True,

@@ -9,11 +9,10 @@ import numpy as np
 import pytest
 import yaml
 
+from flows.processes import BIN, start, stop, wait_for
 from instruments import build
 from noisebo.driver import run_campaign
 from storage.hdf5 import read_campaign
-
-from flows.processes import BIN, start, stop, wait_for
 
 pytestmark = pytest.mark.e2e
 

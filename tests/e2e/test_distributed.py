@@ -7,8 +7,8 @@ import subprocess
 import numpy as np
 import pytest
 import yaml
-from flows.processes import BIN, start, stop, wait_for
 
+from flows.processes import BIN, start, stop, wait_for
 from instruments import build
 from noisebo.driver import run_campaign
 from storage.hdf5 import read_campaign
