@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import array
 import base64
+import http.client
 import json
 import math
 import sys
@@ -164,8 +165,9 @@ class _Link:
                 if error.code != 503 and error.code < 500:
                     raise CampaignRefused(f"{method} {path}: {error.code} {message}") from None
                 self._lost(f"the campaign answered {error.code} ({message})")
-            except (urllib.error.URLError, ConnectionError, TimeoutError, OSError) as error:
-                self._lost(f"cannot reach {self.url} ({getattr(error, 'reason', error)})")
+            except (OSError, http.client.HTTPException, ValueError) as error:  # URLError is an OSError
+                # a refused or dropped connection, or an answer cut off by a campaign that died
+                self._lost(f"cannot reach {self.url} ({getattr(error, 'reason', None) or type(error).__name__})")
             time.sleep(delay)
             delay = min(delay * 2, self.retry_s)
 
@@ -178,5 +180,5 @@ class _Link:
 def _error_text(error: urllib.error.HTTPError) -> str:
     try:
         return json.loads(error.read()).get("error", error.reason)
-    except (ValueError, AttributeError, OSError):
+    except (ValueError, AttributeError, OSError, http.client.HTTPException):
         return str(error.reason)

@@ -19,22 +19,22 @@ from tests.bridge.kills import (
     write_remote_config,
 )
 
-SEED = 12
 pytestmark = pytest.mark.e2e
 
 
+@pytest.mark.parametrize("seed", [12, 13])
 def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_pc_keeps_serving(
-        tmp_path, prefect_server, monkeypatch):
+        seed, tmp_path, prefect_server, monkeypatch):
     monkeypatch.setenv("NOISEBO_BRIDGE_TOKEN", "kill-test-token")
     port = free_port()
     config = write_remote_config(tmp_path / "killed.yaml", port)
     out = tmp_path / "runs"
-    path = out / f"killed_reward_s{SEED:04d}.h5"
+    path = out / f"killed_reward_s{seed:04d}.h5"
     env = {**os.environ, **prefect_server, "NOISEBO_BRIDGE_TOKEN": "kill-test-token"}
     cli = [sys.executable, "-m", "cli.main"]
-    commands = [[*cli, "run", str(config), "--seed", str(SEED), "--out", str(out), "--no-rrd"]]
+    commands = [[*cli, "run", str(config), "--seed", str(seed), "--out", str(out), "--no-rrd"]]
     commands += [[*cli, "resume", str(path), "--no-rrd"]] * 2
-    moments = sorted(np.random.default_rng(SEED).choice(np.arange(4, 40), size=len(commands), replace=False))
+    moments = sorted(np.random.default_rng(seed).choice(np.arange(4, 40), size=len(commands), replace=False))
 
     client = start_client(f"http://127.0.0.1:{port}", capture=True)
     try:
@@ -43,6 +43,7 @@ def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_
             wait_for_length(path, moment, lambda process=campaign: process.poll() is None)
             campaign.send_signal(signal.SIGKILL)
             campaign.wait()
+            assert client.poll() is None, f"the instrument PC's process ended: {client.communicate()}"
         done = subprocess.run([*cli, "resume", str(path), "--no-rrd"], env=env, capture_output=True, text=True,
                               timeout=300, check=False)
         assert done.returncode == 0, done.stderr[-3000:]
@@ -51,4 +52,4 @@ def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_
         client.kill()
     assert client.returncode == 0, err
     assert served.strip() == "completed"
-    assert_same_campaign(path, reference(SEED))
+    assert_same_campaign(path, reference(seed))
