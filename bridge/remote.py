@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import socket
 import stat
 from pathlib import Path
 
@@ -92,9 +93,12 @@ class RemoteInstrument:
             raise InstrumentUnavailable(f"the bridge cannot listen on {s.host}:{s.port}: {error.strerror or error} "
                                         "(another campaign's bridge? set instrument.settings.port)") from None
         self._server = server
+        url = server.url
+        if s.host in ("0.0.0.0", "::"):  # every interface: name this machine as the instrument PC would
+            url = f"http://{socket.gethostname()}:{server.port}"
         exposed = "" if s.host in ("127.0.0.1", "localhost", "::1") else " (reachable from the network: keep the token secret)"
-        print(f"bridge: serving {server.url}{exposed}; API at {server.url}/docs; waiting for the instrument PC "
-              f"(noisebo-client: serve_instrument({server.url!r}, TOKEN, measure))", flush=True)
+        print(f"bridge: serving {url}{exposed}; API at {url}/docs; waiting for the instrument PC "
+              f"(bridge/client.py: serve_instrument({url!r}, TOKEN, measure))", flush=True)
 
     def close(self) -> None:
         if self._server is not None:

@@ -95,3 +95,14 @@ def test_a_spectrum_of_the_wrong_shape_is_refused(tmp_path, spectrum, message):
         code, answer = call(running.url, "POST", "/shots/0/0", json.dumps({"spectrum": spectrum}).encode())
         assert (code, message in answer["error"]) == (422, True), answer
         assert running.journal_bytes() == before
+
+
+def test_an_instrument_pc_that_goes_silent_fails_its_shots_until_the_budget_stops_the_campaign(tmp_path):
+    overrides = {**SMALL, "schedule": {**SMALL["schedule"], "min_failed": 3}}
+    config = remote_config("data/configs/forrester.yaml", overrides, silence_s=0.3)
+    with served(config, tmp_path / "c.h5") as running:
+        assert call(running.url, "GET", "/next?wait=0")[1]["kind"] == "shot"  # it takes the first shot, then nothing
+        final = running.final(timeout=60)
+    assert final.status.value == "failed" and "3 of 3" in final.reason
+    assert [f.kind for f in final.failures] == ["timeout"] * 3
+    assert "nothing heard from it for 0.3 s" in final.failures[0].reason
