@@ -22,7 +22,7 @@ from tests.bridge.kills import (
 pytestmark = pytest.mark.e2e
 
 
-@pytest.mark.parametrize("seed", [12])  # about 60 s a seed: more seeds with `-k` and a longer list
+@pytest.mark.parametrize("seed", [12])  # about 60 s a seed; more seeds kill at more moments
 def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_pc_keeps_serving(
         seed, tmp_path, prefect_server, monkeypatch):
     monkeypatch.setenv("NOISEBO_BRIDGE_TOKEN", "kill-test-token")
