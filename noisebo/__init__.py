@@ -3,7 +3,14 @@
 The numerical core works in float64: GP covariance diagonals span several orders of magnitude.
 """
 
-import jax
+import os
+
+# OpenBLAS's threads spin over the tiny matrices of a decision's fits (L-BFGS-B, least squares):
+# one thread made a decision 1.9x faster on 2 cores (benchmarks/scaling.py). Set before numpy
+# loads OpenBLAS; a value already in the environment wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
