@@ -142,10 +142,10 @@ def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str):
         t_train = fitted.noise_data.t
         t_all = jnp.concatenate([jnp.asarray(g.t), jnp.asarray(g.t_fine), t_train])
         ts_all = (t_all - s.t_min) / (s.t_max - s.t_min)
-        n_mean, n_var = inference.combine(
-            *noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t_all, ts_all), noise_first,
-            fitted.noise.weights,
-        )
+        # The variance is wanted on the t grid only: the fine grid and the training points need means.
+        means, grid_vars = noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t_all, ts_all, n_t)
+        n_mean, _ = inference.combine(means, jnp.zeros_like(means), noise_first, fitted.noise.weights)
+        _, n_var = inference.combine(means[:, :n_t], grid_vars, noise_first, fitted.noise.weights)
         n_mean, n_var = n_mean * fitted.noise_scale, n_var * fitted.noise_scale**2
         grid_mean, fine_mean, train_mean = n_mean[:n_t], n_mean[n_t : n_t + N_FINE], n_mean[n_t + N_FINE :]
         r_grid = reward(jnp.asarray(g.t), grid_mean, rew.alpha, rew.beta)
@@ -156,7 +156,7 @@ def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str):
             f_mean=std.mean + std.scale * f_mean,
             f_var=std.scale**2 * f_var,
             noise_mean=grid_mean,
-            noise_var=n_var[:n_t],
+            noise_var=n_var,
             t=jnp.asarray(g.t),
             t_opt=jnp.asarray(g.t_fine)[best_i],
             noise_at_t_opt=fine_mean[best_i],

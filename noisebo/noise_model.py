@@ -137,9 +137,11 @@ def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
 
 
 def predict_one(
-    kind: str, params: dict, data: NoiseData, t: jnp.ndarray, ts: jnp.ndarray
+    kind: str, params: dict, data: NoiseData, t: jnp.ndarray, ts: jnp.ndarray, n_var: int | None = None
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Mean and variance of Noise (scaled units) at t (m,) seconds / ts scaled, one parameter set."""
+    """Mean (m,) of Noise (scaled units) at t (m,) seconds / ts scaled, one parameter set, and its
+    variance at the first ``n_var`` of them (all when None): (n_var,). The variance costs a
+    triangular solve per point, (n_var x capacity^2), so a caller asks only for those it uses."""
     p = params.get("p", 0.5)
     amplitude, length = params["amplitude"] ** 2, params["length"]
     m_train = mean_law(kind, data.t, params["a0"], params["a1"], p)
@@ -148,11 +150,12 @@ def predict_one(
     k_star = jnp.where(data.mask[None, :], matern52(ts, data.ts, amplitude, length), 0.0)
     resid = jnp.where(data.mask, data.y - m_train, 0.0)
     mean = mean_law(kind, t, params["a0"], params["a1"], p) + k_star @ jsl.cho_solve((chol, True), resid)
-    v = jsl.solve_triangular(chol, k_star.T, lower=True)
+    v = jsl.solve_triangular(chol, k_star[:n_var].T, lower=True)
     var = jnp.maximum(amplitude - jnp.sum(v**2, axis=0), 1e-12)
     return mean, var
 
 
-def predict_samples(kind: str, params: dict, data: NoiseData, t, ts):
-    """``predict_one`` over a leading sample axis of every parameter: returns (S, m) mean and var."""
-    return jax.vmap(lambda p: predict_one(kind, p, data, t, ts))(params)
+def predict_samples(kind: str, params: dict, data: NoiseData, t, ts, n_var: int | None = None):
+    """``predict_one`` over a leading sample axis of every parameter: returns (S, m) means and
+    (S, n_var) variances."""
+    return jax.vmap(lambda p: predict_one(kind, p, data, t, ts, n_var))(params)
