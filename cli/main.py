@@ -413,6 +413,14 @@ def _show_next(args, state, step) -> None:
         print(line)
 
 
+def server_timeout_message() -> str:
+    """What to do when Prefect's temporary server does not come up in time (a busy machine)."""
+    waited = os.environ.get("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "?")
+    return (f"Prefect's temporary local server did not answer within {waited} s (is the machine busy?); "
+            "allow it longer with PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS=300, or start a server once "
+            "with `prefect server start --host 127.0.0.1` and export PREFECT_API_URL=http://127.0.0.1:4200/api")
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse, but a usage mistake is one line, like every other error."""
 
@@ -540,6 +548,11 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_FAILED
     except InstrumentUnavailable as error:
         print(f"noisebo: error: {error}; nothing was measured", file=sys.stderr)
+        return EXIT_FAILED
+    except RuntimeError as error:
+        if "ephemeral Prefect API server" not in str(error):
+            raise
+        print(f"noisebo: error: {server_timeout_message()}; nothing was measured", file=sys.stderr)
         return EXIT_FAILED
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -197,3 +197,20 @@ def test_a_schema_1_file_opens_for_inspect_report_and_replay(tmp_path, capsys):
     assert data["driver"] == {"name": "forrester", "version": "not recorded (schema 1)", "settings": {}}
     assert main(["report", str(old)]) == 0 and (tmp_path / "forrester_schema1_report.png").stat().st_size > 20_000
     assert main(["replay", str(old)]) == 0 and old.with_suffix(".rrd").stat().st_size > 10_000
+
+
+def test_a_temporary_server_that_does_not_start_in_time_is_one_line_and_no_file(tmp_path, tiny_yaml):
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
+    env.update(PREFECT_HOME=str(tmp_path / "prefect"), PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS="1")
+    done = subprocess.run([sys.executable, "-m", "cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs")],
+                          env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 3
+    assert done.stderr.splitlines() == [
+        "noisebo: error: Prefect's temporary local server did not answer within 1 s (is the machine busy?); allow it "
+        "longer with PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS=300, or start a server once with `prefect server "
+        "start --host 127.0.0.1` and export PREFECT_API_URL=http://127.0.0.1:4200/api; nothing was measured"]
+    assert not (tmp_path / "runs").exists()
