@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.wire import ReadingShape, WireError, request_json, spectrum_of
+from bridge.wire import ReadingShape, WireError, campaign_id, request_json, spectrum_of
 from noisebo import engine
 from noisebo.engine import EngineState
 from noisebo.events import DecisionDue, Done, Event, Request, ShotError
@@ -59,17 +59,19 @@ def ask(path: Path, say: Say, resume: bool = False) -> tuple[EngineState, Reques
         return recorder.state, next_step(recorder, say)
 
 
-def tell(path: Path, point: int | None, outcomes: Sequence[Reading | ShotError], say: Say,
-         on_events: Callable[[EngineState, Sequence[Event]], None] = lambda state, events: None,
-         ) -> tuple[EngineState, Request | Done]:
-    """Record ``outcomes`` for the next wanted shots of the point being measured (``point``, when
-    given, must be it), then make any decision that falls due; returns the state and the next
-    request. ``ManualError`` before anything is recorded when they do not fit."""
+def tell(path: Path, point: int | None, outcomes_for: Callable[[ReadingShape], Sequence[Reading | ShotError]],
+         say: Say, on_events: Callable[[EngineState, Sequence[Event]], None] = lambda state, events: None,
+         ) -> tuple[EngineState, Request | Done, int]:
+    """Record the outcomes that ``outcomes_for(the campaign's reading shape)`` gives for the next
+    wanted shots of the point being measured (``point``, when given, must be it), then make any
+    decision that falls due; returns the state, the next request and the number recorded.
+    ``ManualError`` before anything is recorded when they do not fit."""
     with Recorder.attach(path) as recorder:
         def commit(state, events):
             on_events(state, events)
             return recorder.commit(state, events)
 
+        outcomes = outcomes_for(reading_shape(recorder.state))
         request = next_step(recorder, say, commit)
         if isinstance(request, Done):
             raise ManualError(f"the campaign has ended ({request.status.value}"
@@ -85,7 +87,7 @@ def tell(path: Path, point: int | None, outcomes: Sequence[Reading | ShotError],
             if not isinstance(request, Request):
                 break
             commit(recorder.state, engine.tell(recorder.state, request, {request.taken: outcome}, decide_next=False).events)
-        return recorder.state, next_step(recorder, say, commit)
+        return recorder.state, next_step(recorder, say, commit), len(outcomes)
 
 
 def parse_values(texts: Sequence[str], shape: ReadingShape) -> list[Reading]:
@@ -142,8 +144,6 @@ def describe(state: EngineState, step: Request | Done, path: Path) -> list[str]:
 
 def as_json(state: EngineState, step: Request | Done) -> dict:
     """The same request as the bridge serves (see ``bridge.wire``)."""
-    from bridge.wire import campaign_id
-
     if isinstance(step, Done):
         return {"kind": "done", "campaign": campaign_id(state), "status": step.status.value, "reason": step.reason}
     return request_json(state, step, reading_shape(state))

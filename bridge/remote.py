@@ -22,6 +22,8 @@ from noisebo.reduction import Reading
 
 TOKEN_ENV = "NOISEBO_BRIDGE_TOKEN"
 DEFAULT_TOKEN_FILE = "~/.noisebo/bridge.token"
+MEASURED_BY_HAND = ("this campaign is measured by hand: create its file with `noisebo start {config}`, then repeat "
+                    "`noisebo ask FILE` and `noisebo tell FILE --point P VALUE...`")
 LINGER_S = 10.0  # how long an ended campaign waits for its instrument PC to hear so
 
 
@@ -138,10 +140,7 @@ class ManualInstrument:
         self.settings = settings or ManualSettings()
 
     def open(self) -> None:
-        raise InstrumentUnavailable(
-            "this campaign is measured by hand: create it with `noisebo start CONFIG`, then repeat "
-            "`noisebo ask FILE` and `noisebo tell FILE --point P VALUE...`")
+        raise InstrumentUnavailable(MEASURED_BY_HAND.format(config="CONFIG"))
 
     def measure(self, x, t: float) -> Reading:
-        self.open()
-        return Reading(float("nan"))  # not reached: open() raises
+        raise InstrumentUnavailable(MEASURED_BY_HAND.format(config="CONFIG"))

@@ -67,9 +67,10 @@ def _validated(path) -> CampaignConfig:
 
 def _run(args) -> int:
     config = _validated(args.config)
-    if config.instrument.kind == "manual":
-        raise UsageError(f"{args.config} is measured by hand: create its file with `noisebo start {args.config}`, "
-                         "then repeat `noisebo ask FILE` and `noisebo tell FILE --point P VALUE...`")
+    if config.instrument.kind == "manual":  # refused here, before Prefect starts and logs the driver's refusal
+        from bridge.remote import MEASURED_BY_HAND
+
+        raise UsageError(f"{args.config}: {MEASURED_BY_HAND.format(config=args.config)}")
     if args.policy:
         config = config.with_overrides(acquisition={"policy": args.policy})
     from storage.recorder import campaign_path
@@ -367,29 +368,27 @@ def _ask(args) -> int:
 def _tell(args) -> int:
     from bridge import manual
     from flows.campaign import progress_lines
-    from noisebo import engine
-    from storage.recorder import read_started
 
     path = Path(args.file)
     given = sum(bool(v) for v in (args.values, args.spectrum, args.error))
     if given != 1:
         raise UsageError("give the shots' readings as VALUE..., or --spectrum FILE..., or one --error REASON")
-    shape = _manually(lambda: manual.reading_shape(engine.start(read_started(path))))
-    if args.error:
-        from noisebo.events import ShotError
 
-        outcomes = [ShotError("instrument error", f"operator: {args.error}")]
-    elif args.spectrum:
-        outcomes = _manually(lambda: [manual.load_spectrum(p, shape, args.reduction) for p in args.spectrum])
-    else:
-        outcomes = _manually(lambda: manual.parse_values(args.values, shape))
+    def outcomes_for(shape):
+        if args.error:
+            from noisebo.events import ShotError
+
+            return [ShotError("instrument error", f"operator: {args.error}")]
+        if args.spectrum:
+            return [manual.load_spectrum(p, shape, args.reduction) for p in args.spectrum]
+        return manual.parse_values(args.values, shape)
 
     def report(state, events):
         for line in progress_lines(state, events):
             print(line, flush=True)
 
-    state, step = _manually(lambda: manual.tell(path, args.point, outcomes, _warn, report))
-    print(f"recorded {len(outcomes)} shot{'s' * (len(outcomes) != 1)}", file=sys.stderr)
+    state, step, n = _manually(lambda: manual.tell(path, args.point, outcomes_for, _warn, report))
+    print(f"recorded {n} shot{'s' * (n != 1)}", file=sys.stderr)
     _show_next(args, state, step)
     return 0
 

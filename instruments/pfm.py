@@ -20,6 +20,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+
 from pydantic import Field, model_validator
 
 import noisebo

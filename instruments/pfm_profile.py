@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Union
 
 import h5py
 import numpy as np
@@ -16,6 +16,7 @@ from pydantic import Field, model_validator
 from scipy import ndimage
 
 from noisebo.config import FiniteFloat, FrozenModel, NonNegativeFloat, PositiveFloat
+
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,7 +55,7 @@ class SyntheticProfileConfig(FrozenModel):
     seed: int = 0
 
 
-ProfileConfig = Annotated[ScanProfileConfig | SyntheticProfileConfig, Field(discriminator="source")]
+ProfileConfig = Annotated[Union[ScanProfileConfig, SyntheticProfileConfig], Field(discriminator="source")]
 SAMPLES_PER_PIXEL = 4
 
 

@@ -19,12 +19,7 @@ from importlib.metadata import EntryPoint, entry_points
 
 from pydantic import BaseModel, ValidationError
 
-from noisebo.config import (
-    CampaignConfig,
-    ConfigError,
-    InstrumentConfig,
-    describe_errors,
-)
+from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
 from noisebo.events import DriverInfo
 from noisebo.reduction import register_reduction
 

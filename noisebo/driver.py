@@ -8,8 +8,8 @@ are committed (memory, or a journal and an HDF5 file), how a shot is measured an
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -17,17 +17,7 @@ from noisebo import engine
 from noisebo.config import CampaignConfig
 from noisebo.decision import Decision
 from noisebo.engine import EngineState
-from noisebo.events import (
-    DecisionDue,
-    Done,
-    DriverInfo,
-    Event,
-    Outcome,
-    Request,
-    ShotError,
-    Status,
-    Summary,
-)
+from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
 from noisebo.failures import InstrumentError, InstrumentTimeout
 from noisebo.keys import MEASURE, numpy_rng
 from noisebo.state import CampaignState
