@@ -45,8 +45,9 @@ def next_step(recorder: Recorder, say: Say, commit: Callable | None = None) -> R
         step = engine.ask(recorder.state)
         if not isinstance(step, DecisionDue):
             return step
-        say("deciding the final summary" if step.final else f"deciding step {step.step + 1} (the first decision in a "
-            "process compiles the models, about 10 s)")
+        if not step.reduce:
+            say("deciding the final summary" if step.final else f"deciding step {step.step + 1} (the first decision "
+                "in a process compiles the models, about 10 s)")
         commit(recorder.state, engine.advance(recorder.state))
 
 

@@ -18,7 +18,7 @@ from flows import abort
 from instruments import build, registry
 from noisebo.config import CampaignConfig, load_config
 from noisebo.driver import drive, now_utc
-from noisebo.engine import EngineState, new_campaign
+from noisebo.engine import EngineState, ask, new_campaign
 from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
 from storage.recorder import Recorder, campaign_path, package_versions, read_started
@@ -74,7 +74,7 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
         return ops.measure(quote(instrument), seed, request)
 
     def decide(state):
-        if not _COMPILED:
+        if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
             say(f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
                 "(about 10 s)")
             _COMPILED.append(True)

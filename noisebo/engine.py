@@ -156,19 +156,28 @@ def ask(state: EngineState) -> Request | DecisionDue | Done:
     """What the campaign needs next: shots of a point, a decision, or nothing (it is done)."""
     if state.status is not Status.RUNNING:
         return Done(state.status, state.reason)
+    request = _point_under_way(state)
+    if request is not None:
+        return request if request.taken < request.wanted else DecisionDue(len(state.decisions), reduce=True)
+    sched = state.config.schedule
+    if len(state.decisions) < sched.n_steps:
+        return DecisionDue(len(state.decisions))
+    return DecisionDue(sched.n_steps, final=True)
+
+
+def _point_under_way(state: EngineState) -> Request | None:
+    """The point being measured (a seed point, or the one the last decision proposed), if any."""
     sched = state.config.schedule
     index = len(state.points)
     if index < sched.n_seed:
         x, t = (float(v) for v in seed_points(state.config, state.seed)[index])
         return Request(index, -1, (x,), t, state.wanted or sched.shots_before, len(state.taken), None)
     decision = _pending_decision(state)
-    if decision is not None:
-        noise = None if decision.measure_noise else decision.noise_at_t
-        return Request(index, decision.step, (decision.x,), decision.t, state.wanted or decision.shots,
-                       len(state.taken), noise)
-    if len(state.decisions) < sched.n_steps:
-        return DecisionDue(len(state.decisions))
-    return DecisionDue(sched.n_steps, final=True)
+    if decision is None:
+        return None
+    noise = None if decision.measure_noise else decision.noise_at_t
+    return Request(index, decision.step, (decision.x,), decision.t, state.wanted or decision.shots, len(state.taken),
+                   noise)
 
 
 def tell(state: EngineState, request: Request, outcomes: Mapping[int, Outcome], decide_next: bool = True) -> Transition:
@@ -203,17 +212,22 @@ def _record(state: EngineState, request: Request, shot: int, outcome: Outcome) -
         raise EngineError(f"a shot's outcome is a Reading or a ShotError, not {type(outcome).__name__}")
     taken = ShotTaken(request.point, shot, x, t, outcome)
     state = apply(state, taken)
-    if len(state.taken) < request.wanted:
-        return [taken]
+    return [taken] if len(state.taken) < request.wanted else [taken, *_reduce(state, request)]
+
+
+def _reduce(state: EngineState, request: Request) -> list[Event]:
+    """The events of a point whose wanted shots are all in: committed from its shots, or more
+    shots wanted when too few are usable; then the failure budget."""
     cfg = state.config
     readings = [s.reading for s in state.taken]
     try:
-        point, values = make_point(x[0], t, readings, request.model_noise, cfg.reduction, cfg.schedule.clip_sd)
+        point, values = make_point(request.x[0], request.t, readings, request.model_noise, cfg.reduction,
+                                   cfg.schedule.clip_sd)
     except NoUsableShots as short:
         more = MoreShots(request.point, len(readings) + short.missing, short.rejected, str(short))
-        return [taken, more, *_budget(apply(state, more))]
+        return [more, *_budget(apply(state, more))]
     committed = PointCommitted(request.point, request.step, point, tuple(values))
-    return [taken, committed, *_budget(apply(state, committed))]
+    return [committed, *_budget(apply(state, committed))]
 
 
 def _budget(state: EngineState) -> list[Event]:
@@ -227,11 +241,13 @@ def _budget(state: EngineState) -> list[Event]:
 
 def advance(state: EngineState) -> tuple[Event, ...]:
     """The events of the decision that is due: the next BO step (fits, prediction, acquisition;
-    key (seed, step)), or after the last step the final summary and the status "completed".
-    Nothing when no decision is due."""
+    key (seed, step)), or after the last step the final summary and the status "completed", or
+    the reduction of a point whose shots are all in. Nothing when no decision is due."""
     due = ask(state)
     if not isinstance(due, DecisionDue):
         return ()
+    if due.reduce:
+        return tuple(_reduce(state, _point_under_way(state)))
     if due.final:
         return Summarised(summarize(state.config, state.data, state.seed)), StatusChanged(Status.COMPLETED)
     started = time.perf_counter()

@@ -163,10 +163,13 @@ class Request:
 
 @dataclass(frozen=True)
 class DecisionDue:
-    """Nothing to measure until the engine decides BO step ``step`` (``final``: the summary)."""
+    """Nothing to measure until the engine decides BO step ``step`` (``final``: the summary;
+    ``reduce``: first the point whose shots are all in, as a journal cut off between its last
+    shot and its commit leaves it)."""
 
     step: int
     final: bool = False
+    reduce: bool = False
 
 
 @dataclass(frozen=True)

@@ -151,3 +151,15 @@ def test_one_seed_one_campaign_through_two_drivers(faults):
     assert [s.reading for p in one.points for s in p.shots] == [s.reading for p in other.points for s in p.shots]
     if faults:
         assert one.failures and len(one.failures) == len(other.failures)
+
+
+def test_a_journal_cut_between_a_points_last_shot_and_its_commit_reduces_that_point_without_a_new_shot():
+    events = []
+    run = driver.run_campaign(SMALL, build(SMALL.instrument), 4, on_commit=lambda state, new: events.extend(new))
+    started = engine.new_campaign(SMALL, 4, run.final.driver, {}, "now")
+    cut = next(i for i, e in enumerate(events) if isinstance(e, PointCommitted) and e.index == 3)
+    state = engine.replay([started, *events[:cut]])  # the last shot of point 3 is in, its commit is not
+    assert engine.ask(state) == DecisionDue(len(state.decisions), reduce=True)
+    resumed = driver.drive(state, build(SMALL.instrument))
+    assert resumed.data == run.final.data
+    assert [len(p.shots) for p in resumed.points] == [len(p.shots) for p in run.final.points]
