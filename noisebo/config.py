@@ -203,12 +203,18 @@ class NoiseModelConfig(FrozenModel):
 class InferenceConfig(FrozenModel):
     """How model hyperparameters are inferred.
 
-    "map": multi-start BFGS to the posterior mode; the noise model adds a Laplace approximation
-    (``laplace_samples`` draws) so its predictions carry hyperparameter uncertainty.
+    "map": L-BFGS to the posterior mode; the noise model adds a Laplace approximation
+    (``laplace_samples`` draws) so its predictions carry hyperparameter uncertainty. The first
+    BO step and every ``restart_every``-th start from ``restarts`` prior draws besides a
+    data-driven guess and the previous step's fit; the others start from the previous step's
+    fit alone (1: every step multi-starts).
     "nuts": numpyro NUTS; predictions average over ``predict_samples`` thinned posterior draws.
     ``primary_quadrature`` (map mode): if > 0, the GP for f predicts with a weighted Gauss-Hermite
     quadrature of its two-hyperparameter posterior around the mode, this many nodes per
     dimension, instead of the mode alone.
+    ``max_inputs``: each GP merges the points measured at the same input into one observation
+    (exact); beyond this many distinct inputs it merges them by equal-width bins of the input
+    range instead, this many bins (an approximation, recorded with each decision).
     """
 
     mode: Literal["map", "nuts"] = "map"
@@ -218,6 +224,8 @@ class InferenceConfig(FrozenModel):
     nuts_samples: int = Field(500, ge=10)
     predict_samples: int = Field(100, ge=1)
     primary_quadrature: int = Field(0, ge=0, le=15)
+    max_inputs: int = Field(256, ge=8, le=8192)
+    restart_every: int = Field(8, ge=1)
 
 
 class ScheduleConfig(FrozenModel):

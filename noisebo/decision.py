@@ -2,7 +2,9 @@
 
 The hot path is three compiled programs per configuration (fits, prediction, proposal) on
 training sets padded to a fixed capacity, so a campaign compiles them once and never again while
-its number of points stays under the capacity (32, then doubling).
+its number of distinct inputs stays under the capacity (32, then doubling). Points measured at
+the same input are merged first (``noisebo.inputs``), so a campaign on a grid of g candidates
+never needs more than g inputs however long it runs.
 """
 
 from __future__ import annotations
@@ -28,11 +30,6 @@ from noisebo.state import CampaignState
 N_FINE = 2049  # t grid for the predicted optimal t: spacing (t_max - t_min) / 2048
 
 
-def capacity_for(n: int) -> int:
-    """Padded training-set size for n points: 32, or the next power of two above that."""
-    return max(32, 1 << max(n - 1, 0).bit_length())
-
-
 class Grids(NamedTuple):
     """x: (n_x,) and t: (n_t,) candidate grids; t_fine: (N_FINE,) grid for t_opt."""
 
@@ -52,7 +49,9 @@ def space_grids(s: SpaceConfig) -> Grids:
 
 
 class Fitted(NamedTuple):
-    """Both fitted models with the data they were fitted on."""
+    """Both fitted models with the data they were fitted on. ``primary_inputs`` and
+    ``noise_inputs``: how many merged inputs each saw; ``binned``: whether either were bins (the
+    approximation beyond ``inference.max_inputs`` distinct inputs)."""
 
     primary: inference.Samples
     primary_data: primary.PrimaryData
@@ -60,6 +59,9 @@ class Fitted(NamedTuple):
     noise: inference.Samples
     noise_data: noise_model.NoiseData
     noise_scale: float
+    primary_inputs: int = 0
+    noise_inputs: int = 0
+    binned: bool = False
 
 
 def _models(config: CampaignConfig):
@@ -71,11 +73,31 @@ def _models_for(primary_config: PrimaryModelConfig, noise_config: NoiseModelConf
     return primary.make_model(primary_config), noise_model.make_model(noise_config)
 
 
-def _fit_one(config: CampaignConfig, model, data, key, guess: dict, laplace: int, quadrature: int) -> inference.Samples:
+def _fit_one(config: CampaignConfig, model, data, key, guesses: list, laplace: int, quadrature: int,
+             warm: bool) -> inference.Samples:
     inf = config.inference
     if inf.mode == "nuts":
         return inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.predict_samples)
-    return inference.fit_map(model, data, key, inf.restarts, laplace, guess, quadrature)
+    return inference.fit_map(model, data, key, inf.restarts, laplace, guesses, quadrature, draws=not warm)
+
+
+def _previous_guesses(previous: dict | None, prefix: str, scale: float, bounds=None) -> list[dict]:
+    """The previous decision's fitted hyperparameters of one model (``hyperparameters`` keys,
+    A0/A1 in value units) as a starting point in model units: none if any is missing or not
+    finite. A0/A1/p are kept inside the prior's bounds, which move with the data scale."""
+    if not previous:
+        return []
+    names = {k.split(".", 1)[1]: v for k, v in previous.items() if k.startswith(prefix + ".")}
+    if not names or not all(np.isfinite(v) and v > 0 for v in names.values()):
+        return []
+    guess = {k: v / scale if k in ("a0", "a1") else v for k, v in names.items()}
+    if bounds is not None:
+        for row, name in enumerate(("a0", "a1", "p")):
+            if name in guess:
+                lo, hi = float(bounds[row, 0]), float(bounds[row, 1])
+                eps = 1e-6 * (hi - lo)
+                guess[name] = float(np.clip(guess[name], lo + eps, hi - eps))
+    return [guess]
 
 
 class NonFiniteData(ValueError):
@@ -89,30 +111,48 @@ def _check_finite(**columns: np.ndarray) -> None:
             raise NonFiniteData(f"point(s) {bad.tolist()} have a non-finite {name}; no model is trained on it")
 
 
-def fit_models(config: CampaignConfig, state: CampaignState, key: jax.Array) -> Fitted:
-    """Fit the primary GP on every point and the noise model on its training points."""
+def warm_step(config: CampaignConfig, step: int, previous: dict | None) -> bool:
+    """Whether BO step ``step`` fits from the previous step's hyperparameters alone: every step
+    but each ``restart_every``-th, which (like the first) starts from data-driven guesses, the
+    previous fit and ``restarts`` prior draws."""
+    return bool(previous) and step % config.inference.restart_every != 0
+
+
+def fit_models(
+    config: CampaignConfig, state: CampaignState, key: jax.Array, previous: dict | None = None, warm: bool = False
+) -> Fitted:
+    """Fit the primary GP on every point and the noise model on its training points.
+
+    ``previous``: the hyperparameters of the previous fit (``hyperparameters``), an extra start;
+    ``warm``: start from it alone (when it has every hyperparameter)."""
     s = config.space
     x, t, value = state.column("x"), state.column("t"), state.column("value")
     n_shots, noise = state.column("n_shots"), state.column("noise")
     _check_finite(x=x, t=t, value=value, noise=noise)
-    capacity = capacity_for(len(state.points))
-    pdata, std = primary.prepare(x, value, noise**2 / n_shots, capacity, s.x_min, s.x_max)
+    inf = config.inference
+    pdata, std, p_groups = primary.prepare(x, value, noise**2 / n_shots, s.x_min, s.x_max, inf.max_inputs)
     train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
-    ndata, scale = noise_model.prepare(
-        t[train], state.column("shot_std")[train], n_shots[train], capacity, config.noise_model, s.t_min, s.t_max
+    ndata, scale, n_groups = noise_model.prepare(
+        t[train], state.column("shot_std")[train], n_shots[train], config.noise_model, s.t_min, s.t_max,
+        inf.max_inputs,
     )
     primary_fn, noise_fn = _models(config)
     k_primary, k_noise = jax.random.split(key)
-    inf = config.inference
+    p_warm = _previous_guesses(previous, "primary", 1.0)
+    n_warm = _previous_guesses(previous, "noise", scale, np.asarray(ndata.bounds))
+    warm = warm and bool(p_warm) and bool(n_warm)
+    p_guesses = p_warm if warm else [primary.prior_median(config.primary_model)] + p_warm
+    n_guesses = n_warm if warm else [noise_model.initial_guess(ndata, config.noise_model)] + n_warm
     return Fitted(
-        _fit_one(config, primary_fn, pdata, k_primary, primary.prior_median(config.primary_model), 0,
-                 inf.primary_quadrature),
+        _fit_one(config, primary_fn, pdata, k_primary, p_guesses, 0, inf.primary_quadrature, warm),
         pdata,
         std,
-        _fit_one(config, noise_fn, ndata, k_noise, noise_model.initial_guess(ndata, config.noise_model),
-                 inf.laplace_samples, 0),
+        _fit_one(config, noise_fn, ndata, k_noise, n_guesses, inf.laplace_samples, 0, warm),
         ndata,
         scale,
+        p_groups.count.size,
+        n_groups.count.size,
+        p_groups.binned or n_groups.binned,
     )
 
 
@@ -121,6 +161,24 @@ class Prediction(NamedTuple):
 
     posterior: Posterior
     noise_fine: jnp.ndarray
+
+
+def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first: bool):
+    """The noise model's mean at every t of t_all (m,) and its variance at the first n_t (the
+    t grid). The variance and, for a MAP fit, the Laplace draws are needed on the t grid only
+    (their spread widens the grid variance; the mean is the MAP point's), so the draws predict
+    there alone."""
+    params, data, weights = fitted.noise.params, fitted.noise_data, fitted.noise.weights
+    if not map_first:
+        means, grid_vars = noise_model.predict_samples(kind, params, data, t_all, ts_all, n_t)
+        mean, _ = inference.combine(means, jnp.zeros_like(means), False, weights)
+        _, var = inference.combine(means[:, :n_t], grid_vars, False, weights)
+        return mean, var
+    first = {name: value[:1] for name, value in params.items()}
+    mean = noise_model.predict_samples(kind, first, data, t_all, ts_all, 0)[0][0]
+    grid_means, grid_vars = noise_model.predict_samples(kind, params, data, t_all[:n_t], ts_all[:n_t], n_t)
+    _, var = inference.combine(grid_means, grid_vars, True)
+    return mean, var
 
 
 def _predict_program(config: CampaignConfig):
@@ -142,10 +200,7 @@ def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str):
         t_train = fitted.noise_data.t
         t_all = jnp.concatenate([jnp.asarray(g.t), jnp.asarray(g.t_fine), t_train])
         ts_all = (t_all - s.t_min) / (s.t_max - s.t_min)
-        # The variance is wanted on the t grid only: the fine grid and the training points need means.
-        means, grid_vars = noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t_all, ts_all, n_t)
-        n_mean, _ = inference.combine(means, jnp.zeros_like(means), noise_first, fitted.noise.weights)
-        _, n_var = inference.combine(means[:, :n_t], grid_vars, noise_first, fitted.noise.weights)
+        n_mean, n_var = _noise_curves(kind, fitted, t_all, ts_all, n_t, noise_first)
         n_mean, n_var = n_mean * fitted.noise_scale, n_var * fitted.noise_scale**2
         grid_mean, fine_mean, train_mean = n_mean[:n_t], n_mean[n_t : n_t + N_FINE], n_mean[n_t + N_FINE :]
         r_grid = reward(jnp.asarray(g.t), grid_mean, rew.alpha, rew.beta)
@@ -201,7 +256,9 @@ class Decision:
     """The outcome of one BO step (0-based ``step``): the proposal, how to measure it, and what
     the models said. ``noise_at_t`` is the noise model's single-shot sd at the proposed t.
     Arrays: ``acq_map`` (n_x, n_t) float32; ``f_mean``, ``f_var`` (n_x,) on the x grid;
-    ``noise_mean``, ``noise_var`` (n_t,) on the t grid. ``latency_s``: the decision's time (s)."""
+    ``noise_mean``, ``noise_var`` (n_t,) on the t grid. ``latency_s``: the decision's time (s).
+    ``primary_inputs``, ``noise_inputs``: the distinct inputs (or bins) each GP was fitted on;
+    ``binned``: True when they were bins, an approximation (see ``noisebo.inputs``)."""
 
     step: int
     x: float
@@ -219,6 +276,9 @@ class Decision:
     noise_mean: np.ndarray
     noise_var: np.ndarray
     latency_s: float = 0.0
+    primary_inputs: int = 0
+    noise_inputs: int = 0
+    binned: bool = False
 
 
 def hyperparameters(fitted: Fitted) -> dict[str, float]:
@@ -267,6 +327,9 @@ def acquire(
         f_var=np.asarray(prediction.posterior.f_var, dtype=np.float64),
         noise_mean=np.asarray(prediction.posterior.noise_mean, dtype=np.float64),
         noise_var=np.asarray(prediction.posterior.noise_var, dtype=np.float64),
+        primary_inputs=int(fitted.primary_inputs),
+        noise_inputs=int(fitted.noise_inputs),
+        binned=bool(fitted.binned),
     )
     return decision, new_state
 
@@ -276,6 +339,10 @@ def fit_key(seed: int, step: int) -> jax.Array:
     return jax_key(seed, FIT, step)
 
 
-def decide(config: CampaignConfig, state: CampaignState, seed: int, step: int) -> tuple[Decision, CampaignState]:
-    """One whole BO decision: fit both models (key (seed, step)), then ``acquire``."""
-    return acquire(config, fit_models(config, state, fit_key(seed, step)), state, step)
+def decide(
+    config: CampaignConfig, state: CampaignState, seed: int, step: int, previous: dict | None = None
+) -> tuple[Decision, CampaignState]:
+    """One whole BO decision: fit both models (key (seed, step); from ``previous``, the previous
+    step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then ``acquire``."""
+    fitted = fit_models(config, state, fit_key(seed, step), previous, warm_step(config, step, previous))
+    return acquire(config, fitted, state, step)

@@ -251,7 +251,8 @@ def advance(state: EngineState) -> tuple[Event, ...]:
     if due.final:
         return Summarised(summarize(state.config, state.data, state.seed)), StatusChanged(Status.COMPLETED)
     started = time.perf_counter()
-    decision, _ = decide(state.config, state.data, state.seed, due.step)
+    previous = state.decisions[-1].hyperparameters if state.decisions else None
+    decision, _ = decide(state.config, state.data, state.seed, due.step, previous)
     return (Decided(replace(decision, latency_s=time.perf_counter() - started)),)
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import threading
 from functools import lru_cache
-from typing import Callable, NamedTuple
+from typing import Callable, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -166,17 +166,22 @@ def nuts_runner(model: Callable, warmup: int, samples: int, thread: int) -> MCMC
 
 
 def fit_map(
-    model, data, key, restarts: int, laplace_samples: int = 0, guess: dict | None = None, quadrature_nodes: int = 0
+    model, data, key, restarts: int, laplace_samples: int = 0, guess: dict | Sequence[dict] | None = None,
+    quadrature_nodes: int = 0, draws: bool = True,
 ) -> Samples:
-    """MAP of ``model(data)``: L-BFGS-B from ``restarts`` prior draws, plus one start at ``guess``
-    (constrained values of every latent site) when given. Then, if ``quadrature_nodes`` > 0, a
-    weighted quadrature of the posterior around the mode (nodes per dimension); else the MAP
-    point with ``laplace_samples`` Laplace draws."""
+    """MAP of ``model(data)``: L-BFGS-B from each ``guess`` (a dict of constrained values of every
+    latent site, or a sequence of them, tried first) and, with ``draws``, from ``restarts``
+    prior draws (without: the guesses alone, a warm start). Then, if ``quadrature_nodes`` > 0, a weighted quadrature of the posterior
+    around the mode (nodes per dimension); else the MAP point with ``laplace_samples`` Laplace
+    draws."""
+    guesses = [] if guess is None else [guess] if isinstance(guess, dict) else list(guess)
+    if not guesses and not draws:
+        raise ValueError("a MAP fit needs a guess or the prior draws")
     program = _map_program(model, restarts, laplace_samples, quadrature_nodes)
     k_start, k_laplace = jax.random.split(key)
-    starts = list(np.asarray(program.starts(k_start, data)))
-    if guess is not None:
-        starts.insert(0, np.asarray(program.flatten({k: jnp.asarray(v) for k, v in guess.items()}, data)))
+    starts = [np.asarray(program.flatten({k: jnp.asarray(v) for k, v in g.items()}, data)) for g in guesses]
+    if draws:
+        starts += list(np.asarray(program.starts(k_start, data)))
     best, best_value = None, np.inf
     for x0 in starts:
         x, value = _minimise(program.value_and_grad, x0, data)

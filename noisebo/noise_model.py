@@ -23,20 +23,26 @@ from scipy import optimize
 from scipy.special import gammaln
 
 from noisebo.config import NoiseModelConfig
+from noisebo.inputs import Grouped, capacity_for, merge
 from noisebo.kernels import masked_covariance, matern52
 
 RESIDUAL_LENGTH_LOC = float(np.log(0.3))
 
 
 class NoiseData(NamedTuple):
-    """Padded training set of length n. t: seconds; ts: t scaled to [0, 1]; y: s/c4 over the data
-    scale (0 on padding); rel_var: (1 - c4^2)/c4^2 per point; mask: True on real points;
-    bounds: (3, 2) prior bounds of (A0, A1, p) in scaled units."""
+    """Padded training set of length n: one entry per group of points at the same t (see
+    ``noisebo.inputs``). t: seconds; ts: t scaled to [0, 1]; y: the group's precision-weighted
+    mean of s/c4 over the data scale (0 on padding); rel_var: (1 - c4^2)/c4^2 of that mean, i.e.
+    1 / sum over its points of c4^2/(1 - c4^2); count: points in the group; scatter: sum over its
+    points of (y_i - y)^2 / rel_var_i; mask: True on real groups; bounds: (3, 2) prior bounds of
+    (A0, A1, p) in scaled units."""
 
     t: jnp.ndarray
     ts: jnp.ndarray
     y: jnp.ndarray
     rel_var: jnp.ndarray
+    count: jnp.ndarray
+    scatter: jnp.ndarray
     mask: jnp.ndarray
     bounds: jnp.ndarray
 
@@ -73,36 +79,55 @@ def make_model(cfg: NoiseModelConfig):
         m = mean_law(cfg.mean, data.t, a0, a1, p)
         cov = masked_covariance(matern52(data.ts, data.ts, amplitude**2, length), m**2 * data.rel_var, data.mask)
         numpyro.sample("y", dist.MultivariateNormal(jnp.where(data.mask, m, 0.0), covariance_matrix=cov), obs=data.y)
+        # What merging a group's points into their mean left out of the likelihood: the spread of
+        # its points about that mean, whose variances m^2 rel_var_i depend on the law (0 for one point).
+        numpyro.factor("within_groups", group_log_factor(m, data))
 
     return noise_model
 
 
-def prepare(
-    t, shot_std, n_shots, capacity: int, cfg: NoiseModelConfig, t_min: float, t_max: float
-) -> tuple[NoiseData, float]:
-    """Pad measured noise (numpy: t in s, sample std, shots per point) for the model.
+def group_log_factor(m: jnp.ndarray, data: NoiseData) -> jnp.ndarray:
+    """log of the product of the groups' within-group likelihoods, up to a constant, for the law
+    m (n,) at the groups' t: sum of -scatter / (2 m^2) - (count - 1) log m over real groups."""
+    safe_m = jnp.where(data.mask, m, 1.0)
+    terms = -0.5 * data.scatter / safe_m**2 - (data.count - 1.0) * jnp.log(safe_m)
+    return jnp.sum(jnp.where(data.mask, terms, 0.0))
 
-    Returns the data and the scale (same units as the noise) that model values are multiplied by.
-    """
+
+def prepare(
+    t, shot_std, n_shots, cfg: NoiseModelConfig, t_min: float, t_max: float, max_inputs: int,
+    capacity: int | None = None,
+) -> tuple[NoiseData, float, Grouped]:
+    """Merge measured noise (numpy (n,): t in s, sample std, shots per point) by t and pad it
+    for the model (to ``capacity``, default the groups' ``capacity_for``).
+
+    Returns the data, the scale (same units as the noise) that model values are multiplied by,
+    and the groups (in scaled units)."""
     t, shot_std, n_shots = (np.asarray(a, dtype=np.float64) for a in (t, shot_std, n_shots))
     n = t.shape[0]
-    unbiased = shot_std / c4(n_shots)
+    k = c4(n_shots)
+    unbiased = shot_std / k
     scale = float(unbiased.mean()) if n else 1.0
     if not np.isfinite(scale) or scale <= 0:
         scale = 1.0
-    k = c4(n_shots)
-    pad = capacity - n
+    groups = merge(t, unbiased / scale, (1.0 - k**2) / k**2, t_min, t_max, max_inputs)
+    g = groups.coord.shape[0]
+    pad = (capacity or capacity_for(g)) - g
+    if pad < 0:
+        raise ValueError(f"{g} noise-model inputs do not fit a capacity of {capacity}")
     priors = (cfg.a0_prior, cfg.a1_prior)
     bounds = [[pr.low / scale, pr.high / scale] for pr in priors] + [[cfg.p_prior.low, cfg.p_prior.high]]
     data = NoiseData(
-        t=jnp.asarray(np.pad(t, (0, pad), constant_values=1.0)),
-        ts=jnp.asarray(np.pad((t - t_min) / (t_max - t_min), (0, pad))),
-        y=jnp.asarray(np.pad(unbiased / scale, (0, pad))),
-        rel_var=jnp.asarray(np.pad((1.0 - k**2) / k**2, (0, pad))),
-        mask=jnp.asarray(np.arange(capacity) < n),
+        t=jnp.asarray(np.pad(groups.coord, (0, pad), constant_values=1.0)),
+        ts=jnp.asarray(np.pad((groups.coord - t_min) / (t_max - t_min), (0, pad))),
+        y=jnp.asarray(np.pad(groups.mean, (0, pad))),
+        rel_var=jnp.asarray(np.pad(groups.var, (0, pad))),
+        count=jnp.asarray(np.pad(groups.count.astype(np.float64), (0, pad))),
+        scatter=jnp.asarray(np.pad(groups.scatter, (0, pad))),
+        mask=jnp.asarray(np.arange(g + pad) < g),
         bounds=jnp.asarray(bounds),
     )
-    return data, scale
+    return data, scale, groups
 
 
 def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
@@ -111,6 +136,7 @@ def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
     prior median. Scaled units."""
     mask = np.asarray(data.mask)
     t, y = np.asarray(data.t)[mask], np.asarray(data.y)[mask]
+    weight = np.sqrt(np.asarray(data.count)[mask])  # a group stands for its points
     bounds = np.asarray(data.bounds)
     exponents = np.linspace(bounds[2, 0], bounds[2, 1], 29) if cfg.mean == "power" else np.array([0.5])
     best = None
@@ -120,7 +146,7 @@ def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
     y = np.maximum(y, max(1e-3 * float(y.max(initial=0.0)), 1e-12))
     for p in exponents:
         design = np.column_stack([np.ones_like(t), t ** (-p * power)]) / y[:, None] ** power  # relative errors
-        coef, residual = optimize.nnls(design, np.ones_like(y))
+        coef, residual = optimize.nnls(design * weight[:, None], weight)
         if best is None or residual < best[0]:
             best = (residual, coef ** (1.0 / power), p)
     _, (a0, a1), p = best

@@ -2,7 +2,8 @@
 
 Training targets are standardised (zero mean, unit variance) and x is scaled to [0, 1]; each
 point's own noise variance (the variance of the value fed, e.g. s^2/n for a mean of n shots)
-sits on the covariance diagonal, in fitting and in prediction.
+sits on the covariance diagonal, in fitting and in prediction. Points at the same x enter as one
+precision-weighted observation (``noisebo.inputs``): the same likelihood up to a constant.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpyro
 import numpyro.distributions as dist
 
 from noisebo.config import PrimaryModelConfig
+from noisebo.inputs import Grouped, capacity_for, merge
 from noisebo.kernels import masked_covariance, matern52
 
 
@@ -59,8 +61,14 @@ def prior_median(prior: PrimaryModelConfig) -> dict[str, float]:
     return {"amplitude": float(np.exp(prior.amplitude_loc)), "length": float(np.exp(prior.length_loc))}
 
 
-def prepare(x, value, var, capacity: int, x_min: float, x_max: float) -> tuple[PrimaryData, Standardisation]:
-    """Standardise and pad raw observations (numpy, length n <= capacity) for the model."""
+def prepare(
+    x, value, var, x_min: float, x_max: float, max_inputs: int, capacity: int | None = None
+) -> tuple[PrimaryData, Standardisation, Grouped]:
+    """Standardise raw observations (numpy (n,): x, value, and the variance of each value),
+    merge those at the same x (see ``noisebo.inputs``) and pad the groups to ``capacity``
+    (default: the groups' ``capacity_for``).
+
+    Returns the model's data, the standardisation (from all n values) and the groups."""
     x, value, var = (np.asarray(a, dtype=np.float64) for a in (x, value, var))
     n = x.shape[0]
     mean = float(value.mean()) if n else 0.0
@@ -68,14 +76,18 @@ def prepare(x, value, var, capacity: int, x_min: float, x_max: float) -> tuple[P
     if not np.isfinite(scale) or scale < 1e-12:
         scale = 1.0
     std = Standardisation(mean, scale, float(x_min), float(x_max - x_min))
-    pad = capacity - n
+    groups = merge((x - x_min) / std.x_span, (value - mean) / scale, var / scale**2, 0.0, 1.0, max_inputs)
+    g = groups.coord.shape[0]
+    pad = (capacity or capacity_for(g)) - g
+    if pad < 0:
+        raise ValueError(f"{g} primary-model inputs do not fit a capacity of {capacity}")
     data = PrimaryData(
-        x=jnp.asarray(np.pad((x - x_min) / std.x_span, (0, pad))),
-        y=jnp.asarray(np.pad((value - mean) / scale, (0, pad))),
-        var=jnp.asarray(np.pad(var / scale**2, (0, pad), constant_values=1.0)),
-        mask=jnp.asarray(np.arange(capacity) < n),
+        x=jnp.asarray(np.pad(groups.coord, (0, pad))),
+        y=jnp.asarray(np.pad(groups.mean, (0, pad))),
+        var=jnp.asarray(np.pad(groups.var, (0, pad), constant_values=1.0)),
+        mask=jnp.asarray(np.arange(g + pad) < g),
     )
-    return data, std
+    return data, std, groups
 
 
 def predict_one(params: dict, data: PrimaryData, xs: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:

@@ -29,7 +29,7 @@ def _data():
     rng = np.random.default_rng(3)
     t = np.geomspace(0.2, 10.0, 12)
     s = ((2 / np.sqrt(t) + 0.1)[:, None] * rng.standard_normal((12, 30))).std(axis=1, ddof=1)
-    return noise_model.prepare(t, s, np.full(12, 30), 32, NoiseModelConfig(), 0.2, 10.0)
+    return noise_model.prepare(t, s, np.full(12, 30), NoiseModelConfig(), 0.2, 10.0, 256)[:2]
 
 
 def test_map_is_a_local_optimum_and_laplace_draws_spread_around_it():

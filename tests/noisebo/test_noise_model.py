@@ -20,7 +20,7 @@ def synthetic(a0, a1, n_points=16, shots=30, seed=0, law="inv_sqrt"):
 
 
 def fit(cfg, t, shot_std, n_shots, key=0):
-    data, scale = noise_model.prepare(t, shot_std, n_shots, 32, cfg, 0.2, 10.0)
+    data, scale, _ = noise_model.prepare(t, shot_std, n_shots, cfg, 0.2, 10.0, 256)
     guess = noise_model.initial_guess(data, cfg)
     samples = inference.fit_map(noise_model.make_model(cfg), data, jax.random.PRNGKey(key), 6, 0, guess)
     return {k: float(v[0]) * (scale if k in ("a0", "a1") else 1.0) for k, v in samples.params.items()}
@@ -55,7 +55,7 @@ def test_quadrature_initial_guess_is_exact_on_exact_data():
     t = np.geomspace(0.2, 10.0, 8)
     sd = np.sqrt(4.0 / t + 0.25)
     cfg = NoiseModelConfig(mean="quadrature")
-    data, scale = noise_model.prepare(t, sd * noise_model.c4(np.full(8, 30)), np.full(8, 30), 32, cfg, 0.2, 10.0)
+    data, scale, _ = noise_model.prepare(t, sd * noise_model.c4(np.full(8, 30)), np.full(8, 30), cfg, 0.2, 10.0, 256)
     guess = noise_model.initial_guess(data, cfg)
     assert guess["a1"] * scale == pytest.approx(2.0, rel=1e-6) and guess["a0"] * scale == pytest.approx(0.5, rel=1e-6)
 
@@ -67,7 +67,7 @@ def test_padding_does_not_change_predictions():
     tq = np.array([0.3, 2.5, 9.0])
     out = []
     for capacity in (8, 32):
-        data, _ = noise_model.prepare(t, s, n, capacity, cfg, 0.2, 10.0)
+        data, _, _ = noise_model.prepare(t, s, n, cfg, 0.2, 10.0, 256, capacity)
         out.append(np.asarray(noise_model.predict_samples("inv_sqrt", params, data, tq, (tq - 0.2) / 9.8)))
     np.testing.assert_allclose(out[0], out[1], rtol=1e-10)
 

@@ -14,7 +14,7 @@ def test_prediction_matches_a_hand_computed_gp():
     x = np.array([0.1, 0.4, 0.8])
     value = np.array([1.0, -2.0, 3.0])
     var = np.array([0.1, 0.5, 0.2])
-    data, std = primary.prepare(x, value, var, 8, 0.0, 1.0)
+    data, std, _ = primary.prepare(x, value, var, 0.0, 1.0, 256, 8)
     params = {"amplitude": np.array([1.3]), "length": np.array([0.25])}
     xs = np.array([0.0, 0.4, 0.6])
     mean, pvar = (np.asarray(a)[0] for a in primary.predict_samples(params, data, xs))
@@ -30,8 +30,8 @@ def test_prediction_matches_a_hand_computed_gp():
 def test_noise_on_the_diagonal_widens_the_posterior():
     x, value = np.array([0.2, 0.5]), np.array([1.0, 2.0])
     params = {"amplitude": np.array([1.0]), "length": np.array([0.2])}
-    quiet, _ = primary.prepare(x, value, np.array([1e-4, 1e-4]), 8, 0.0, 1.0)
-    loud, _ = primary.prepare(x, value, np.array([1.0, 1.0]), 8, 0.0, 1.0)
+    quiet, _, _ = primary.prepare(x, value, np.array([1e-4, 1e-4]), 0.0, 1.0, 256, 8)
+    loud, _, _ = primary.prepare(x, value, np.array([1.0, 1.0]), 0.0, 1.0, 256, 8)
     v_quiet = np.asarray(primary.predict_samples(params, quiet, np.array([0.2]))[1])
     v_loud = np.asarray(primary.predict_samples(params, loud, np.array([0.2]))[1])
     assert v_quiet[0, 0] < 0.01 < v_loud[0, 0]
@@ -40,6 +40,6 @@ def test_noise_on_the_diagonal_widens_the_posterior():
 def test_map_fit_finds_a_length_scale_of_the_right_order():
     x = np.linspace(0, 1, 25)
     value = np.sin(2 * np.pi * x / 0.5)  # period 0.5: Matern length scale of order 0.1
-    data, _ = primary.prepare(x, value, np.full(25, 1e-4), 32, 0.0, 1.0)
+    data, _, _ = primary.prepare(x, value, np.full(25, 1e-4), 0.0, 1.0, 256, 32)
     samples = inference.fit_map(primary.make_model(PrimaryModelConfig()), data, jax.random.PRNGKey(0), 4)
     assert 0.03 < float(samples.params["length"][0]) < 0.3
