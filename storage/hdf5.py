@@ -1,10 +1,16 @@
-"""The campaign's HDF5 file: a complete, self-describing snapshot derived from its journal.
+"""The campaign's HDF5 file, derived from its journal: the finished layout and the readers.
 
-Every write builds a new file beside the old one, fsyncs it and atomically renames it over the
-old one, so the path always holds a closed, valid HDF5 file (plain ``h5py.File(path)`` opens it
-at any moment, during the campaign or after a crash), and a reader never sees a half-written
-file. Layout (schema "noisebo.campaign", version 1) is documented in the README; every dataset
-carries "units" and "description" attributes.
+While a campaign runs, its file is grown in place by ``storage.live.LiveFile`` (HDF5 SWMR: each
+committed point appends only its new rows). When the run ends (any status but running),
+``write_snapshot`` writes the whole campaign once more in the finished layout: a new file beside
+the old one, fsynced and atomically renamed over it, so a finished campaign is a plain, compact
+HDF5 file (spectra compressed) that ``h5py.File(path, "r")`` opens. Layout (schema
+"noisebo.campaign", version 2) is documented in the README; every dataset carries "units" and
+"description" attributes.
+
+The readers (``read_campaign``, ``read_spectra``, ``read_shot_fits``, ``read_failures``) read
+both a finished file and a running or killed one (opened with ``swmr=True``, every table cut to
+its committed rows) and give the same values for the same campaign.
 """
 
 from __future__ import annotations
@@ -12,14 +18,16 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import Sequence
 
 import h5py
 import numpy as np
 
-from noisebo.decision import grids
+from noisebo.decision import Decision, grids
 from storage.faults import crash_point
 from storage.journal import _fsync_dir
-from noisebo.engine import EngineState
+from noisebo.engine import EngineState, PointEntry
+from noisebo.events import ShotFailed, ShotTaken
 
 SCHEMA = "noisebo.campaign"
 SCHEMA_VERSION = 2
@@ -46,6 +54,9 @@ POINT_COLUMNS = {
     "noise": ("f units", "single-shot noise sd used by the GP (diagonal = noise^2 / n_shots)"),
     "noise_measured": ("bool", "True: noise = shot_std; False: noise-model prediction"),
 }
+POINT_STEP = ("1", "BO step that proposed it (-1: seed)")
+# Root attributes that change with every committed point; a running file keeps them in /committed.
+MUTABLE_ATTRS = ("converged_step", "n_points", "n_steps", "n_shots", "n_failed_attempts")
 
 
 def _put(group: h5py.Group, name: str, data, units: str, description: str) -> None:
@@ -67,42 +78,70 @@ ARRAY_COLUMNS = {
 }
 
 
+def column_dtype(name: str, units: str) -> np.dtype:
+    """The stored dtype of a /points or /steps column."""
+    if units == "bool":
+        return np.dtype(bool)
+    return np.dtype(np.int32 if name in ("n_shots", "step", "shots") else np.float64)
+
+
+def array_shapes(state: EngineState) -> dict[str, tuple[int, ...]]:
+    """The per-step array shapes (without the step axis): acq_map (n_x, n_t), f_* (n_x,), noise_* (n_t,)."""
+    n_x, n_t = state.config.space.n_x, state.config.space.n_t
+    return {"acq_map": (n_x, n_t), "f_mean": (n_x,), "f_var": (n_x,), "noise_mean": (n_t,), "noise_var": (n_t,)}
+
+
+def array_dtype(name: str) -> np.dtype:
+    return np.dtype(np.float32 if name == "acq_map" else np.float64)
+
+
+def point_rows(entries: Sequence[PointEntry]) -> dict[str, np.ndarray]:
+    """/points columns (POINT_COLUMNS and "step") of these committed points, (len(entries),) each."""
+    points = [e.committed.point for e in entries]
+    rows = {name: np.asarray([getattr(p, name) for p in points], dtype=column_dtype(name, units))
+            for name, (units, _) in POINT_COLUMNS.items()}
+    rows["step"] = np.asarray([e.committed.step for e in entries], dtype=np.int32)
+    return rows
+
+
+def hyperparameter_names(decisions: Sequence[Decision]) -> list[str]:
+    """Every hyperparameter name any of ``decisions`` fitted, sorted."""
+    return sorted({k for d in decisions for k in d.hyperparameters})
+
+
+def step_rows(decisions: Sequence[Decision], names: Sequence[str], shapes: dict) -> dict:
+    """/steps columns of these decisions: STEP_COLUMNS (len,), the ARRAY_COLUMNS (len, *shape)
+    and "hyperparameters" {name: (len,)} (NaN where a decision lacks one of ``names``)."""
+    rows = {name: np.asarray([getattr(d, name) for d in decisions], dtype=column_dtype(name, units))
+            for name, (units, _) in STEP_COLUMNS.items()}
+    rows["hyperparameters"] = {
+        name: np.asarray([d.hyperparameters.get(name, np.nan) for d in decisions], dtype=np.float64) for name in names}
+    for name, shape in shapes.items():
+        stacked = np.stack([getattr(d, name) for d in decisions]) if decisions else np.zeros((0, *shape))
+        rows[name] = stacked.astype(np.float32) if name == "acq_map" else stacked
+    return rows
+
+
 def campaign_tables(state: EngineState) -> dict:
     """The campaign as plain columns, in the shape ``read_campaign`` returns (without "attrs"):
     "grid", "points", "steps" (with "hyperparameters" and the per-step arrays), "shots" and
     "summary" (None until done)."""
     g = grids(state.config)
-    points = {}
-    for name, (units, _) in POINT_COLUMNS.items():
-        dtype = bool if units == "bool" else (np.int32 if name == "n_shots" else np.float64)
-        points[name] = np.asarray([getattr(p, name) for p in state.data.points], dtype=dtype)
-    points["step"] = np.asarray(state.step_of_points, dtype=np.int32)
     decisions = state.decisions
-    steps = {}
-    for name, (units, _) in STEP_COLUMNS.items():
-        dtype = bool if units == "bool" else (np.int32 if name in ("step", "shots") else np.float64)
-        steps[name] = np.asarray([getattr(d, name) for d in decisions], dtype=dtype)
-    names = sorted({k for d in decisions for k in d.hyperparameters})
-    steps["hyperparameters"] = {
-        name: np.asarray([d.hyperparameters.get(name, np.nan) for d in decisions], dtype=np.float64) for name in names
-    }
-    shapes = {"acq_map": (g.x.size, g.t.size), "f_mean": (g.x.size,), "f_var": (g.x.size,),
-              "noise_mean": (g.t.size,), "noise_var": (g.t.size,)}
-    for name, shape in shapes.items():
-        steps[name] = np.stack([getattr(d, name) for d in decisions]) if decisions else np.zeros((0, *shape))
-    steps["acq_map"] = steps["acq_map"].astype(np.float32)
+    steps = step_rows(decisions, hyperparameter_names(decisions), array_shapes(state))
     summary = None
     if state.summary is not None:
         s = state.summary
         summary = {"f_mean": s.f_mean, "f_var": s.f_var, "noise_fine": s.noise_fine, "t_opt": float(s.t_opt),
                    "hyperparameters": dict(s.hyperparameters)}
-    return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": points, "steps": steps,
+    return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points), "steps": steps,
             "shots": shot_columns(state), "summary": summary}
 
 
-def _fill(f: h5py.File, state: EngineState) -> None:
+def root_attrs(state: EngineState) -> dict:
+    """The file's root attributes (README: "HDF5 layout")."""
     config = state.config
-    f.attrs.update(
+    return dict(
         schema=SCHEMA,
         schema_version=SCHEMA_VERSION,
         name=config.name,
@@ -122,11 +161,33 @@ def _fill(f: h5py.File, state: EngineState) -> None:
         config_json=json.dumps(config.model_dump(mode="json")),
         versions_json=json.dumps(state.versions),
     )
-    tables = campaign_tables(state)
+
+
+def fill_grid(f: h5py.File, state: EngineState) -> None:
+    g = grids(state.config)
     grid = f.create_group("grid")
-    _put(grid, "x", tables["grid"]["x"], "x units", "candidate x grid")
-    _put(grid, "t", tables["grid"]["t"], "s", "candidate t grid")
-    _put(grid, "t_fine", tables["grid"]["t_fine"], "s", "t grid of the predicted optimal t")
+    _put(grid, "x", g.x, "x units", "candidate x grid")
+    _put(grid, "t", g.t, "s", "candidate t grid")
+    _put(grid, "t_fine", g.t_fine, "s", "t grid of the predicted optimal t")
+
+
+def fill_summary(f: h5py.File, state: EngineState) -> None:
+    """/summary, once the campaign has one."""
+    if state.summary is None:
+        return
+    s = state.summary
+    summary = f.create_group("summary")
+    summary.attrs["t_opt"] = float(s.t_opt)
+    summary.attrs["hyperparameters_json"] = json.dumps(dict(s.hyperparameters))
+    _put(summary, "f_mean", s.f_mean, "f units", "final predicted f on grid/x")
+    _put(summary, "f_var", s.f_var, "f units^2", "its variance")
+    _put(summary, "noise_fine", s.noise_fine, "f units", "final noise sd on grid/t_fine")
+
+
+def _fill(f: h5py.File, state: EngineState) -> None:
+    f.attrs.update(root_attrs(state))
+    tables = campaign_tables(state)
+    fill_grid(f, state)
 
     _fill_shots(f, state, tables["shots"])
     _fill_failures(f, state)
@@ -134,7 +195,7 @@ def _fill(f: h5py.File, state: EngineState) -> None:
     points = f.create_group("points")
     for name, (units, description) in POINT_COLUMNS.items():
         _put(points, name, tables["points"][name], units, description)
-    _put(points, "step", tables["points"]["step"], "1", "BO step that proposed it (-1: seed)")
+    _put(points, "step", tables["points"]["step"], *POINT_STEP)
 
     steps = f.create_group("steps")
     for name, (units, description) in STEP_COLUMNS.items():
@@ -144,15 +205,7 @@ def _fill(f: h5py.File, state: EngineState) -> None:
         _put(hyper, name, values, "model units", f"fitted {name} per step (MAP or posterior mean)")
     for name, (units, description) in ARRAY_COLUMNS.items():
         _put(steps, name, tables["steps"][name], units, description)
-
-    if tables["summary"] is not None:
-        s = tables["summary"]
-        summary = f.create_group("summary")
-        summary.attrs["t_opt"] = s["t_opt"]
-        summary.attrs["hyperparameters_json"] = json.dumps(s["hyperparameters"])
-        _put(summary, "f_mean", s["f_mean"], "f units", "final predicted f on grid/x")
-        _put(summary, "f_var", s["f_var"], "f units^2", "its variance")
-        _put(summary, "noise_fine", s["noise_fine"], "f units", "final noise sd on grid/t_fine")
+    fill_summary(f, state)
 
 
 SHOT_COLUMNS = (
@@ -164,6 +217,7 @@ SHOT_COLUMNS = (
     ("committed", bool, "bool", "its point has been reduced and committed"),
     ("ok", bool, "bool", "the value is usable (False: rejected, see reason)"),
 )
+SHOT_TEXT = {"reason": "why the shot was rejected (empty if ok)"}
 FIT_UNITS = {
     "amplitude": ("f units", "fitted SHO amplitude r_real"),
     "amplitude_se": ("f units", "its standard error from the fit covariance"),
@@ -174,17 +228,26 @@ FIT_UNITS = {
     "phase_deg": ("deg", "local response phase (measured phase minus the oscillator's lag)"),
     "sign": ("1", "domain sign from the phase"),
 }
+FIT_NOTE = "how the fit went (empty: free fit; else why the nominal resonance was used or it failed)"
+SPECTRA_DESCRIPTION = "raw resonance sweeps per point: (shot, row, sample); rows frequency, amplitude, phase"
+SPECTRA_ROWS = "frequency_hz, amplitude_pm, phase_deg"
 
 
 def shot_columns(state: EngineState) -> dict:
     """Every shot as columns (SHOT_COLUMNS, "reason", "note" and the FIT_UNITS columns): those
     of committed points with their reduced values, then the shots of the point under way."""
+    return shot_rows(state.points, state.taken)
+
+
+def shot_rows(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = ()) -> dict:
+    """The shots of these committed points, then the shots ``taken`` of the point under way, as
+    columns: SHOT_COLUMNS (n,), "reason" and "note" (lists of str) and "fit" {FIT_UNITS name: (n,)}."""
     cols: dict[str, list] = {name: [] for name, *_ in SHOT_COLUMNS}
     cols |= {"reason": [], "note": []} | {name: [] for name in FIT_UNITS}
-    for entry in state.points:
+    for entry in entries:
         for shot, value in zip(entry.shots, entry.committed.values):
             _add_shot(cols, shot, value)
-    for shot in state.taken:
+    for shot in taken:
         _add_shot(cols, shot, None)
     out = {name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS}
     out["reason"], out["note"] = cols["reason"], cols["note"]
@@ -208,73 +271,89 @@ def _add_shot(cols: dict, shot, value) -> None:
         cols[name].append(getattr(fit, name) if fit is not None else np.nan)
 
 
+def spectra_of(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = (), first: int = 0) -> dict[int, tuple]:
+    """{point index: its shots} for the points whose shots carry raw spectra: the committed
+    ``entries`` (numbered from ``first``), then the point under way (``taken``)."""
+    spectra = {first + i: e.shots for i, e in enumerate(entries) if e.shots and e.shots[0].reading.spectrum is not None}
+    if taken and taken[0].reading.spectrum is not None:
+        spectra[first + len(entries)] = tuple(taken)
+    return spectra
+
+
 FAILURE_COLUMNS = (
     ("point", np.int32, "1", "point the failed attempt belongs to"),
     ("shot", np.int32, "1", "shot index it was an attempt at (retried with the same key)"),
     ("x", np.float64, "x units", "position"),
     ("t", np.float64, "s", "exposure (sweep) time"),
 )
+FAILURE_TEXT = {"kind": "timeout | instrument error", "reason": "the error message"}
+FAILURES_DESCRIPTION = "failed attempts at shots (instrument errors, timeouts); each was tried again"
+
+
+def failure_rows(rows: Sequence[ShotFailed]) -> dict:
+    """/failures columns of these failed attempts: FAILURE_COLUMNS (n,), "kind" and "reason" (lists of str)."""
+    out = {name: np.asarray([r.x[0] if name == "x" else getattr(r, name) for r in rows], dtype=dtype)
+           for name, dtype, _, _ in FAILURE_COLUMNS}
+    return out | {name: [getattr(r, name) for r in rows] for name in FAILURE_TEXT}
 
 
 def _fill_failures(f: h5py.File, state: EngineState) -> None:
     group = f.create_group("failures")
-    group.attrs["description"] = "failed attempts at shots (instrument errors, timeouts); each was tried again"
-    rows = state.failures
-    for name, dtype, units, description in FAILURE_COLUMNS:
-        _put(group, name, np.asarray([r.x[0] if name == "x" else getattr(r, name) for r in rows], dtype=dtype),
-             units, description)
-    for name, description in (("kind", "timeout | instrument error"), ("reason", "the error message")):
-        _put_text(group, name, [getattr(r, name) for r in rows], description)
+    group.attrs["description"] = FAILURES_DESCRIPTION
+    rows = failure_rows(state.failures)
+    for name, _, units, description in FAILURE_COLUMNS:
+        _put(group, name, rows[name], units, description)
+    for name, description in FAILURE_TEXT.items():
+        _put_text(group, name, rows[name], description)
 
 
 def _fill_shots(f: h5py.File, state: EngineState, columns: dict) -> None:
     shots = f.create_group("shots")
     for name, _, units, description in SHOT_COLUMNS:
         _put(shots, name, columns[name], units, description)
-    _put_text(shots, "reason", columns["reason"], "why the shot was rejected (empty if ok)")
+    _put_text(shots, "reason", columns["reason"], SHOT_TEXT["reason"])
     if np.any(np.isfinite(columns["fit"]["amplitude"])):
         fit = shots.create_group("fit")
         for name, (units, description) in FIT_UNITS.items():
             _put(fit, name, columns["fit"][name], units, description)
-        _put_text(fit, "note", columns["note"],
-                  "how the fit went (empty: free fit; else why the nominal resonance was used or it failed)")
-    spectra = {e.committed.index: e.shots for e in state.points if e.shots and e.shots[0].reading.spectrum is not None}
-    if state.taken and state.taken[0].reading.spectrum is not None:
-        spectra[len(state.points)] = state.taken
+        _put_text(fit, "note", columns["note"], FIT_NOTE)
+    spectra = spectra_of(state.points, state.taken)
     if spectra:
         group = f.create_group("spectra")
-        group.attrs["description"] = "raw resonance sweeps per point: (shot, row, sample); rows frequency, amplitude, phase"
-        group.attrs["rows"] = "frequency_hz, amplitude_pm, phase_deg"
+        group.attrs["description"] = SPECTRA_DESCRIPTION
+        group.attrs["rows"] = SPECTRA_ROWS
         for i, shots_of in sorted(spectra.items()):
             data = np.stack([s.reading.spectrum for s in shots_of])
             ds = group.create_dataset(f"point_{i:04d}", data=data, chunks=(1, *data.shape[1:]), compression="gzip", compression_opts=1)
             ds.attrs["units"] = "Hz, pm, deg"
 
 
-def read_spectra(path: Path, point: int) -> np.ndarray:
-    """The raw sweeps of one point, (n_shots, 3, N): rows frequency Hz, amplitude pm, phase deg."""
-    with h5py.File(path, "r") as f:
-        name = f"spectra/point_{point:04d}"
-        if name not in f:
-            raise CampaignFileError(f"{path}: no spectra for point {point}")
-        return f[name][()]
-
-
 def write_snapshot(path: Path, state: EngineState) -> None:
-    """Atomically replace ``path`` with a fresh HDF5 snapshot of ``state``."""
+    """Atomically replace ``path`` with the whole campaign ``state`` in the finished layout (a
+    plain, compact HDF5 file; spectra compressed). O(size of the campaign): once per run end."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = temporary_path(path)
     with h5py.File(tmp, "w", libver=LIBVER) as f:
         _fill(f, state)
         f.flush()
         crash_point("hdf5")
-    fd = os.open(tmp, os.O_RDONLY)
+    fsync_file(tmp)
+    os.replace(tmp, path)
+    _fsync_dir(path.parent)
+
+
+def temporary_path(path: Path) -> Path:
+    """Where a whole new file for ``path`` is built before it is renamed over it."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.tmp-{os.getpid()}")
+
+
+def fsync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
     finally:
         os.close(fd)
-    os.replace(tmp, path)
-    _fsync_dir(path.parent)
 
 
 def stray_temporaries(path: Path) -> list[Path]:
@@ -299,38 +378,64 @@ def check_present(path: Path) -> Path:
     return path
 
 
+def open_campaign(path: Path) -> h5py.File:
+    """``path`` opened read-only: plainly (a finished file), else as an SWMR reader (a file a
+    running campaign holds, or one it held when it was killed: plain h5py refuses those)."""
+    path = check_present(path)
+    try:
+        return h5py.File(path, "r")
+    except OSError as error:
+        first = error
+    try:
+        return h5py.File(path, "r", swmr=True)
+    except OSError:
+        raise CampaignFileError(f"{path}: not a readable HDF5 file ({str(first).split('(')[0].strip()})") from None
+
+
+def _opened_campaign(path: Path) -> tuple[h5py.File, dict]:
+    """The open file and its root attributes, checked to be a campaign this noisebo reads."""
+    f = open_campaign(path)
+    attrs = dict(f.attrs)
+    if attrs.get("schema") != SCHEMA:
+        f.close()
+        raise CampaignFileError(f"{path}: an HDF5 file but not a noisebo campaign (no schema {SCHEMA!r})")
+    version = int(attrs.get("schema_version", -1))
+    if version not in READABLE_VERSIONS:
+        f.close()
+        raise CampaignFileError(f"{path}: campaign schema version {version}; this noisebo reads "
+                                f"{', '.join(map(str, READABLE_VERSIONS))}")
+    return f, attrs
+
+
+def _is_live(attrs: dict) -> bool:
+    from storage import live
+
+    return attrs.get("layout") == live.LAYOUT
+
+
 def read_campaign(path: Path) -> dict:
-    """Everything in a campaign file as plain Python and numpy values.
+    """Everything in a campaign file, finished or still being written, as plain Python and numpy values.
 
     Keys: "attrs" (root attributes, with "config" parsed from config_json), "grid", "points",
     "steps" (with "hyperparameters"), "shots" (dicts of arrays) and "summary" (None until done)."""
-    path = check_present(path)
-    try:
-        f = h5py.File(path, "r")
-    except OSError as error:
-        raise CampaignFileError(f"{path}: not a readable HDF5 file ({str(error).split('(')[0].strip()})") from None
+    from storage import live
+
+    f, attrs = _opened_campaign(path)
     with f:
-        attrs = dict(f.attrs)
-        if attrs.get("schema") != SCHEMA:
-            raise CampaignFileError(f"{path}: an HDF5 file but not a noisebo campaign (no schema {SCHEMA!r})")
-        version = int(attrs.get("schema_version", -1))
-        if version not in READABLE_VERSIONS:
-            raise CampaignFileError(f"{path}: campaign schema version {version}; this noisebo reads "
-                                    f"{', '.join(map(str, READABLE_VERSIONS))}")
         try:
-            out = {
-                "attrs": {k: (v.item() if hasattr(v, "item") else v) for k, v in attrs.items()},
-                "grid": {k: v[()] for k, v in f["grid"].items()},
-                "points": {k: v[()] for k, v in f["points"].items()},
-                "shots": {k: v[()] for k, v in f["shots"].items() if isinstance(v, h5py.Dataset)},
-                "steps": {k: v[()] for k, v in f["steps"].items() if isinstance(v, h5py.Dataset)},
-                "summary": None,
-            }
-            out["steps"]["hyperparameters"] = {k: v[()] for k, v in f["steps/hyperparameters"].items()}
-            if "summary" in f:
-                s = f["summary"]
-                out["summary"] = {k: v[()] for k, v in s.items()} | {
-                    "t_opt": float(s.attrs["t_opt"]), "hyperparameters": json.loads(s.attrs["hyperparameters_json"])}
+            if _is_live(attrs):
+                out = live.read_tables(f, path)
+                attrs = {k: v for k, v in attrs.items() if k != "layout"} | out.pop("counts")
+            else:
+                out = {
+                    "grid": {k: v[()] for k, v in f["grid"].items()},
+                    "points": {k: v[()] for k, v in f["points"].items()},
+                    "shots": {k: v[()] for k, v in f["shots"].items() if isinstance(v, h5py.Dataset)},
+                    "steps": {k: v[()] for k, v in f["steps"].items() if isinstance(v, h5py.Dataset)},
+                }
+                out["steps"]["hyperparameters"] = {k: v[()] for k, v in f["steps/hyperparameters"].items()}
+            out["summary"] = read_summary(f)
+            out["attrs"] = {k: (v.item() if hasattr(v, "item") else v) for k, v in attrs.items()}
             out["attrs"]["config"] = json.loads(out["attrs"]["config_json"])
             out["attrs"]["driver"] = json.loads(out["attrs"]["driver_json"]) if "driver_json" in attrs else {
                 "name": out["attrs"]["instrument"], "version": "not recorded (schema 1)", "settings": {}}
@@ -339,10 +444,51 @@ def read_campaign(path: Path) -> dict:
     return out
 
 
+def read_summary(f: h5py.File) -> dict | None:
+    """/summary as {"f_mean", "f_var", "noise_fine", "t_opt", "hyperparameters"}, None until done."""
+    if "summary" not in f:
+        return None
+    s = f["summary"]
+    return {k: v[()] for k, v in s.items()} | {
+        "t_opt": float(s.attrs["t_opt"]), "hyperparameters": json.loads(s.attrs["hyperparameters_json"])}
+
+
+def read_spectra(path: Path, point: int) -> np.ndarray:
+    """The raw sweeps of one point, (n_shots, 3, N): rows frequency Hz, amplitude pm, phase deg."""
+    from storage import live
+
+    f, attrs = _opened_campaign(path)
+    with f:
+        if _is_live(attrs):
+            found = live.read_spectra(f, path, point)
+        else:
+            name = f"spectra/point_{point:04d}"
+            found = f[name][()] if name in f else None
+    if found is None:
+        raise CampaignFileError(f"{path}: no spectra for point {point}")
+    return found
+
+
 def read_shot_fits(path: Path) -> dict | None:
     """Per-shot SHO fit columns (``/shots/fit``, see FIT_UNITS) of a campaign file, None if its
     shots are not sweeps."""
-    with h5py.File(path, "r") as f:
+    from storage import live
+
+    f, attrs = _opened_campaign(path)
+    with f:
+        if _is_live(attrs):
+            return live.read_shot_fits(f, path)
         if "shots/fit" not in f:
             return None
         return {k: v[()] for k, v in f["shots/fit"].items() if k in FIT_UNITS}
+
+
+def read_failures(path: Path) -> dict:
+    """The failed attempts (``/failures``): point, shot, x, t (n,) and kind, reason (n,) bytes."""
+    from storage import live
+
+    f, attrs = _opened_campaign(path)
+    with f:
+        if _is_live(attrs):
+            return live.read_failures(f, path)
+        return {k: v[()] for k, v in f["failures"].items()}

@@ -1,9 +1,14 @@
-"""The campaign recorder: journal first (durable, the source of truth), HDF5 snapshot after.
+"""The campaign recorder: journal first (durable, the source of truth), HDF5 file after.
 
 A campaign's files are FILE.h5 (the results) and FILE.journal beside it. Creating refuses to
 overwrite either; resuming locks the journal, cuts off a torn tail, replays it and rewrites the
 HDF5 file from it, so whatever a crash left behind, the file again holds every committed
 measurement exactly once.
+
+While the campaign runs, the HDF5 file is written whole once (at the first commit of this
+process) and then grown in place, each committed point appending only its rows
+(``storage.live``); when it ends (any status but running) it is written whole once more in the
+finished layout (``storage.hdf5.write_snapshot``).
 """
 
 from __future__ import annotations
@@ -15,10 +20,11 @@ from typing import Sequence
 
 from noisebo import engine
 from noisebo.engine import EngineState
-from noisebo.events import Event, PointCommitted, Started, StatusChanged, Summarised
+from noisebo.events import Event, PointCommitted, Started, Status, StatusChanged, Summarised
 from storage import journal, records
 from storage.hdf5 import CampaignFileError, stray_temporaries, write_snapshot
 from storage.journal import JournalError, JournalWriter
+from storage.live import LiveFile
 
 PACKAGES = ("noisebo", "numpy", "scipy", "jax", "jaxlib", "numpyro", "h5py", "prefect", "pydantic", "rerun-sdk")
 
@@ -65,12 +71,13 @@ SNAPSHOT_AFTER = (Started, PointCommitted, Summarised, StatusChanged)
 
 class Recorder:
     """Commits campaign events: each is journaled (written and fsynced) before it is applied,
-    and the HDF5 snapshot is refreshed after every committed point and status change."""
+    and the HDF5 file is brought up to date after every committed point and status change."""
 
     def __init__(self, h5_path: Path, writer: JournalWriter, state: EngineState):
         self.h5_path = Path(h5_path)
         self._writer = writer
         self.state = state
+        self._live: LiveFile | None = None
 
     @classmethod
     def create(cls, h5_path: Path, started: Started) -> Recorder:
@@ -135,10 +142,35 @@ class Recorder:
         return state
 
     def snapshot(self) -> None:
-        write_snapshot(self.h5_path, self.state)
+        """Bring the HDF5 file up to ``self.state``: a running campaign's rows appended in place
+        (written whole when the open file cannot take them: the first time in this process, a new
+        status reason, a summary, a new hyperparameter); any other status, the whole campaign
+        once in the finished layout."""
+        state = self.state
+        if state.status is not Status.RUNNING:
+            self._close_live()
+            write_snapshot(self.h5_path, state)
+            return
+        try:
+            if self._live is not None and self._live.holds(state):
+                self._live.append(state)
+                return
+            self._close_live()
+            self._live = LiveFile.create(self.h5_path, state)
+        except BaseException:
+            self._close_live()  # the next snapshot writes the file whole again
+            raise
+
+    def _close_live(self) -> None:
+        if self._live is not None:
+            live, self._live = self._live, None
+            live.close()
 
     def close(self) -> None:
-        self._writer.close()
+        try:
+            self._close_live()
+        finally:
+            self._writer.close()
 
     def __enter__(self) -> Recorder:
         return self
