@@ -116,6 +116,11 @@ def _resume(args) -> int:
     except JournalError as error:
         raise CampaignFileError(f"cannot resume {path}: {error}") from None
     if _journal_status(path) == "completed":
+        # A kill during the finished file's write leaves the running file in place: write the
+        # finished file from the journal (the same file again when it was not cut short).
+        from storage.recorder import Recorder
+
+        Recorder.resume(path).close()
         print(f"{path} is already complete: nothing to resume", file=sys.stderr)
         print(path)
         return 0
