@@ -1,6 +1,6 @@
-"""kill -9 at many moments, including halfway through a journal record or an HDF5 snapshot, then
-`noisebo resume`: nothing committed is lost or duplicated, and the finished campaign equals the
-uninterrupted one. Real processes, real SIGKILL."""
+"""kill -9 at many moments, including halfway through a journal record, a whole-file HDF5 write
+or an in-place append, then `noisebo resume`: nothing committed is lost or duplicated, and the
+finished campaign equals the uninterrupted one. Real processes, real SIGKILL."""
 
 import os
 import signal
@@ -15,6 +15,7 @@ import pytest
 from instruments import build
 from noisebo.driver import run_campaign
 from storage import journal
+from storage.hdf5 import read_campaign
 
 SEED = 9
 
@@ -53,15 +54,23 @@ def assert_equals_reference(path, reference):
 
 
 # Record 1 is the campaign record (killed while creating), 2 the first shot, 17 a shot of the
-# second seed point, 45 inside the BO steps; snapshot 1 is the first HDF5 file ever written.
+# second seed point, 45 inside the BO steps. Whole-file HDF5 writes: 1 the file created with the
+# campaign, 2 its rewrite when the first decision brings the hyperparameters, 3 the finished file
+# (killed before its rename). Appends (one per committed point but the first BO point's, five
+# crash points each: after the points, steps, failures and shots tables, and after the flush
+# before the counters): 17 falls between the tables of the second BO point's append, 20 just
+# before its counters.
 CRASHES = [
     "journal:2",
     "journal:45",
     "hdf5:3",
+    "append:17",
+    "append:20",
     pytest.param("journal:1", marks=pytest.mark.slow),
     pytest.param("journal:17", marks=pytest.mark.slow),
     pytest.param("hdf5:1", marks=pytest.mark.slow),
-    pytest.param("hdf5:6", marks=pytest.mark.slow),
+    pytest.param("hdf5:2", marks=pytest.mark.slow),
+    pytest.param("append:3", marks=pytest.mark.slow),
 ]
 
 
@@ -72,8 +81,12 @@ def test_injected_kill_then_resume(crash, tiny_yaml, tmp_path, prefect_harness, 
     killed = noisebo(["run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)], cli_env(prefect_harness, crash))
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
     if path.exists():
-        with h5py.File(path, "r") as f:  # whatever the moment, the file on disk opens
+        # Whatever the moment, the file on disk opens. swmr=True: a file killed while open for
+        # appending is flagged open-for-write, which plain h5py refuses without h5clear; an SWMR
+        # reader opens it, and any finished file too.
+        with h5py.File(path, "r", swmr=True) as f:
             assert f.attrs["status"] == "running"
+        assert read_campaign(path)["attrs"]["status"] == "running"
     if not path.with_suffix(".journal").exists():
         # Killed while creating: nothing was committed, and a fresh run starts cleanly.
         done = noisebo(["run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)], cli_env(prefect_harness))
@@ -113,8 +126,11 @@ def test_another_process_reads_the_file_while_the_campaign_runs(tiny_yaml, tmp_p
     seen, deadline = [], time.monotonic() + 240
     while proc.poll() is None and time.monotonic() < deadline:
         if path.exists():
-            with h5py.File(path, "r") as f:  # plain h5py, while the campaign writes
-                seen.append((str(f.attrs["status"]), int(f.attrs["n_points"]), len(f["shots/value"])))
+            # noisebo's reader, while the campaign writes: the running file is open for appending
+            # (plain h5py refuses it; the reader opens it with swmr=True) and its per-point counts
+            # are in /committed, not in root attributes (no attribute is rewritten under SWMR).
+            data = read_campaign(path)
+            seen.append((str(data["attrs"]["status"]), int(data["attrs"]["n_points"]), len(data["shots"]["value"])))
         time.sleep(0.01)
     assert proc.wait(timeout=60) == 0
     running = [s for s in seen if s[0] == "running"]
