@@ -1,8 +1,11 @@
 """Crash injection for the durability tests.
 
-With the environment variable NOISEBO_CRASH_AT="kind:N", the N-th (1-based) durable write of
-that kind ("journal" or "hdf5") first performs half of its write, then kills its own process with
-SIGKILL: a real kill -9 at the worst moment, reproducibly. Unset, this costs one dict lookup.
+With the environment variable NOISEBO_CRASH_AT="kind:N", the N-th (1-based) crash point of that
+kind kills its own process with SIGKILL: a real kill -9 at the worst moment, reproducibly. Kinds:
+"journal" (a record: half of it is written first), "hdf5" (a whole HDF5 file written, killed
+before it is renamed into place) and "append" (inside an in-place append of the running HDF5
+file: five per append, after each of its tables and before its row counters). Unset, this costs
+one dict lookup.
 """
 
 from __future__ import annotations

@@ -37,6 +37,7 @@ from typing import Callable, Sequence
 
 import h5py
 import numpy as np
+from h5py import h5s
 
 from noisebo.engine import EngineState
 from storage.faults import crash_point
@@ -56,23 +57,36 @@ SPECTRA_CHUNK = 1 << 16  # bytes
 MAX_DIMS = 4  # dimensions of one shot's raw array
 
 
+class _Column:
+    """A resizable dataset written rows at a time through h5py's low-level calls (an append
+    writes some sixty datasets; the high-level ones cost four times as much) and its extent kept
+    here. Rows past the ones written stay as they are."""
+
+    def __init__(self, ds: h5py.Dataset):
+        self.ds, self.dtype, self.tail = ds, ds.dtype, ds.shape[1:]
+        self.rows = ds.shape[0]
+
+    def write(self, start: int, values) -> None:
+        """``values`` (n, *tail) as rows ``start``..``start + n - 1``, growing the dataset if needed."""
+        values = np.ascontiguousarray(values, dtype=self.dtype)
+        n, end = len(values), start + len(values)
+        if end > self.rows:
+            self.ds.id.set_extent((end, *self.tail))
+            self.rows = end
+        if n:
+            space = self.ds.id.get_space()
+            space.select_hyperslab((start, *(0,) * len(self.tail)), (n, *self.tail))
+            self.ds.id.write(h5s.create_simple(values.shape), space, values)
+
+
 def _column(group: h5py.Group, name: str, dtype, units: str, description: str, tail: tuple = (),
-            chunk: int = ROWS_PER_CHUNK) -> h5py.Dataset:
+            chunk: int = ROWS_PER_CHUNK) -> _Column:
     """An empty resizable column of rows shaped ``tail``, ``chunk`` rows to a chunk (1 for rows
     that are arrays of their own, such as acquisition maps)."""
     ds = group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), chunks=(chunk, *tail), dtype=dtype)
     ds.attrs["units"] = units
     ds.attrs["description"] = description
-    return ds
-
-
-def _put_rows(ds: h5py.Dataset, start: int, values: np.ndarray) -> None:
-    """Write ``values`` as rows ``start``.. of ``ds``, growing it if needed (rows past them stay)."""
-    end = start + len(values)
-    if ds.shape[0] < end:
-        ds.resize(end, axis=0)
-    if len(values):
-        ds[start:end] = values
+    return _Column(ds)
 
 
 class _Blobs:
@@ -80,10 +94,9 @@ class _Blobs:
     Remembers where each row it wrote ends, so rows can be written again from any row on."""
 
     def __init__(self, group: h5py.Group, data: str = "utf8", chunk: int = TEXT_CHUNK):
-        self.data = group[data] if data in group else group.create_dataset(
-            data, shape=(0,), maxshape=(None,), chunks=(chunk,), dtype=np.uint8)
-        self.end = group["end"] if "end" in group else group.create_dataset(
-            "end", shape=(0,), maxshape=(None,), chunks=(ROWS_PER_CHUNK,), dtype=np.int64)
+        self.data = _Column(group.create_dataset(data, shape=(0,), maxshape=(None,), chunks=(chunk,), dtype=np.uint8))
+        self.end = _Column(group.create_dataset("end", shape=(0,), maxshape=(None,), chunks=(ROWS_PER_CHUNK,),
+                                                dtype=np.int64))
         self.ends: list[int] = []
 
     @classmethod
@@ -97,8 +110,8 @@ class _Blobs:
         """``blobs`` as rows ``start``..; the rows written before ``start`` stay."""
         begin = self.ends[start - 1] if start else 0
         ends = (begin + np.cumsum([len(b) for b in blobs], dtype=np.int64)) if blobs else np.zeros(0, np.int64)
-        _put_rows(self.data, begin, np.frombuffer(b"".join(blobs), dtype=np.uint8))
-        _put_rows(self.end, start, ends)
+        self.data.write(begin, np.frombuffer(b"".join(blobs), dtype=np.uint8))
+        self.end.write(start, ends)
         del self.ends[start:]
         self.ends.extend(ends.tolist())
 
@@ -140,6 +153,7 @@ class LiveFile:
         self._shapes = array_shapes(state)
         # rows of committed things written: points, steps, failures, shots and spectra of committed points
         self._rows = dict.fromkeys(("points", "steps", "failures", "shots", "spectra"), 0)
+        self._columns: dict[str, _Column] = {}  # by path: "points/x"
         self._texts: dict[str, _Blobs] = {}
         self._spectra: _Blobs | None = None
 
@@ -193,6 +207,7 @@ class LiveFile:
         f.attrs.update({k: v for k, v in root_attrs(state).items() if k not in MUTABLE_ATTRS})
         f.attrs["layout"] = LAYOUT
         counters = f.create_dataset("committed", data=np.zeros(len(COUNTERS), dtype=np.int64))
+        self._add(_Column(counters))
         counters.attrs["names"] = " ".join(COUNTERS)
         counters.attrs["description"] = ("rows of each table to trust (points, steps, shots, failures, spectra) "
                                          "and the root attributes n_shots, converged_step")
@@ -205,29 +220,30 @@ class LiveFile:
     def _layout_points_and_steps(self) -> None:
         points = self._f.create_group("points")
         for name, (units, description) in (POINT_COLUMNS | {"step": POINT_STEP}).items():
-            _column(points, name, column_dtype(name, units), units, description)
+            self._add(_column(points, name, column_dtype(name, units), units, description))
         steps = self._f.create_group("steps")
         for name, (units, description) in STEP_COLUMNS.items():
-            _column(steps, name, column_dtype(name, units), units, description)
+            self._add(_column(steps, name, column_dtype(name, units), units, description))
         hyper = steps.create_group("hyperparameters")
         for name in self._names:
-            _column(hyper, name, np.float64, "model units", f"fitted {name} per step (MAP or posterior mean)")
+            self._add(_column(hyper, name, np.float64, "model units",
+                              f"fitted {name} per step (MAP or posterior mean)"))
         for name, (units, description) in ARRAY_COLUMNS.items():
-            _column(steps, name, array_dtype(name), units, description, self._shapes[name], chunk=1)
+            self._add(_column(steps, name, array_dtype(name), units, description, self._shapes[name], chunk=1))
 
     def _layout_shots_and_failures(self) -> None:
         shots = self._f.create_group("shots")
         for name, dtype, units, description in SHOT_COLUMNS:
-            _column(shots, name, dtype, units, description)
+            self._add(_column(shots, name, dtype, units, description))
         self._texts["shots/reason"] = _Blobs.text(shots, "reason", SHOT_TEXT["reason"])
         fit = shots.create_group("fit")
         for name, (units, description) in FIT_UNITS.items():
-            _column(fit, name, np.float64, units, description)
+            self._add(_column(fit, name, np.float64, units, description))
         self._texts["shots/fit/note"] = _Blobs.text(fit, "note", FIT_NOTE)
         failures = self._f.create_group("failures")
         failures.attrs["description"] = FAILURES_DESCRIPTION
         for name, dtype, units, description in FAILURE_COLUMNS:
-            _column(failures, name, dtype, units, description)
+            self._add(_column(failures, name, dtype, units, description))
         for name, description in FAILURE_TEXT.items():
             self._texts[f"failures/{name}"] = _Blobs.text(failures, name, description)
 
@@ -235,24 +251,24 @@ class LiveFile:
         spectra = self._f.create_group("spectra")
         spectra.attrs["description"] = SPECTRA_DESCRIPTION + "; here one row per shot, its raw array in bytes"
         spectra.attrs["rows"] = SPECTRA_ROWS
-        _column(spectra, "point", np.int32, "1", "point the shot belongs to")
-        _column(spectra, "dtype", "S8", "text", "numpy dtype of the shot's array (e.g. <f4)")
-        _column(spectra, "shape", np.int64, "1", f"shape of the shot's array, padded with -1 to {MAX_DIMS}",
-                (MAX_DIMS,))
+        self._add(_column(spectra, "point", np.int32, "1", "point the shot belongs to"))
+        self._add(_column(spectra, "dtype", "S8", "text", "numpy dtype of the shot's array (e.g. <f4)"))
+        self._add(_column(spectra, "shape", np.int64, "1", f"shape of the shot's array, padded with -1 to {MAX_DIMS}",
+                          (MAX_DIMS,)))
         self._spectra = _Blobs(spectra, "bytes", SPECTRA_CHUNK)
-        self._spectra.data.attrs["units"] = "Hz, pm, deg"
-        self._spectra.data.attrs["description"] = "every shot's raw array, C order, end to end"
+        self._spectra.data.ds.attrs["units"] = "Hz, pm, deg"
+        self._spectra.data.ds.attrs["description"] = "every shot's raw array, C order, end to end"
 
     def _write(self, state: EngineState, crash: Callable[[], None]) -> None:
         """The rows ``state`` has past those committed in the file (a point under way's shots
         last, to be written again), a flush, then the counters that make them count, a flush."""
         rows, f = self._rows, self._f
         new_points = state.points[rows["points"]:]
-        self._write_table(f["points"], rows["points"], point_rows(new_points))
+        self._write_table("points", rows["points"], point_rows(new_points))
         crash()
         steps = step_rows(state.decisions[rows["steps"]:], self._names, self._shapes)
-        self._write_table(f["steps"], rows["steps"], steps)
-        self._write_table(f["steps/hyperparameters"], rows["steps"], steps["hyperparameters"])
+        self._write_table("steps", rows["steps"], steps)
+        self._write_table("steps/hyperparameters", rows["steps"], steps["hyperparameters"])
         crash()
         self._write_failures(state.failures[rows["failures"]:])
         crash()
@@ -266,23 +282,26 @@ class LiveFile:
                   "shots": rows["shots"] + len(shots["point"]),
                   "spectra": rows["spectra"] + sum(len(v) for v in spectra.values()), "n_shots": state.n_shots,
                   "converged_step": -1 if state.data.converged_step is None else state.data.converged_step}
-        f["committed"][:] = np.asarray([counts[k] for k in COUNTERS], dtype=np.int64)
+        self._columns["committed"].write(0, [counts[k] for k in COUNTERS])
         f.flush()
         committed_spectra = sum(len(v) for k, v in spectra.items() if k < len(state.points))
         rows.update(points=len(state.points), steps=len(state.decisions), failures=len(state.failures),
                     shots=rows["shots"] + sum(len(e.shots) for e in new_points),
                     spectra=rows["spectra"] + committed_spectra)
 
-    @staticmethod
-    def _write_table(group: h5py.Group, start: int, columns: dict) -> None:
+    def _add(self, column: _Column) -> None:
+        self._columns[column.ds.name.lstrip("/")] = column
+
+    def _write_table(self, group: str, start: int, columns: dict) -> None:
+        """The array columns of ``columns`` (other entries are text or nested) as rows ``start``.. of ``group``."""
         for name, values in columns.items():
             if isinstance(values, np.ndarray):
-                _put_rows(group[name], start, values)
+                self._columns[f"{group}/{name}"].write(start, values)
 
     def _write_failures(self, failures) -> None:
         start = self._rows["failures"]
         columns = failure_rows(failures)
-        self._write_table(self._f["failures"], start, columns)
+        self._write_table("failures", start, columns)
         for name in FAILURE_TEXT:
             self._texts[f"failures/{name}"].write(start, [s.encode() for s in columns[name]])
 
@@ -290,8 +309,8 @@ class LiveFile:
         """Shot rows from the first shot of the new points on: theirs, then the point under way's
         (written again at the next append, as the shots of a committed point)."""
         start = self._rows["shots"]
-        self._write_table(self._f["shots"], start, shots)
-        self._write_table(self._f["shots/fit"], start, shots["fit"])
+        self._write_table("shots", start, shots)
+        self._write_table("shots/fit", start, shots["fit"])
         self._texts["shots/reason"].write(start, [s.encode() for s in shots["reason"]])
         self._texts["shots/fit/note"].write(start, [s.encode() for s in shots["note"]])
 
@@ -304,13 +323,13 @@ class LiveFile:
             if a.ndim > MAX_DIMS:
                 raise CampaignFileError(f"{self.path}: a shot's raw array has {a.ndim} dimensions; the file keeps "
                                         f"at most {MAX_DIMS}")
-        start, group = self._rows["spectra"], self._f["spectra"]
-        _put_rows(group["point"], start, np.asarray([p for p, _ in arrays], dtype=np.int32))
-        _put_rows(group["dtype"], start, np.asarray([a.dtype.str.encode() for _, a in arrays], dtype="S8"))
+        start, columns = self._rows["spectra"], self._columns
+        columns["spectra/point"].write(start, np.asarray([p for p, _ in arrays], dtype=np.int32))
+        columns["spectra/dtype"].write(start, np.asarray([a.dtype.str.encode() for _, a in arrays], dtype="S8"))
         shapes = np.full((len(arrays), MAX_DIMS), -1, dtype=np.int64)
         for row, (_, a) in enumerate(arrays):
             shapes[row, : a.ndim] = a.shape
-        _put_rows(group["shape"], start, shapes)
+        columns["spectra/shape"].write(start, shapes)
         self._spectra.write(start, [a.tobytes() for _, a in arrays])
         return spectra
 
