@@ -131,51 +131,72 @@ def state_at(config: CampaignConfig, n: int, spectra: bool, seed: int = 0):
     return state
 
 
-class RewritingRecorder(Recorder):
+class Timed:
+    """Recorder mixin: the seconds spent bringing the HDF5 file up to date (``hdf5_s``)."""
+
+    hdf5_s = 0.0
+
+    def snapshot(self) -> None:
+        started_at = time.perf_counter()
+        super().snapshot()
+        self.hdf5_s += time.perf_counter() - started_at
+
+
+class AppendingRecorder(Timed, Recorder):
+    """The recorder as it is: the running file grown in place."""
+
+
+class RewritingRecorder(Timed, Recorder):
     """The recorder as it was before appending: the whole file rewritten after every point."""
 
     def snapshot(self) -> None:
+        started_at = time.perf_counter()
         write_snapshot(self.h5_path, self.state)
+        self.hdf5_s += time.perf_counter() - started_at
 
 
-def commit_point(recorder: Recorder, config: CampaignConfig, index: int, spectra: bool) -> float:
-    """Commit one point's batches; the seconds all its Recorder.commit calls took."""
-    total = 0.0
+def commit_point(recorder, config: CampaignConfig, index: int, spectra: bool) -> tuple[float, float]:
+    """Commit one point's batches; the seconds all its Recorder.commit calls took, and the HDF5 part of them."""
+    total, hdf5_before = 0.0, recorder.hdf5_s
     for batch in point_commits(config, index, 0, spectra):
         started_at = time.perf_counter()
         recorder.commit(recorder.state, batch)
         total += time.perf_counter() - started_at
-    return total
+    return total, recorder.hdf5_s - hdf5_before
 
 
 def grow_new(config: CampaignConfig, sizes: list[int], repeats: int, spectra: bool, folder: Path) -> dict:
-    """{n: (median s per point over the ``repeats`` points after n, file bytes at n, finished file bytes at n)}."""
+    """{n: {"s", "hdf5_s": medians per point over the ``repeats`` points after n, "bytes": the
+    running file's size at n, "finished_bytes": the finished file's}}."""
     path = folder / "new.h5"
     out = {}
-    with Recorder.create(path, started(config)) as recorder:
+    with AppendingRecorder.create(path, started(config)) as recorder:
         times = []
         for i in range(max(sizes) + repeats):
             if i in sizes:
                 finished = folder / "finished.h5"
                 write_snapshot(finished, recorder.state)
-                out[i] = [path.stat().st_size, finished.stat().st_size]
+                out[i] = {"bytes": path.stat().st_size, "finished_bytes": finished.stat().st_size}
                 finished.unlink()
             times.append(commit_point(recorder, config, i, spectra))
-    return {n: (statistics.median(times[n:n + repeats]), *out[n]) for n in sizes}
+    for n in sizes:
+        total, hdf5 = zip(*times[n:n + repeats])
+        out[n] |= {"s": statistics.median(total), "hdf5_s": statistics.median(hdf5)}
+    return out
 
 
-def old_at(config: CampaignConfig, n: int, repeats: int, spectra: bool, folder: Path, state) -> tuple[float, int]:
-    """Median s per point of the old recorder over ``repeats`` points after n, and its file's bytes at n."""
+def old_at(config: CampaignConfig, n: int, repeats: int, spectra: bool, folder: Path, state) -> dict:
+    """The old recorder from the in-memory ``state`` of n points: {"s", "hdf5_s": medians per
+    point over ``repeats`` points after n, "bytes": its file's size at n}."""
     path = folder / f"old{n}.h5"
     writer = JournalWriter.create(journal_path(path), records.encode(started(config)))
-    recorder = RewritingRecorder(path, writer, state)
-    recorder.snapshot()
-    size = path.stat().st_size
-    with recorder:
-        times = [commit_point(recorder, config, n + k, spectra) for k in range(repeats)]
+    with RewritingRecorder(path, writer, state) as recorder:
+        recorder.snapshot()
+        size = path.stat().st_size
+        total, hdf5 = zip(*(commit_point(recorder, config, n + k, spectra) for k in range(repeats)))
     path.unlink()
     journal_path(path).unlink()
-    return statistics.median(times), size
+    return {"s": statistics.median(total), "hdf5_s": statistics.median(hdf5), "bytes": size}
 
 
 def main(argv=None) -> int:
@@ -195,7 +216,8 @@ def main(argv=None) -> int:
         config = config.with_overrides(schedule={"n_steps": max(sizes) + args.repeats})
         print(f"{kind}: grid {config.space.n_x} x {config.space.n_t}; per point: Recorder.commit of its decision, "
               f"shots and point (journal + HDF5), median", flush=True)
-        print(f"{'n':>6} {'old ms':>9} {'new ms':>8} {'old file':>9} {'new file':>9} {'finished':>9}", flush=True)
+        print(f"{'n':>6} {'old ms':>8} {'of which HDF5':>13} {'new ms':>7} {'of which HDF5':>13} {'old file':>9} "
+              f"{'new file':>9} {'finished':>9}", flush=True)
         with tempfile.TemporaryDirectory(prefix="noisebo-storage-") as tmp:
             new = grow_new(config, sizes, args.repeats, spectra, Path(tmp))
             state, built = engine.start(started(config)), 0
@@ -204,13 +226,14 @@ def main(argv=None) -> int:
                     for batch in point_commits(config, i, 0, spectra):
                         state = engine.apply_all(state, batch)
                 built = n
-                old_s, old_bytes = old_at(config, n, args.old_repeats, spectra, Path(tmp), state)
-                new_s, new_bytes, finished_bytes = new[n]
-                row = {"kind": kind, "n": n, "old_ms": old_s * 1e3, "new_ms": new_s * 1e3, "old_mb": old_bytes / 1e6,
-                       "new_mb": new_bytes / 1e6, "finished_mb": finished_bytes / 1e6}
+                old = old_at(config, n, args.old_repeats, spectra, Path(tmp), state)
+                row = {"kind": kind, "n": n, "old_ms": old["s"] * 1e3, "old_hdf5_ms": old["hdf5_s"] * 1e3,
+                       "new_ms": new[n]["s"] * 1e3, "new_hdf5_ms": new[n]["hdf5_s"] * 1e3, "old_mb": old["bytes"] / 1e6,
+                       "new_mb": new[n]["bytes"] / 1e6, "finished_mb": new[n]["finished_bytes"] / 1e6}
                 rows.append(row)
-                print(f"{n:>6} {row['old_ms']:>9.1f} {row['new_ms']:>8.1f} {row['old_mb']:>7.1f}MB "
-                      f"{row['new_mb']:>7.1f}MB {row['finished_mb']:>7.1f}MB", flush=True)
+                print(f"{n:>6} {row['old_ms']:>8.1f} {row['old_hdf5_ms']:>13.1f} {row['new_ms']:>7.1f} "
+                      f"{row['new_hdf5_ms']:>13.1f} {row['old_mb']:>7.1f}MB {row['new_mb']:>7.1f}MB "
+                      f"{row['finished_mb']:>7.1f}MB", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0
