@@ -21,6 +21,7 @@ from noisebo import inference, noise_model, primary
 from noisebo.config import (
     AcquisitionConfig, CampaignConfig, NoiseModelConfig, PrimaryModelConfig, RewardConfig, SpaceConfig,
 )
+from noisebo.inputs import capacity_for, group_ids
 from noisebo.keys import FIT, jax_key
 from noisebo.policies import Posterior, acquisition_map, argmax_2d
 from noisebo.reward import optimal_index, reward
@@ -119,22 +120,27 @@ def warm_step(config: CampaignConfig, step: int, previous: dict | None) -> bool:
 
 
 def fit_models(
-    config: CampaignConfig, state: CampaignState, key: jax.Array, previous: dict | None = None, warm: bool = False
+    config: CampaignConfig, state: CampaignState, key: jax.Array, previous: dict | None = None, warm: bool = False,
+    capacities: tuple[int, int] | None = None,
 ) -> Fitted:
     """Fit the primary GP on every point and the noise model on its training points.
 
     ``previous``: the hyperparameters of the previous fit (``hyperparameters``), an extra start;
-    ``warm``: start from it alone (when it has every hyperparameter)."""
+    ``warm``: start from it alone (when it has every hyperparameter). ``capacities``: the padded
+    sizes of the (primary, noise) training sets; default the smallest that fit (padding changes
+    no result, only which compiled programs run)."""
+    cap_primary, cap_noise = capacities or (None, None)
     s = config.space
     x, t, value = state.column("x"), state.column("t"), state.column("value")
     n_shots, noise = state.column("n_shots"), state.column("noise")
     _check_finite(x=x, t=t, value=value, noise=noise)
     inf = config.inference
-    pdata, std, p_groups = primary.prepare(x, value, noise**2 / n_shots, s.x_min, s.x_max, inf.max_inputs)
+    pdata, std, p_groups = primary.prepare(x, value, noise**2 / n_shots, s.x_min, s.x_max, inf.max_inputs,
+                                           cap_primary)
     train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
     ndata, scale, n_groups = noise_model.prepare(
         t[train], state.column("shot_std")[train], n_shots[train], config.noise_model, s.t_min, s.t_max,
-        inf.max_inputs,
+        inf.max_inputs, cap_noise,
     )
     primary_fn, noise_fn = _models(config)
     k_primary, k_noise = jax.random.split(key)
@@ -346,3 +352,39 @@ def decide(
     step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then ``acquire``."""
     fitted = fit_models(config, state, fit_key(seed, step), previous, warm_step(config, step, previous))
     return acquire(config, fitted, state, step)
+
+
+AHEAD_FILL = 0.75  # compile the next capacity once a training set fills this much of its own
+
+
+def capacities_ahead(config: CampaignConfig, decision: Decision) -> tuple[int, int] | None:
+    """The (primary, noise) capacities a campaign is about to need after ``decision``: a
+    training set past ``AHEAD_FILL`` of its capacity will soon cross into the next (never beyond
+    what ``inference.max_inputs`` needs). None when neither is close."""
+    limit = capacity_for(config.inference.max_inputs)
+
+    def ahead(n: int) -> int:
+        capacity = capacity_for(n)
+        return min(2 * capacity, limit) if n >= AHEAD_FILL * capacity else capacity
+
+    now = (capacity_for(decision.primary_inputs), capacity_for(decision.noise_inputs))
+    wanted = (ahead(decision.primary_inputs), ahead(decision.noise_inputs))
+    return wanted if wanted != now else None
+
+
+def capacities_needed(config: CampaignConfig, state: CampaignState) -> tuple[int, int]:
+    """The (primary, noise) capacities a decision on ``state`` pads to (see ``fit_models``)."""
+    s, limit = config.space, config.inference.max_inputs
+    train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
+    counts = [int(group_ids(c, lo, hi, limit)[0].max(initial=-1)) + 1
+              for c, lo, hi in ((state.column("x"), s.x_min, s.x_max), (state.column("t")[train], s.t_min, s.t_max))]
+    return capacity_for(counts[0]), capacity_for(counts[1])
+
+
+def compile_ahead(config: CampaignConfig, state: CampaignState, previous: dict | None,
+                  capacities: tuple[int, int]) -> None:
+    """Run a decision's programs (a multi-start fit and the prediction) at ``capacities`` and
+    discard the results: JAX keeps them compiled for when the campaign crosses there. Meant for
+    a background thread while the instrument measures (MAP mode; NUTS samplers are per thread)."""
+    fitted = fit_models(config, state, fit_key(0, 0), previous, False, capacities)
+    jax.block_until_ready(predict(config, fitted, state).posterior)

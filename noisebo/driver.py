@@ -8,6 +8,7 @@ are committed (memory, or a journal and an HDF5 file), how a shot is measured an
 from __future__ import annotations
 
 import datetime as dt
+import threading
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -15,7 +16,7 @@ import numpy as np
 
 from noisebo import engine
 from noisebo.config import CampaignConfig
-from noisebo.decision import Decision
+from noisebo.decision import Decision, capacities_ahead, capacities_needed, compile_ahead
 from noisebo.engine import EngineState
 from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
 from noisebo.failures import InstrumentError, InstrumentTimeout
@@ -54,6 +55,60 @@ def simulates(instrument) -> bool:
 in_memory: Commit = engine.apply_all  # commit events by applying them, with no journal
 
 
+class CompileAhead:
+    """Compiles the decision programs of the next padding capacity in a background thread once a
+    campaign's training set nears it (``decision.capacities_ahead``), so crossing a capacity costs
+    no compilation in the decision itself. One thread at a time; each capacity once per process."""
+
+    _done: set = set()
+    _lock = threading.Lock()
+
+    def __init__(self) -> None:
+        self._thread: threading.Thread | None = None
+        self._capacities: tuple[int, int] | None = None
+
+    def after(self, state: EngineState) -> None:
+        """Start compiling ahead if the latest decision says a crossing is near."""
+        config = state.config
+        if not state.decisions or config.inference.mode != "map" or self.busy:
+            return
+        capacities = capacities_ahead(config, state.decisions[-1])
+        key = (config.primary_model, config.noise_model, config.inference, config.space, config.reward,
+               config.acquisition, capacities)
+        with self._lock:
+            if capacities is None or key in self._done:
+                return
+            self._done.add(key)
+        args = (config, state.data, state.decisions[-1].hyperparameters, capacities)
+        self._capacities = capacities
+        self._thread = threading.Thread(target=_quietly, args=(compile_ahead, *args), daemon=True,
+                                        name="noisebo-compile-ahead")
+        self._thread.start()
+
+    def before(self, state: EngineState) -> None:
+        """Wait for a compilation in flight that the decision due on ``state`` needs (rather
+        than compile the same programs twice at once)."""
+        if self.busy and capacities_needed(state.config, state.data) == self._capacities:
+            self._thread.join()
+
+    @property
+    def busy(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def join(self) -> None:
+        if self._thread is not None:
+            self._thread.join()
+
+
+def _quietly(fn, *args) -> None:
+    # Compiling ahead only saves time later: if it fails, the crossing compiles in line and any
+    # real problem surfaces there, in the decision itself.
+    try:
+        fn(*args)
+    except Exception:  # noqa: BLE001
+        pass
+
+
 def drive(
     state: EngineState,
     instrument,
@@ -74,12 +129,23 @@ def drive(
         return state
 
     follow(state)
+    ahead = CompileAhead()
+    try:
+        return _loop(state, instrument, committed, measure, decide, stop_requested, ahead)
+    finally:
+        ahead.join()  # never leave a thread compiling as the process winds down
+
+
+def _loop(state, instrument, committed, measure, decide, stop_requested, ahead: CompileAhead) -> EngineState:
     while True:
         step = engine.ask(state)
         if isinstance(step, Done):
             return state
         if isinstance(step, DecisionDue):
+            if not (step.final or step.reduce):
+                ahead.before(state)
             state = committed(state, decide(state))
+            ahead.after(state)
             continue
         outcome = measure(instrument, state.seed, step)
         before = len(state.points)

@@ -1,0 +1,89 @@
+"""Decisions across padding capacities: the same answers whatever the padding, and the next
+capacity's programs compiled ahead of the crossing."""
+
+import numpy as np
+import pytest
+
+from noisebo import decision
+from noisebo.config import CampaignConfig
+from noisebo.diagnostics import compile_count
+from noisebo.inputs import capacity_for
+from noisebo.state import CampaignState, Point
+
+CONFIG = CampaignConfig().with_overrides(space={"n_x": 60, "n_t": 30})
+
+
+def grid_state(n: int, seed: int = 4) -> CampaignState:
+    """n Forrester-like points on the config's grids (as proposals are), 10 shots each."""
+    rng = np.random.default_rng(seed)
+    g = decision.grids(CONFIG)
+    state = CampaignState()
+    for x, t in zip(rng.choice(g.x, n), rng.choice(g.t, n)):
+        sd = 2.0 / np.sqrt(t) + 0.1
+        shots = (6 * x - 2) ** 2 * np.sin(12 * x - 4) + sd * rng.standard_normal(10)
+        std = float(shots.std(ddof=1))
+        state = state.with_point(Point(float(x), float(t), float(shots.mean()), std, 10, std, True))
+    return state
+
+
+@pytest.fixture(scope="module")
+def crossing():
+    """A state whose x inputs just crossed 32 distinct values: the primary GP pads to 64."""
+    state = grid_state(45)
+    fitted = decision.fit_models(CONFIG, state, decision.fit_key(0, 0))
+    assert fitted.primary_inputs > 32 and fitted.primary_data.x.shape[0] == 64
+    return state
+
+
+def test_padding_changes_no_decision(crossing):
+    plain, _ = decision.decide(CONFIG, crossing, 0, 0)
+    fitted = decision.fit_models(CONFIG, crossing, decision.fit_key(0, 0), capacities=(128, 128))
+    padded, _ = decision.acquire(CONFIG, fitted, crossing, 0)
+    assert (padded.x, padded.t, padded.shots) == (plain.x, plain.t, plain.shots)
+    assert padded.t_opt == pytest.approx(plain.t_opt, abs=1e-12)
+    for name, value in plain.hyperparameters.items():
+        # rel 1e-3: a flat direction of the posterior (A0 near 0) stops L-BFGS at slightly other
+        # points under other rounding; the decision itself is the same.
+        assert padded.hyperparameters[name] == pytest.approx(value, rel=1e-3), name
+
+
+def test_repeated_inputs_are_merged_and_recorded(crossing):
+    d, _ = decision.decide(CONFIG, crossing, 0, 0)
+    x, t = crossing.column("x"), crossing.column("t")
+    assert (d.primary_inputs, d.noise_inputs, d.binned) == (np.unique(x).size, np.unique(t).size, False)
+
+
+def test_beyond_max_inputs_the_decision_says_it_binned(crossing):
+    config = CONFIG.with_overrides(inference={"max_inputs": 16})
+    d, _ = decision.decide(config, crossing, 0, 0)
+    assert d.binned and d.primary_inputs <= 16 and d.noise_inputs <= 16
+
+
+@pytest.mark.parametrize("inputs, ahead", [
+    ((20, 20), None),                  # 20 of 32: not close yet
+    ((24, 20), (64, 32)),              # 24 = 0.75 * 32: compile 64 for the primary GP
+    ((24, 90), (64, 128)),             # 90 of 128 is not close (< 96)
+    ((24, 100), (64, 256)),            # 100 of 128 is
+    ((200, 250), None),                # both at the largest capacity max_inputs = 256 needs
+])
+def test_capacities_ahead(inputs, ahead):
+    d = decision.Decision(0, 0.5, 1.0, 0.0, 3, True, 0.1, 1.0, False, {}, np.zeros((1, 1)), np.zeros(1),
+                          np.zeros(1), np.zeros(1), np.zeros(1), primary_inputs=inputs[0], noise_inputs=inputs[1])
+    assert decision.capacities_ahead(CONFIG, d) == ahead
+
+
+def test_compiled_ahead_the_crossing_compiles_nothing():
+    # Models of their own, so no other test has compiled their programs at any capacity.
+    config = CONFIG.with_overrides(primary_model={"length_scale": 0.6}, noise_model={"residual_amplitude_scale": 0.9})
+    before = grid_state(36, seed=9)
+    first, _ = decision.decide(config, before, 0, 0)
+    assert 24 <= first.primary_inputs <= 32 and first.noise_inputs < 24  # the primary GP nears 32
+    capacities = decision.capacities_ahead(config, first)
+    assert capacities is not None and capacities[0] == 64
+    decision.compile_ahead(config, before, first.hyperparameters, capacities)
+    after = grid_state(80, seed=9)
+    assert decision.capacities_needed(config, after) == capacities
+    before_count = compile_count()
+    crossed, _ = decision.decide(config, after, 0, 1, first.hyperparameters)
+    assert (capacity_for(crossed.primary_inputs), capacity_for(crossed.noise_inputs)) == capacities
+    assert compile_count() == before_count
