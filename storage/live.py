@@ -55,6 +55,10 @@ ROWS_PER_CHUNK = 64  # a flush rewrites each table's last, partly filled chunk: 
 TEXT_CHUNK = 1024  # bytes
 SPECTRA_CHUNK = 1 << 16  # bytes
 MAX_DIMS = 4  # dimensions of one shot's raw array
+# Each dataset's chunk cache: a flush walks every chunk a dataset's cache holds, so a large cache
+# full of rows already written made each flush slower as the campaign grew (0.25 ms at 200
+# points, 2.2 ms at 2000); nothing written is read back, so a small one keeps flushes flat.
+CHUNK_CACHE_BYTES, CHUNK_CACHE_SLOTS = 65536, 31
 
 
 class _Column:
@@ -162,7 +166,7 @@ class LiveFile:
         """The whole of ``state`` in a new file renamed over ``path``, left open for appending."""
         path = Path(path)
         tmp = temporary_path(path)
-        f = h5py.File(tmp, "w", libver=LIBVER)
+        f = h5py.File(tmp, "w", libver=LIBVER, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=CHUNK_CACHE_SLOTS, rdcc_w0=1.0)
         try:
             live = cls(path, f, state)
             live._layout(state)
