@@ -168,17 +168,20 @@ def commit_point(recorder, config: CampaignConfig, index: int, spectra: bool) ->
 def grow_new(config: CampaignConfig, sizes: list[int], repeats: int, spectra: bool, folder: Path) -> dict:
     """{n: {"s", "hdf5_s": medians per point over the ``repeats`` points after n, "bytes": the
     running file's size at n, "finished_bytes": the finished file's}}."""
-    path = folder / "new.h5"
-    out = {}
+    path, finished = folder / "new.h5", folder / "finished.h5"
+    out, at = {}, {}
     with AppendingRecorder.create(path, started(config)) as recorder:
         times = []
         for i in range(max(sizes) + repeats):
             if i in sizes:
-                finished = folder / "finished.h5"
-                write_snapshot(finished, recorder.state)
-                out[i] = {"bytes": path.stat().st_size, "finished_bytes": finished.stat().st_size}
-                finished.unlink()
+                out[i], at[i] = {"bytes": path.stat().st_size}, recorder.state
+            if i - repeats in sizes:  # after the timed points: its fsync must not slow them
+                write_snapshot(finished, at[i - repeats])
+                out[i - repeats]["finished_bytes"] = finished.stat().st_size
             times.append(commit_point(recorder, config, i, spectra))
+    write_snapshot(finished, at[max(sizes)])
+    out[max(sizes)]["finished_bytes"] = finished.stat().st_size
+    finished.unlink()
     for n in sizes:
         total, hdf5 = zip(*times[n:n + repeats])
         out[n] |= {"s": statistics.median(total), "hdf5_s": statistics.median(hdf5)}
