@@ -166,7 +166,8 @@ class LiveFile:
         """The whole of ``state`` in a new file renamed over ``path``, left open for appending."""
         path = Path(path)
         tmp = temporary_path(path)
-        f = h5py.File(tmp, "w", libver=LIBVER, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=CHUNK_CACHE_SLOTS, rdcc_w0=1.0)
+        f = h5py.File(tmp, "w", libver=LIBVER, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=CHUNK_CACHE_SLOTS,
+                      rdcc_w0=1.0)
         try:
             live = cls(path, f, state)
             live._layout(state)
