@@ -1,5 +1,5 @@
-"""The campaign flow: the engine's loop (``noisebo.driver.drive``) with each shot a ``measure``
-task, each decision a ``decide`` task, and every event journaled before it counts.
+"""The campaign flow: the engine's loop (``noisebo.driver.drive``) with each point's shots a
+``measure point`` task, each decision a ``decide`` task, and every event journaled before it counts.
 
 The journal is the campaign's memory: the flow starts from the state the recorder replayed, so
 the same code starts a new campaign and resumes a killed one, and a resumed campaign proposes and
@@ -54,8 +54,9 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
 
 def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda state: None,
         instrument=None) -> Path:
-    """Drive a campaign from wherever its journal stands to the end: each shot is a ``measure``
-    task, each decision a ``decide`` task, every event journaled before it counts. ``observe``
+    """Drive a campaign from wherever its journal stands to the end: each point's shots are a
+    ``measure point`` task, each decision a ``decide`` task, every event journaled (shot by shot)
+    before it counts. ``observe``
     sees the campaign after every committed point and at the end (the live view). Past the
     failure budget the campaign records the status "failed" with the reason and raises
     ``FailureBudgetExceeded``; on a signal it finishes the point, records "aborted" and raises
@@ -70,8 +71,8 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
             observe(new)
         return new
 
-    def measure(instrument, seed, request):
-        return ops.measure(quote(instrument), seed, request)
+    def measure_point(instrument, state, committed):
+        return ops.measure_point(quote(instrument), quote(state), quote(committed))
 
     def decide(state):
         if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
@@ -85,7 +86,7 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
         return None if name is None else f"{name} received"
 
     observe(recorder.state)
-    final = drive(recorder.state, instrument, commit, measure, decide, stop_requested)
+    final = drive(recorder.state, instrument, commit, measure_point, decide, stop_requested)
     observe(final)
     if final.status is Status.FAILED:
         raise FailureBudgetExceeded(final.reason)

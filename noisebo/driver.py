@@ -25,6 +25,7 @@ from noisebo.state import CampaignState
 
 Commit = Callable[[EngineState, Sequence[Event]], EngineState]
 Measure = Callable[[object, int, Request], Outcome]
+MeasurePoint = Callable[[object, EngineState, Commit], EngineState]
 Decide = Callable[[EngineState], Sequence[Event]]
 
 
@@ -41,6 +42,20 @@ def take_shot(instrument, seed: int, request: Request) -> Outcome:
     except InstrumentError as error:
         kind = "timeout" if isinstance(error, InstrumentTimeout) else "instrument error"
         return ShotError(kind, str(error))
+
+
+def take_point(instrument, state: EngineState, committed: Commit, measure: Measure = take_shot) -> EngineState:
+    """The shots of the point under way, each committed as it is taken (a failed attempt too, and
+    tried again), until the engine wants something else: a decision, the next point, or nothing
+    more. Returns the state after the last commit."""
+    step = engine.ask(state)
+    while isinstance(step, Request):
+        outcome = measure(instrument, state.seed, step)
+        state = committed(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
+        point, step = step.point, engine.ask(state)
+        if isinstance(step, Request) and step.point != point:
+            break
+    return state
 
 
 SIMULATOR_METHODS = ("simulate", "truth", "noise_law")
@@ -113,12 +128,13 @@ def drive(
     state: EngineState,
     instrument,
     commit: Commit = in_memory,
-    measure: Measure = take_shot,
+    measure_point: MeasurePoint = take_point,
     decide: Decide = engine.advance,
     stop_requested: Callable[[], str | None] = lambda: None,
 ) -> EngineState:
     """Step the campaign from ``state`` until the engine says it is done, and return the final
-    state. After each committed point, ``stop_requested()`` may name a reason to stop: the
+    state: ``decide`` when a decision is due, else ``measure_point`` (``take_point``: every shot
+    committed as it is taken) for the point under way. After each committed point, ``stop_requested()`` may name a reason to stop: the
     campaign is then committed as aborted with that reason. An instrument with ``committed``
     (``instruments.base.Follower``) sees the state at the start and after every commit."""
     follow = getattr(instrument, "committed", lambda state: None)
@@ -131,12 +147,12 @@ def drive(
     follow(state)
     ahead = CompileAhead()
     try:
-        return _loop(state, instrument, committed, measure, decide, stop_requested, ahead)
+        return _loop(state, instrument, committed, measure_point, decide, stop_requested, ahead)
     finally:
         ahead.join()  # never leave a thread compiling as the process winds down
 
 
-def _loop(state, instrument, committed, measure, decide, stop_requested, ahead: CompileAhead) -> EngineState:
+def _loop(state, instrument, committed, measure_point, decide, stop_requested, ahead: CompileAhead) -> EngineState:
     while True:
         step = engine.ask(state)
         if isinstance(step, Done):
@@ -147,9 +163,8 @@ def _loop(state, instrument, committed, measure, decide, stop_requested, ahead: 
             state = committed(state, decide(state))
             ahead.after(state)
             continue
-        outcome = measure(instrument, state.seed, step)
         before = len(state.points)
-        state = committed(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
+        state = measure_point(instrument, state, committed)
         if len(state.points) > before:
             reason = stop_requested()
             if reason is not None:

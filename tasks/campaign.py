@@ -1,4 +1,4 @@
-"""The tasks of a campaign: one shot of the instrument, and one decision of the engine.
+"""The tasks of a campaign: the shots of one point, and one decision of the engine.
 
 Nothing here retries: a failed shot comes back as a ``ShotError`` that the engine journals and
 asks for again with the same key, within the campaign's failure budget."""
@@ -12,13 +12,15 @@ from prefect.cache_policies import NO_CACHE
 
 from noisebo import driver, engine
 from noisebo.engine import EngineState
-from noisebo.events import Event, Outcome, Request
+from noisebo.events import Event
 
 
-@task(name="measure", cache_policy=NO_CACHE)
-def measure(instrument, seed: int, request: Request) -> Outcome:
-    """One attempt at the next wanted shot of ``request`` (``noisebo.driver.take_shot``)."""
-    return driver.take_shot(instrument, seed, request)
+@task(name="measure point", cache_policy=NO_CACHE)
+def measure_point(instrument, state: EngineState, committed: driver.Commit) -> EngineState:
+    """The shots of the point under way, each committed (journaled) as it is taken
+    (``noisebo.driver.take_point``): one task per point, not per shot, keeps Prefect's
+    bookkeeping to a few milliseconds per point."""
+    return driver.take_point(instrument, state, committed)
 
 
 @task(name="decide", cache_policy=NO_CACHE)
