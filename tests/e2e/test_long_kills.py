@@ -1,0 +1,74 @@
+"""kill -9 deep into a long PFM campaign (200 points, a resonance sweep per shot), then
+`noisebo resume`: the file opens whatever the moment, and the finished one equals the
+uninterrupted campaign, spectra included. Real processes, real SIGKILL, the real server."""
+
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from instruments import build
+from instruments.registry import validated
+from noisebo.config import load_config
+from noisebo.driver import run_campaign
+from storage.hdf5 import read_campaign, read_spectra
+
+pytestmark = pytest.mark.e2e
+
+SEED = 5
+POINTS = 200
+CONFIG = validated(load_config("data/configs/pfm.yaml").with_overrides(
+    name="long", schedule={"n_steps": POINTS - 3}))
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return run_campaign(CONFIG, build(CONFIG.instrument), SEED).final
+
+
+@pytest.fixture
+def long_yaml(tmp_path):
+    path = tmp_path / "long.yaml"
+    path.write_text(yaml.safe_dump(CONFIG.model_dump(mode="json")))
+    return path
+
+
+def noisebo(args, env):
+    return subprocess.run([sys.executable, "-m", "cli.main", *args], env=env, capture_output=True, text=True,
+                          timeout=900)
+
+
+def assert_equals_reference(path, final):
+    data = read_campaign(path)
+    assert data["attrs"]["status"] == "completed" and data["attrs"]["n_points"] == POINTS
+    points = [e.committed.point for e in final.points]
+    for name in ("x", "t", "value", "noise", "shot_std"):
+        np.testing.assert_array_equal(data["points"][name], [getattr(p, name) for p in points], err_msg=name)
+    got = list(zip(data["shots"]["point"].tolist(), data["shots"]["shot"].tolist()))
+    assert got == [(s.point, s.shot) for e in final.points for s in e.shots]  # every shot once, in order
+    np.testing.assert_array_equal(data["steps"]["t_opt"], [d.t_opt for d in final.decisions])
+    for i in (0, 57, 150, POINTS - 1):
+        expected = np.stack([s.reading.spectrum for s in final.points[i].shots])
+        np.testing.assert_array_equal(read_spectra(path, i), expected)
+
+
+# A kill inside the HDF5 append of about the 150th point (five crash points per append), and
+# one halfway through writing a journal record late in the campaign.
+@pytest.mark.parametrize("crash", ["append:753", "journal:700"])
+def test_kill_deep_into_a_long_campaign_then_resume(crash, long_yaml, tmp_path, prefect_server, reference):
+    out = tmp_path / "runs"
+    path = out / f"long_double_s{SEED:04d}.h5"
+    env = {**prefect_server, "NOISEBO_CRASH_AT": crash}
+    killed = noisebo(["run", str(long_yaml), "--seed", str(SEED), "--out", str(out), "--no-rrd"], env)
+    assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
+    running = read_campaign(path)  # the killed file opens, with the rows committed before the kill
+    assert running["attrs"]["status"] == "running" and running["attrs"]["n_points"] >= 100
+    env = {k: v for k, v in env.items() if k != "NOISEBO_CRASH_AT"}
+    done = noisebo(["resume", str(path), "--no-rrd"], env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert_equals_reference(path, reference)
+    assert os.path.getsize(path) > 0
