@@ -20,6 +20,11 @@ at an input of its own: the worst case, where beyond ``inference.max_inputs`` th
 
 measures what crossing a padding capacity costs instead: a decision on 32 distinct inputs, then
 one on 33 (both GPs: capacity 32 -> 64), in line and after ``decision.compile_ahead``.
+
+    python benchmarks/scaling.py --cold
+
+times `noisebo run` from its start to its first BO point, on an empty compilation cache and
+again with the cache the first run left, with Prefect's temporary server and with a running one.
 """
 
 from __future__ import annotations
@@ -131,6 +136,41 @@ def crossing(config_path: str) -> dict:
     return out
 
 
+def cold_starts(config_path: str) -> list[dict]:
+    """Seconds from starting `noisebo run` to its first BO point (the first decision made and
+    its point measured), twice on an empty compilation cache (the second run loads what the
+    first compiled), with Prefect's temporary server and with a running Prefect server."""
+    import tempfile
+
+    import yaml
+
+    from flows.processes import local_server
+    from noisebo.config import load_config
+
+    work = Path(tempfile.mkdtemp(prefix="noisebo-cold-"))
+    config = load_config(config_path).with_overrides(name="cold", schedule={"n_steps": 1})
+    path = work / "cold.yaml"
+    path.write_text(yaml.safe_dump(config.model_dump(mode="json")))
+    rows = []
+
+    def run_twice(server: str, env: dict) -> None:
+        env = {**env, "NOISEBO_JAX_CACHE": str(work / f"jax-{server}"), "PYTHONUNBUFFERED": "1"}
+        for run in ("first run", "cache warm"):
+            started = time.perf_counter()
+            process = subprocess.Popen([sys.executable, "-m", "cli.main", "run", str(path), "--out",
+                                        str(work / f"{server}-{run}"), "--no-rrd"], cwd=ROOT, env=env,
+                                       stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            first = next((time.perf_counter() - started for line in process.stdout if line.startswith("step 1/")), None)
+            process.wait()
+            rows.append({"server": server, "run": run, "first_point_s": first, "exit": process.returncode})
+
+    base = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
+    run_twice("temporary", base)
+    with local_server(work / "prefect") as env:
+        run_twice("running", {**base, **env})
+    return rows
+
+
 def _run_alone(args, *extra) -> dict | str:
     done = subprocess.run([sys.executable, __file__, "--config", args.config, *extra], capture_output=True,
                           text=True, check=False, env={**os.environ, "PYTHONWARNINGS": "ignore"})
@@ -152,6 +192,7 @@ def main(argv=None) -> int:
     parser.add_argument("--config", default=str(ROOT / "data/configs/forrester.yaml"))
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     parser.add_argument("--crossing", action="store_true", help="measure crossing a padding capacity instead")
+    parser.add_argument("--cold", action="store_true", help="measure `noisebo run` to its first decision instead")
     parser.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--crossing-one", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -160,6 +201,15 @@ def main(argv=None) -> int:
         return 0
     if args.crossing_one:
         print(json.dumps(crossing(args.config)))
+        return 0
+    if args.cold:
+        print("seconds from `noisebo run` to its first BO point (forrester, map, simulated shots):")
+        rows = cold_starts(args.config)
+        for row in rows:
+            first = "failed" if row["first_point_s"] is None else f"{row['first_point_s']:6.1f} s"
+            print(f"  Prefect server {row['server']:<10} {row['run']:<11} {first}")
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=1))
         return 0
     if args.crossing:
         out = _run_alone(args, "--crossing-one")

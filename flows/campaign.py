@@ -77,7 +77,7 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
     def decide(state):
         if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
             say(f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
-                "(about 10 s)")
+                "(about 10 s, or 1-3 s with the compilation cache of an earlier run)")
             _COMPILED.append(True)
         return ops.decide(quote(state))
 

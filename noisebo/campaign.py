@@ -9,7 +9,7 @@ from typing import Sequence
 import numpy as np
 
 from noisebo.config import CampaignConfig, ReductionConfig
-from noisebo.decision import fit_key, fit_models, grids, hyperparameters, predict
+from noisebo.decision import capacities_needed, compile_ahead, fit_key, fit_models, grids, hyperparameters, predict
 from noisebo.events import Summary
 from noisebo.keys import SEED_POINTS, numpy_rng
 from noisebo.reduction import ShotValue, clip_outliers, shot_values, usable
@@ -82,3 +82,22 @@ def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summar
     )
 
 
+
+
+def stand_in_seeds(config: CampaignConfig, seed: int) -> CampaignState:
+    """The campaign's seed points with stand-in readings (value = index, noise 1): a state of the
+    shapes its first decision works on, before anything is measured."""
+    shots = config.schedule.shots_before
+    points = tuple(Point(float(x), float(t), float(i), 1.0, shots, 1.0, True)
+                   for i, (x, t) in enumerate(seed_points(config, seed)))
+    return CampaignState(points=points)
+
+
+def compile_first_decision(config: CampaignConfig, seed: int) -> None:
+    """Compile (or load from the persistent cache) the programs of the campaign's first decision
+    on stand-in seed points, so the real one need not: for a thread started while Prefect and
+    the instrument start up. MAP mode only (NUTS samplers are per thread)."""
+    if config.inference.mode != "map":
+        return
+    state = stand_in_seeds(config, seed)
+    compile_ahead(config, state, None, capacities_needed(config, state))

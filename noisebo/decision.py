@@ -9,6 +9,7 @@ never needs more than g inputs however long it runs.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
@@ -350,6 +351,7 @@ def decide(
 ) -> tuple[Decision, CampaignState]:
     """One whole BO decision: fit both models (key (seed, step); from ``previous``, the previous
     step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then ``acquire``."""
+    _wait_for_compilation(config, state)
     fitted = fit_models(config, state, fit_key(seed, step), previous, warm_step(config, step, previous))
     return acquire(config, fitted, state, step)
 
@@ -381,10 +383,40 @@ def capacities_needed(config: CampaignConfig, state: CampaignState) -> tuple[int
     return capacity_for(counts[0]), capacity_for(counts[1])
 
 
+# Compilations under way in other threads, by programs and capacities: a decision that needs one
+# waits for it instead of compiling the same programs at the same time (JAX would do both).
+_COMPILING: dict[tuple, threading.Event] = {}
+_COMPILING_LOCK = threading.Lock()
+
+
+def _programs(config: CampaignConfig, capacities: tuple[int, int]) -> tuple:
+    return (config.primary_model, config.noise_model, config.inference, config.space, config.reward,
+            config.acquisition, tuple(capacities))
+
+
 def compile_ahead(config: CampaignConfig, state: CampaignState, previous: dict | None,
                   capacities: tuple[int, int]) -> None:
     """Run a decision's programs (a multi-start fit and the prediction) at ``capacities`` and
     discard the results: JAX keeps them compiled for when the campaign crosses there. Meant for
-    a background thread while the instrument measures (MAP mode; NUTS samplers are per thread)."""
-    fitted = fit_models(config, state, fit_key(0, 0), previous, False, capacities)
-    jax.block_until_ready(predict(config, fitted, state).posterior)
+    a background thread while the instrument measures (MAP mode; NUTS samplers are per thread);
+    a ``decide`` that needs these capacities meanwhile waits for it."""
+    key, done = _programs(config, capacities), threading.Event()
+    with _COMPILING_LOCK:
+        _COMPILING.setdefault(key, done)
+    try:
+        fitted = fit_models(config, state, fit_key(0, 0), previous, False, capacities)
+        jax.block_until_ready(predict(config, fitted, state).posterior)
+    finally:
+        done.set()
+        with _COMPILING_LOCK:
+            if _COMPILING.get(key) is done:
+                del _COMPILING[key]
+
+
+def _wait_for_compilation(config: CampaignConfig, state: CampaignState) -> None:
+    with _COMPILING_LOCK:
+        if not _COMPILING:
+            return
+        done = _COMPILING.get(_programs(config, capacities_needed(config, state)))
+    if done is not None:
+        done.wait()

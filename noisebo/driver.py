@@ -16,7 +16,7 @@ import numpy as np
 
 from noisebo import engine
 from noisebo.config import CampaignConfig
-from noisebo.decision import Decision, capacities_ahead, capacities_needed, compile_ahead
+from noisebo.decision import Decision, capacities_ahead, compile_ahead
 from noisebo.engine import EngineState
 from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
 from noisebo.failures import InstrumentError, InstrumentTimeout
@@ -73,14 +73,14 @@ in_memory: Commit = engine.apply_all  # commit events by applying them, with no 
 class CompileAhead:
     """Compiles the decision programs of the next padding capacity in a background thread once a
     campaign's training set nears it (``decision.capacities_ahead``), so crossing a capacity costs
-    no compilation in the decision itself. One thread at a time; each capacity once per process."""
+    no compilation in the decision itself (one that comes first waits for the thread rather than
+    compile the same programs again). One thread at a time; each capacity once per process."""
 
     _done: set = set()
     _lock = threading.Lock()
 
     def __init__(self) -> None:
         self._thread: threading.Thread | None = None
-        self._capacities: tuple[int, int] | None = None
 
     def after(self, state: EngineState) -> None:
         """Start compiling ahead if the latest decision says a crossing is near."""
@@ -95,16 +95,9 @@ class CompileAhead:
                 return
             self._done.add(key)
         args = (config, state.data, state.decisions[-1].hyperparameters, capacities)
-        self._capacities = capacities
         self._thread = threading.Thread(target=_quietly, args=(compile_ahead, *args), daemon=True,
                                         name="noisebo-compile-ahead")
         self._thread.start()
-
-    def before(self, state: EngineState) -> None:
-        """Wait for a compilation in flight that the decision due on ``state`` needs (rather
-        than compile the same programs twice at once)."""
-        if self.busy and capacities_needed(state.config, state.data) == self._capacities:
-            self._thread.join()
 
     @property
     def busy(self) -> bool:
@@ -158,8 +151,6 @@ def _loop(state, instrument, committed, measure_point, decide, stop_requested, a
         if isinstance(step, Done):
             return state
         if isinstance(step, DecisionDue):
-            if not (step.final or step.reduce):
-                ahead.before(state)
             state = committed(state, decide(state))
             ahead.after(state)
             continue
