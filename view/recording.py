@@ -56,20 +56,55 @@ def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[s
         return None, None
 
 
+class _PerStep:
+    """One per-step array column (acq_map, f_mean, ...) of a running campaign, read a step at a
+    time (as ``frame_at`` does) without stacking every step's array anew for each frame."""
+
+    def __init__(self, decisions, name: str):
+        self._decisions, self._name = decisions, name
+
+    def __getitem__(self, step: int) -> np.ndarray:
+        return getattr(self._decisions[step], self._name)
+
+    def __len__(self) -> int:
+        return len(self._decisions)
+
+
 class CampaignRecording:
     """Observer of a running campaign: logs each new frame to a RerunView."""
 
     def __init__(self, view: RerunView, config: CampaignConfig):
         self.view, self.config = view, config
         self.logged = 0
+        self._shot_point: list[int] = []  # point and t of every committed point's shots, in order
+        self._shot_t: list[float] = []
+        self._shots_of = 0  # committed points whose shots are in those lists
+
+    def _tables(self, state) -> dict:
+        """The columns ``frame_at`` reads, in ``campaign_tables``' shape but built for a frame's
+        needs: the per-step arrays by reference and the shots added point by point, so a frame of
+        a long campaign costs what is new, not a copy of everything (the finished campaign's
+        summary frame, once, takes the whole tables)."""
+        from storage.hdf5 import array_shapes, campaign_tables, hyperparameter_names, point_rows, step_rows
+
+        if state.summary is not None:
+            return campaign_tables(state)
+        for entry in state.points[self._shots_of:]:
+            self._shot_point += [s.point for s in entry.shots]
+            self._shot_t += [s.t for s in entry.shots]
+        self._shots_of = len(state.points)
+        decisions = state.decisions
+        steps = step_rows(decisions, hyperparameter_names(decisions), {})
+        steps |= {name: _PerStep(decisions, name) for name in array_shapes(state)}
+        g = grids(self.config)
+        return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points), "steps": steps,
+                "shots": {"point": np.asarray(self._shot_point), "t": np.asarray(self._shot_t)}, "summary": None}
 
     def update(self, state) -> None:
         """Log the frames ``state`` (an ``EngineState``) has reached and not logged yet."""
-        from storage.hdf5 import campaign_tables
-
         if not self.view.enabled:
             return
-        tables = campaign_tables(state)
+        tables = self._tables(state)
         seeded = len(state.points) >= self.config.schedule.n_seed
         ready = n_frames(tables, self.config) if seeded else 0  # frame 0 waits for the last seed point
         for k in range(self.logged, ready):
