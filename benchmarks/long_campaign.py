@@ -1,7 +1,7 @@
 """A long campaign through `noisebo run`: decision, orchestration and storage time per point as
 it grows.
 
-    python benchmarks/long_campaign.py [--points 1000] [--config PATH] [--window 100] [--json PATH]
+    python benchmarks/long_campaign.py [--points 1000] [--config PATH] [--window 100] [--no-rrd] [--json PATH]
 
 Runs `noisebo run` (the Prefect flow with its temporary server, the journal, the HDF5 file and
 the Rerun recording, exactly as a user runs it) on the config with as many BO steps as make
@@ -66,6 +66,7 @@ def main(argv=None) -> int:
     parser.add_argument("--config", default=str(ROOT / "data/configs/forrester.yaml"))
     parser.add_argument("--window", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-rrd", action="store_true", help="without the Rerun recording")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
 
@@ -80,7 +81,7 @@ def main(argv=None) -> int:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     env.pop("PREFECT_API_URL", None)
     lines, code = timed_lines([sys.executable, "-m", "cli.main", "run", str(config_path), "--seed", str(args.seed),
-                               "--out", str(work)], env)
+                               "--out", str(work), *(["--no-rrd"] if args.no_rrd else [])], env)
     if code != 0:
         print(f"noisebo run failed (exit {code}); last lines:\n" + "\n".join(line for _, line in lines[-5:]))
         return 1
@@ -98,8 +99,8 @@ def main(argv=None) -> int:
         rows.append({"n": base.schedule.n_seed + k, "gap_s": gap, "decision_s": float(latency[k]),
                      "instrument_s": float(instrument[k]), "rest_s": gap - float(latency[k]) - float(instrument[k])})
     size = path.stat().st_size
-    print(f"noisebo run on {Path(args.config).name} to {args.points} points ({path.name}: {size / 2**20:.1f} MiB, "
-          f"{size / args.points / 1024:.1f} KiB per point, finished layout)")
+    print(f"noisebo run{' --no-rrd' if args.no_rrd else ''} on {Path(args.config).name} to {args.points} points "
+          f"({path.name}: {size / 2**20:.1f} MiB, {size / args.points / 1024:.1f} KiB per point, finished layout)")
     print(f"{'points':>11} {'decision':>9} {'other, median':>14} {'other, max':>11} {'gap, median':>12}")
     summary = []
     for lo in range(0, args.points, args.window):
