@@ -82,7 +82,6 @@ def _run(args) -> int:
           f"{config.instrument.kind}: {config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}",
           flush=True)
     _starting()
-    _compile_first_decision(config, args.seed)
     campaign_flows, _ = _prefect()
     with flow_settings(), _abortable(path):
         path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd,
@@ -90,20 +89,6 @@ def _run(args) -> int:
     print(outcome_line(Path(path)))
     print(path)
     return 0
-
-
-def _compile_first_decision(config: CampaignConfig, seed: int) -> None:
-    """Compile the first decision's programs in a thread while Prefect starts (the process waits
-    for it before exiting). A failure here only means the first decision compiles them itself."""
-    import threading
-
-    from noisebo.campaign import compile_first_decision
-
-    def quietly() -> None:
-        with contextlib.suppress(Exception):
-            compile_first_decision(config, seed)
-
-    threading.Thread(target=quietly, name="noisebo-compile-first").start()
 
 
 def _starting() -> None:

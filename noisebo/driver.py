@@ -16,6 +16,7 @@ import numpy as np
 
 from noisebo import engine
 from noisebo.config import CampaignConfig
+from noisebo.campaign import compile_first_decision
 from noisebo.decision import Decision, capacities_ahead, compile_ahead
 from noisebo.engine import EngineState
 from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
@@ -83,20 +84,29 @@ class CompileAhead:
         self._thread: threading.Thread | None = None
 
     def after(self, state: EngineState) -> None:
-        """Start compiling ahead if the latest decision says a crossing is near."""
+        """Start compiling ahead if the latest decision says a crossing is near, or, before the
+        first decision, its programs (on stand-in seed points) while the seed points are measured."""
         config = state.config
-        if not state.decisions or config.inference.mode != "map" or self.busy:
+        if config.inference.mode != "map" or self.busy:
+            return
+        if not state.decisions:
+            self._start(config, None, lambda: compile_first_decision(config, state.seed))
             return
         capacities = capacities_ahead(config, state.decisions[-1])
+        if capacities is not None:
+            args = (config, state.data, state.decisions[-1].hyperparameters, capacities)
+            self._start(config, capacities, lambda: compile_ahead(*args))
+
+    def _start(self, config, capacities, work) -> None:
         key = (config.primary_model, config.noise_model, config.inference, config.space, config.reward,
                config.acquisition, capacities)
         with self._lock:
-            if capacities is None or key in self._done:
+            if key in self._done:
                 return
             self._done.add(key)
-        args = (config, state.data, state.decisions[-1].hyperparameters, capacities)
-        self._thread = threading.Thread(target=_quietly, args=(compile_ahead, *args), daemon=True,
-                                        name="noisebo-compile-ahead")
+        # Not a daemon: a thread inside an XLA compilation as the interpreter exits aborts the
+        # process; ``drive`` joins it before returning.
+        self._thread = threading.Thread(target=_quietly, args=(work,), name="noisebo-compile-ahead")
         self._thread.start()
 
     @property
@@ -108,11 +118,11 @@ class CompileAhead:
             self._thread.join()
 
 
-def _quietly(fn, *args) -> None:
-    # Compiling ahead only saves time later: if it fails, the crossing compiles in line and any
+def _quietly(work) -> None:
+    # Compiling ahead only saves time later: if it fails, the decision compiles in line and any
     # real problem surfaces there, in the decision itself.
     try:
-        fn(*args)
+        work()
     except Exception:  # noqa: BLE001
         pass
 
@@ -139,6 +149,7 @@ def drive(
 
     follow(state)
     ahead = CompileAhead()
+    ahead.after(state)
     try:
         return _loop(state, instrument, committed, measure_point, decide, stop_requested, ahead)
     finally:

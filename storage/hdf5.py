@@ -44,6 +44,9 @@ STEP_COLUMNS = {
     "t_opt": ("s", "predicted optimal t at this step"),
     "converged": ("bool", "noise model converged at or before this step"),
     "latency_s": ("s", "decision time: fits, prediction and acquisition"),
+    "primary_inputs": ("1", "distinct x (or bins, if binned) the GP for f was fitted on"),
+    "noise_inputs": ("1", "distinct t (or bins, if binned) the noise model was fitted on"),
+    "binned": ("bool", "True: beyond inference.max_inputs distinct inputs, the GPs merged points by bins (an approximation)"),
 }
 POINT_COLUMNS = {
     "x": ("x units", "position"),
@@ -82,7 +85,7 @@ def column_dtype(name: str, units: str) -> np.dtype:
     """The stored dtype of a /points or /steps column."""
     if units == "bool":
         return np.dtype(bool)
-    return np.dtype(np.int32 if name in ("n_shots", "step", "shots") else np.float64)
+    return np.dtype(np.int32 if name in ("n_shots", "step", "shots", "primary_inputs", "noise_inputs") else np.float64)
 
 
 def array_shapes(state: EngineState) -> dict[str, tuple[int, ...]]:

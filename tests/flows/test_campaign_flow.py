@@ -39,6 +39,17 @@ def test_flow_campaign_equals_the_pure_loop(tiny_config, finished):
     assert json.loads(attrs["config_json"])["name"] == "tiny"
 
 
+def test_each_step_records_the_inputs_its_models_saw(finished):
+    with h5py.File(finished, "r") as f:
+        x, t, step = f["points/x"][()], f["points/t"][()], f["points/step"][()]
+        steps = {k: f["steps"][k][()] for k in ("primary_inputs", "noise_inputs", "binned")}
+    for k in range(len(steps["binned"])):  # step k was fitted on the points measured before it
+        before = step < k
+        assert steps["primary_inputs"][k] == np.unique(x[before]).size
+        assert steps["noise_inputs"][k] == np.unique(t[before]).size  # 10 shots, then 3: all train it
+    assert not steps["binned"].any()
+
+
 def test_file_layout_is_readable_with_plain_h5py(finished):
     with h5py.File(finished, "r") as f:
         assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 2
