@@ -204,10 +204,10 @@ class InferenceConfig(FrozenModel):
     """How model hyperparameters are inferred.
 
     "map": L-BFGS to the posterior mode; the noise model adds a Laplace approximation
-    (``laplace_samples`` draws) so its predictions carry hyperparameter uncertainty. The first
-    BO step and every ``restart_every``-th start from ``restarts`` prior draws besides a
-    data-driven guess and the previous step's fit; the others start from the previous step's
-    fit alone (1: every step multi-starts).
+    (``laplace_samples`` draws) so its predictions carry hyperparameter uncertainty. Until the
+    noise model has converged, and then every ``restart_every``-th step, fits start from
+    ``restarts`` prior draws besides a data-driven guess and the previous step's fit; the other
+    steps after convergence start from the previous step's fit alone (1: every step multi-starts).
     "nuts": numpyro NUTS; predictions average over ``predict_samples`` thinned posterior draws.
     ``primary_quadrature`` (map mode): if > 0, the GP for f predicts with a weighted Gauss-Hermite
     quadrature of its two-hyperparameter posterior around the mode, this many nodes per

@@ -113,11 +113,13 @@ def _check_finite(**columns: np.ndarray) -> None:
             raise NonFiniteData(f"point(s) {bad.tolist()} have a non-finite {name}; no model is trained on it")
 
 
-def warm_step(config: CampaignConfig, step: int, previous: dict | None) -> bool:
-    """Whether BO step ``step`` fits from the previous step's hyperparameters alone: every step
-    but each ``restart_every``-th, which (like the first) starts from data-driven guesses, the
-    previous fit and ``restarts`` prior draws."""
-    return bool(previous) and step % config.inference.restart_every != 0
+def warm_step(config: CampaignConfig, step: int, previous: dict | None, noise_converged: bool) -> bool:
+    """Whether BO step ``step`` fits from the previous step's hyperparameters alone: once the
+    noise model has converged, every step but each ``restart_every``-th. Until then (few points,
+    a posterior that may have several modes, and the steps that decide when the campaign
+    converges), and on those steps, fits start from data-driven guesses, the previous fit and
+    ``restarts`` prior draws."""
+    return bool(previous) and noise_converged and step % config.inference.restart_every != 0
 
 
 def fit_models(
@@ -352,7 +354,8 @@ def decide(
     """One whole BO decision: fit both models (key (seed, step); from ``previous``, the previous
     step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then ``acquire``."""
     _wait_for_compilation(config, state)
-    fitted = fit_models(config, state, fit_key(seed, step), previous, warm_step(config, step, previous))
+    warm = warm_step(config, step, previous, state.is_converged)
+    fitted = fit_models(config, state, fit_key(seed, step), previous, warm)
     return acquire(config, fitted, state, step)
 
 
