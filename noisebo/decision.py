@@ -392,9 +392,11 @@ _COMPILING: dict[tuple, threading.Event] = {}
 _COMPILING_LOCK = threading.Lock()
 
 
-def _programs(config: CampaignConfig, capacities: tuple[int, int]) -> tuple:
+def programs_key(config: CampaignConfig, capacities: tuple[int, int] | None) -> tuple:
+    """What identifies a decision's compiled programs: the config sections they depend on and
+    the padded capacities."""
     return (config.primary_model, config.noise_model, config.inference, config.space, config.reward,
-            config.acquisition, tuple(capacities))
+            config.acquisition, None if capacities is None else tuple(capacities))
 
 
 def compile_ahead(config: CampaignConfig, state: CampaignState, previous: dict | None,
@@ -403,7 +405,7 @@ def compile_ahead(config: CampaignConfig, state: CampaignState, previous: dict |
     discard the results: JAX keeps them compiled for when the campaign crosses there. Meant for
     a background thread while the instrument measures (MAP mode; NUTS samplers are per thread);
     a ``decide`` that needs these capacities meanwhile waits for it."""
-    key, done = _programs(config, capacities), threading.Event()
+    key, done = programs_key(config, capacities), threading.Event()
     with _COMPILING_LOCK:
         _COMPILING.setdefault(key, done)
     try:
@@ -420,6 +422,6 @@ def _wait_for_compilation(config: CampaignConfig, state: CampaignState) -> None:
     with _COMPILING_LOCK:
         if not _COMPILING:
             return
-        done = _COMPILING.get(_programs(config, capacities_needed(config, state)))
+        done = _COMPILING.get(programs_key(config, capacities_needed(config, state)))
     if done is not None:
         done.wait()

@@ -17,7 +17,7 @@ import numpy as np
 from noisebo import engine
 from noisebo.config import CampaignConfig
 from noisebo.campaign import compile_first_decision
-from noisebo.decision import Decision, capacities_ahead, compile_ahead
+from noisebo.decision import Decision, capacities_ahead, compile_ahead, programs_key
 from noisebo.engine import EngineState
 from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
 from noisebo.failures import InstrumentError, InstrumentTimeout
@@ -98,8 +98,7 @@ class CompileAhead:
             self._start(config, capacities, lambda: compile_ahead(*args))
 
     def _start(self, config, capacities, work) -> None:
-        key = (config.primary_model, config.noise_model, config.inference, config.space, config.reward,
-               config.acquisition, capacities)
+        key = programs_key(config, capacities)
         with self._lock:
             if key in self._done:
                 return
