@@ -48,7 +48,8 @@ SHOTS = 30
 
 
 def state_of(config, n: int, design: str = "grid", seed: int = 0):
-    """A campaign state of n measured Forrester points (noise from the simulator's law)."""
+    """A campaign state of n points measured on the config's simulator (noise from its law;
+    value: mean of 30 Gaussian shots about its truth, which for PFM skips the sweeps' SHO fits)."""
     import numpy as np
 
     from instruments import build
@@ -59,19 +60,21 @@ def state_of(config, n: int, design: str = "grid", seed: int = 0):
     simulator = build(validated(config).instrument)
     rng = np.random.default_rng(seed)
     s = config.space
-    if design == "grid":
-        g = grids(config)
-        x, t = rng.choice(g.x, n), rng.choice(g.t, n)
+    g = grids(config)
+    if design == "grid" and s.dimensions == 1:
+        x, t = rng.choice(g.x, n)[:, None], rng.choice(g.t, n)
+    elif design == "grid":  # proposals lie off the reference points in d > 1: draw x anywhere, t on its grid
+        x, t = rng.uniform(s.lows, s.highs, (n, s.dimensions)), rng.choice(g.t, n)
     else:
-        x = rng.uniform(s.x_min, s.x_max, n)
+        x = rng.uniform(s.lows, s.highs, (n, s.dimensions))
         t = np.exp(rng.uniform(np.log(s.t_min), np.log(s.t_max), n))
     sd = simulator.noise_law(t)
-    truth = simulator.truth(x[:, None])
+    truth = simulator.truth(x)
     points = []
     for i in range(n):
         shots = truth[i] + sd[i] * rng.standard_normal(SHOTS)
         std = float(shots.std(ddof=1))
-        points.append(Point(float(x[i]), float(t[i]), float(shots.mean()), std, SHOTS, std, True))
+        points.append(Point(tuple(x[i]), float(t[i]), float(shots.mean()), std, SHOTS, std, True))
     # A long campaign is past its noise model's convergence (its warm steps start from the
     # previous fit; before convergence every step multi-starts).
     return CampaignState(points=tuple(points), t_opt_history=(2.5, 2.5, 2.5), converged_step=2)

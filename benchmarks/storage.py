@@ -103,16 +103,16 @@ def point_commits(config: CampaignConfig, index: int, seed: int = 0, spectra: bo
         x, t, n_shots, step = d.x, d.t, d.shots, d.step
     else:
         s = config.space
-        x, t, n_shots, step = float(rng.uniform(s.x_min, s.x_max)), float(rng.uniform(s.t_min, s.t_max)), \
+        x, t, n_shots, step = (float(rng.uniform(s.x_min, s.x_max)),), float(rng.uniform(s.t_min, s.t_max)), \
             config.schedule.shots_before, -1
     if spectra:
         t = float(np.clip(rng.lognormal(np.log(0.47), 0.3), config.space.t_min, config.space.t_max))
     if fail_every and index % fail_every == fail_every - 1:
-        batches.append([ShotFailed(index, 0, (x,), t, "instrument error", f"synthetic failure at point {index}")])
+        batches.append([ShotFailed(index, 0, x, t, "instrument error", f"synthetic failure at point {index}")])
     shots, values = [], []
     for k in range(n_shots):
         reading = Reading(None, sweep(t, rng), "sho") if spectra else Reading(float(rng.normal(1.0, 0.3)))
-        shots.append(ShotTaken(index, k, (x,), t, reading))
+        shots.append(ShotTaken(index, k, x, t, reading))
         values.append(shot_value(reading, k, spectra, bool(reject_every) and k % reject_every == reject_every - 1))
         batches.append([shots[-1]])
     ok = np.asarray([v.value for v in values if v.ok])

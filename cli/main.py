@@ -279,6 +279,9 @@ def _sweep(args) -> int:
 
 def inspect_summary(path: Path) -> dict:
     """The JSON view of a campaign file (see ``noisebo inspect --json``)."""
+    import numpy as np
+
+    from noisebo.state import as_position
     from storage.hdf5 import read_campaign
 
     data = read_campaign(path)
@@ -290,7 +293,7 @@ def inspect_summary(path: Path) -> dict:
         rows.append({
             "point": i,
             "step": None if step < 0 else step,
-            "x": float(points["x"][i]),
+            "x": list(as_position(points["x"][i])) if np.ndim(points["x"][i]) else float(points["x"][i]),
             "t": float(points["t"][i]),
             "n_shots": int(points["n_shots"][i]),
             "value": float(points["value"][i]),
@@ -317,6 +320,8 @@ def inspect_summary(path: Path) -> dict:
 
 
 def _inspect(args) -> int:
+    from noisebo.state import format_position
+
     path = check_present(Path(args.file))
     summary = call_isolated(inspect_summary, path, what=str(path))
     if args.json:
@@ -324,17 +329,18 @@ def _inspect(args) -> int:
         return 0
     conv = summary["first_converged_step"]
     driver = summary["driver"]
+    x_width = max([9] + [len(format_position(row["x"])) for row in summary["points"]])
     print(f"{summary['file']}: {summary['config']['name']} seed {summary['seed']}, policy {summary['policy']}, "
           f"status {summary['status']}{' (' + summary['status_reason'] + ')' if summary['status_reason'] else ''}")
     print(f"  instrument {driver['name']} {driver['version']}")
     print(f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
           f"noise model {'not converged' if conv is None else f'converged at step {conv + 1}'}; "
           f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s")
-    print(f"  {'step':>5} {'x':>9} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
+    print(f"  {'step':>5} {'x':>{x_width}} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
     for row in summary["points"]:
         step = "seed" if row["step"] is None else str(row["step"] + 1)
         t_opt = "" if row["t_opt"] is None else f"{row['t_opt']:.4f}"
-        print(f"  {step:>5} {row['x']:>9.4g} {row['t']:>8.4g} {row['n_shots']:>5} {row['value']:>10.4g} "
+        print(f"  {step:>5} {format_position(row['x']):>{x_width}} {row['t']:>8.4g} {row['n_shots']:>5} {row['value']:>10.4g} "
               f"{row['noise']:>8.3g}{'' if row['noise_measured'] else '*'} {t_opt:>9}")
     print("  * noise from the noise model")
     return 0

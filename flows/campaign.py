@@ -21,6 +21,7 @@ from noisebo.driver import drive, now_utc
 from noisebo.engine import EngineState, ask, new_campaign
 from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
+from noisebo.state import format_position
 from storage.recorder import Recorder, campaign_path, package_versions, read_started
 from tasks import campaign as ops
 
@@ -44,7 +45,7 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
         if isinstance(event, PointCommitted):
             p = event.point
             label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
-            lines.append(f"{label}: x={p.x:.4g} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} noise={p.noise:.3g}")
+            lines.append(f"{label}: x={format_position(p.x)} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} noise={p.noise:.3g}")
         elif isinstance(event, MoreShots):
             lines.append(f"point {event.point}: {event.reason}; taking more shots ({event.wanted} in all)")
         elif isinstance(event, Decided) and event.decision.converged and not state.data.is_converged:

@@ -26,12 +26,16 @@ class FaultyInstrument:
         self.inner, self.faults, self.name, self.version = inner, faults, inner.name, inner.version
         if is_simulator(inner):  # a simulator stays one behind the injector
             self.simulate, self.truth, self.noise_law = self._simulate, inner.truth, inner.noise_law
+            if hasattr(inner, "noise_law_at"):
+                self.noise_law_at = inner.noise_law_at
         self._rng = np.random.default_rng(faults.seed)
         self._lock = threading.Lock()
         self.calls = 0
         self.ledger: list[dict] = []
 
-    def _draw(self, x: float, t: float) -> str | None:
+    def _draw(self, x: np.ndarray, t: float) -> str | None:
+        """The fault of this call, or None; the ledger's "x" is the one coordinate on a line, the
+        list of coordinates otherwise."""
         with self._lock:
             u = float(self._rng.random())
             sign = 1.0 if self._rng.random() < 0.5 else -1.0
@@ -40,7 +44,8 @@ class FaultyInstrument:
             for kind in FAULT_KINDS:
                 edge += getattr(self.faults, kind)
                 if u < edge:
-                    self.ledger.append({"call": self.calls, "x": float(x), "t": float(t), "kind": kind, "sign": sign})
+                    where = float(x[0]) if x.size == 1 else x.tolist()
+                    self.ledger.append({"call": self.calls, "x": where, "t": float(t), "kind": kind, "sign": sign})
                     return kind
             return None
 
@@ -51,7 +56,7 @@ class FaultyInstrument:
         return self._faulty(self.inner.simulate(x, t, rng), x, t)
 
     def _faulty(self, reading: Reading, x: np.ndarray, t: float) -> Reading:
-        x = float(np.asarray(x, dtype=np.float64).ravel()[0])
+        x = np.asarray(x, dtype=np.float64).ravel()
         kind = self._draw(x, t)
         if kind is None:
             return reading
@@ -59,7 +64,8 @@ class FaultyInstrument:
             time.sleep(self.faults.hang_s)
             return reading
         if kind == "exception":
-            raise InstrumentError(f"{self.name}: injected instrument error at x={x:g}, t={t:g}")
+            where = f"{x[0]:g}" if x.size == 1 else "(" + ", ".join(f"{v:g}" for v in x) + ")"
+            raise InstrumentError(f"{self.name}: injected instrument error at x={where}, t={t:g}")
         if kind in ("nan", "inf"):
             bad = float("nan") if kind == "nan" else float("inf")
             if reading.spectrum is None:
@@ -71,7 +77,7 @@ class FaultyInstrument:
             return self._outlier(reading, x, t, self.ledger[-1]["sign"])
         return Reading(None, np.asarray(reading.spectrum)[:, :3], reading.reduction)  # corrupt: a 3-sample stub
 
-    def _outlier(self, reading: Reading, x: float, t: float, sign: float) -> Reading:
+    def _outlier(self, reading: Reading, x: np.ndarray, t: float, sign: float) -> Reading:
         """The reading moved by outlier_sd true noise sd: a scalar directly; a spectrum scaled
         so that its fitted amplitude moves by that much (the fit is linear in the scale)."""
         simulated = is_simulator(self.inner)
@@ -79,7 +85,7 @@ class FaultyInstrument:
         step = self.faults.outlier_sd * (float(noise[0]) if noise is not None else 1.0)
         if reading.spectrum is None:
             return Reading(float(reading.value) + sign * step)
-        truth = self.inner.truth(np.asarray([[x]])) if simulated else None
+        truth = self.inner.truth(x[None, :]) if simulated else None
         amplitude = max(abs(float(truth[0])), 1.0) if truth is not None else 1.0
         spectrum = np.array(reading.spectrum, copy=True)
         spectrum[1] *= max(1.0 + sign * step / amplitude, 0.0)

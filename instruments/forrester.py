@@ -32,6 +32,12 @@ class ForresterInstrument:
     name = "forrester"
     version = noisebo.__version__
     Settings = ForresterSettings
+    dimensions = 1
+
+    @property
+    def bounds(self) -> list[tuple[float, float]]:
+        """The benchmark's domain of x: [(0, 1)]."""
+        return [(0.0, 1.0)]
 
     def __init__(self, settings: ForresterSettings | None = None):
         self.settings = settings or ForresterSettings()
@@ -41,6 +47,13 @@ class ForresterInstrument:
         """Single-shot noise sd at exposure t (s): A1/sqrt(t) + A0."""
         t = np.asarray(t, dtype=np.float64)
         return self.settings.a1 / np.sqrt(t) + self.settings.a0
+
+    def noise_law_at(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Single-shot noise sd at positions x (n, 1) and exposures t (m,): (n, m), the same law
+        A1/sqrt(t) + A0 at every x."""
+        x = np.asarray(x, dtype=np.float64)
+        law = self.noise_law(t)
+        return np.broadcast_to(law, (x.shape[0],) + law.shape).copy()
 
     def truth(self, x: np.ndarray) -> np.ndarray:
         """f at positions x (n, 1): (n,)."""

@@ -7,30 +7,33 @@ sampled densely and interpolated linearly.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, ClassVar, Literal, Union
 
-import h5py
 import numpy as np
 from pydantic import Field, model_validator
 from scipy import ndimage
 
+from instruments.pfm_scan import DEFAULT_SCAN, PROJECT_ROOT, ProfileError, dominant_phase, read_scan, signed_response
 from noisebo.config import FiniteFloat, FrozenModel, NonNegativeFloat, PositiveFloat
 
+__all__ = ["PROJECT_ROOT", "ProfileError", "dominant_phase", "ScanProfileConfig", "SyntheticProfileConfig",
+           "ProfileConfig", "Profile", "scan_profile", "synthetic_profile", "build_profile", "ChannelIndex"]
 
-PROJECT_ROOT = Path(__file__).resolve().parents[1]
+ChannelIndex = Annotated[int, Field(ge=0)]
 
 
 class ScanProfileConfig(FrozenModel):
     """A line across a real PFM scan (pyNSID layout: amplitude and phase channels). ``file`` is
     resolved against the project root when relative; ``start_px``/``end_px`` are (row, column)
     pixels; the response is amplitude (pm) signed by the phase against the scan's dominant
-    domain phase, after a Gaussian smoothing of ``smooth_px`` pixels (the scan's own noise)."""
+    domain phase, after a Gaussian smoothing of ``smooth_px`` pixels (the scan's own noise).
+    ``amplitude_channel``/``phase_channel``: the channels' indices k, or None (the default) to
+    find them by their ``quantity`` attribute (``instruments.pfm_scan.find_channel``)."""
 
     source: Literal["scan"] = "scan"
-    file: str = "data/pfm/PTO_Funakubo0003.h5"
-    amplitude_channel: int = Field(1, ge=0)
-    phase_channel: int = Field(3, ge=0)
+    file: str = DEFAULT_SCAN
+    amplitude_channel: ChannelIndex | None = None
+    phase_channel: ChannelIndex | None = None
     start_px: tuple[FiniteFloat, FiniteFloat] = (20.0, 120.0)
     end_px: tuple[FiniteFloat, FiniteFloat] = (200.0, 255.0)
     smooth_px: NonNegativeFloat = 1.0
@@ -65,68 +68,38 @@ class Profile:
 
     x_um: np.ndarray
     response_pm: np.ndarray
+    dimensions: ClassVar[int] = 1
 
     @property
     def length_um(self) -> float:
         return float(self.x_um[-1])
 
+    @property
+    def bounds_um(self) -> list[tuple[float, float]]:
+        """[(0, length_um)]: the extent of the one axis."""
+        return [(0.0, self.length_um)]
+
     def __call__(self, x_um) -> np.ndarray:
         return np.interp(np.asarray(x_um, dtype=np.float64), self.x_um, self.response_pm)
 
 
-class ProfileError(ValueError):
-    """A profile that cannot be built; the message names the file or setting."""
-
-
-def _channel(f: h5py.File, k: int, path: Path) -> tuple[np.ndarray, np.ndarray, str]:
-    base = f"Measurement_000/Channel_{k}/Channel_{k}"
-    try:
-        image = f[f"{base}/Channel_{k}"][()].astype(np.float64)
-        x_axis = f[f"{base}/x"][()].astype(np.float64)
-    except KeyError:
-        raise ProfileError(f"{path}: no channel {k} in the pyNSID layout ({base}/Channel_{k})") from None
-    units = f[f"{base}/Channel_{k}"].attrs.get("units", b"")
-    units = units.decode() if isinstance(units, bytes) else str(units)
-    return image, x_axis, units
-
-
-def dominant_phase(phase_rad: np.ndarray) -> float:
-    """The phase (rad) of the majority domain: the circular mean of the phases within 60 degrees
-    of the histogram's mode."""
-    hist, edges = np.histogram(np.mod(phase_rad, 2 * np.pi), bins=72, range=(0, 2 * np.pi))
-    mode = 0.5 * (edges[np.argmax(hist)] + edges[np.argmax(hist) + 1])
-    near = np.cos(phase_rad - mode) > np.cos(np.deg2rad(60))
-    return float(np.angle(np.mean(np.exp(1j * phase_rad[near]))))
-
-
 def scan_profile(cfg: ScanProfileConfig) -> Profile:
     """The signed amplitude along the configured line of a real scan (pm, x in um)."""
-    path = Path(cfg.file)
-    path = path if path.is_absolute() else PROJECT_ROOT / path
-    try:
-        f = h5py.File(path, "r")
-    except (OSError, FileNotFoundError) as error:
-        raise ProfileError(f"{path}: cannot open the PFM scan ({str(error).split('(')[0].strip()})") from None
-    with f:
-        amplitude, x_axis, amp_units = _channel(f, cfg.amplitude_channel, path)
-        phase, _, phase_units = _channel(f, cfg.phase_channel, path)
-    if amp_units != "m" or phase_units != "deg":
-        raise ProfileError(f"{path}: expected amplitude in m and phase in deg, found {amp_units!r} and {phase_units!r}")
-    rows, cols = amplitude.shape
+    scan = read_scan(cfg.file, cfg.amplitude_channel, cfg.phase_channel)
+    rows, cols = scan.shape
     for name, (r, c) in (("start_px", cfg.start_px), ("end_px", cfg.end_px)):
         if not (0 <= r <= rows - 1 and 0 <= c <= cols - 1):
             raise ProfileError(f"{name} {(r, c)} lies outside the {rows} x {cols} scan")
-    pixel_um = abs(float(x_axis[1] - x_axis[0])) * 1e6
-    phase_rad = np.deg2rad(phase)
-    reference = dominant_phase(phase_rad)
-    sign = np.where(ndimage.gaussian_filter(np.cos(phase_rad - reference), max(cfg.smooth_px, 1e-9)) >= 0, 1.0, -1.0)
-    response = ndimage.gaussian_filter(amplitude * 1e12, cfg.smooth_px) * sign
+    response = signed_response(scan, cfg.smooth_px)
     (r0, c0), (r1, c1) = cfg.start_px, cfg.end_px
     length_px = float(np.hypot(r1 - r0, c1 - c0))
     n = max(2, int(np.ceil(length_px * SAMPLES_PER_PIXEL)) + 1)
     s = np.linspace(0.0, 1.0, n)
     values = ndimage.map_coordinates(response, [r0 + s * (r1 - r0), c0 + s * (c1 - c0)], order=1)
-    return Profile(s * length_px * pixel_um, values)
+    row_um, column_um = scan.pitch_um
+    if row_um == column_um:  # square pixels (the shipped scans)
+        return Profile(s * length_px * row_um, values)
+    return Profile(s * float(np.hypot((r1 - r0) * row_um, (c1 - c0) * column_um)), values)
 
 
 def synthetic_profile(cfg: SyntheticProfileConfig) -> Profile:
@@ -148,4 +121,5 @@ def synthetic_profile(cfg: SyntheticProfileConfig) -> Profile:
 
 
 def build_profile(cfg: ScanProfileConfig | SyntheticProfileConfig) -> Profile:
+    """The line profile of a line source ("scan" or "synthetic")."""
     return scan_profile(cfg) if cfg.source == "scan" else synthetic_profile(cfg)

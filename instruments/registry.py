@@ -101,10 +101,34 @@ def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
         settings = settings_of(config.instrument, cls)
     except ConfigError as error:
         raise type(error)(f"{source}: {error}") from None
+    problem = space_problem(config, cls, settings)
+    if problem is not None:
+        raise ConfigError(f"{source}: {problem}")
     faults = config.instrument.faults
     if faults is not None and faults.corrupt_spectrum > 0 and not getattr(cls, "spectra", False):
         raise ConfigError(f"{source}: instrument.faults.corrupt_spectrum needs an instrument that returns spectra")
     return config.with_overrides(instrument={"settings": settings.model_dump(mode="json")})
+
+
+def space_problem(config: CampaignConfig, cls: type, settings: BaseModel) -> str | None:
+    """What is wrong with ``space.axes`` for a simulator that declares its extent (``bounds``:
+    one (low, high) per axis, in x's units), or None: the number of axes must match and every
+    axis lie inside its extent. Other drivers (a device knows its own limits) are not asked."""
+    if not (hasattr(cls, "bounds") and hasattr(cls, "simulate")):
+        return None
+    try:
+        bounds = [tuple(map(float, b)) for b in cls(settings).bounds]
+    except Exception:  # noqa: BLE001 - a driver that cannot start says why when the campaign builds it
+        return None
+    axes = config.space.axes
+    if len(bounds) != len(axes):
+        return (f"space.axes: the {config.instrument.kind} instrument measures over {len(bounds)} axis(es), "
+                f"the space has {len(axes)}")
+    for k, (axis, (lo, hi)) in enumerate(zip(axes, bounds)):
+        if axis.low < lo - 1e-9 * max(1.0, abs(lo)) or axis.high > hi + 1e-9 * max(1.0, abs(hi)):
+            return (f"space.axes.{k} ({axis.name}): [{axis.low:g}, {axis.high:g}] leaves the instrument's extent "
+                    f"[{lo:.6g}, {hi:.6g}]")
+    return None
 
 
 def driver_info(config: InstrumentConfig) -> DriverInfo:

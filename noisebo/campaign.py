@@ -14,33 +14,34 @@ from noisebo.events import Summary
 from noisebo.keys import SEED_POINTS, numpy_rng
 from noisebo.reduction import ShotValue, clip_outliers, shot_values, usable
 from noisebo.schedule import reduce_shots
-from noisebo.state import CampaignState, Point
+from noisebo.state import CampaignState, Point, as_position
 
 
 def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
-    """(n_seed, 2) random (x, t) seed locations.
+    """(n_seed, d + 1) random seed locations: the d coordinates of x, then t.
 
-    "latin_hypercube" (default) stratifies both axes, t on a log scale: the seeds then span the
+    "latin_hypercube" (default) stratifies every axis, t on a log scale: the seeds then span the
     exposure range, from a short, cheap shot to a long one, which separates A0 from A1 in the
     noise model from the start. "uniform" draws each coordinate uniformly. ``seed_t_scale``
     "log_span" replaces the random t by n values evenly spaced on a log scale from t_min to t_max
     inclusive (in random order): the ends of the range are where the two terms of the noise law
     differ most, so they pin A0 and A1 best."""
     s, sched = config.space, config.schedule
-    n = sched.n_seed
+    n, d = sched.n_seed, s.dimensions
     rng = numpy_rng(seed, SEED_POINTS)
     if sched.seed_design == "latin_hypercube":
-        strata = np.column_stack([rng.permutation(n), rng.permutation(n)])
-        u = (strata + rng.random((n, 2))) / n
+        strata = np.column_stack([rng.permutation(n) for _ in range(d + 1)])
+        u = (strata + rng.random((n, d + 1))) / n
     else:
-        u = rng.random((n, 2))
-    x = s.x_min + u[:, 0] * (s.x_max - s.x_min)
+        u = rng.random((n, d + 1))
+    lows, highs = np.asarray(s.lows), np.asarray(s.highs)
+    x = lows + u[:, :d] * (highs - lows)
     if sched.seed_t_scale == "log":
-        t = s.t_min * (s.t_max / s.t_min) ** u[:, 1]
+        t = s.t_min * (s.t_max / s.t_min) ** u[:, d]
     elif sched.seed_t_scale == "log_span":
         t = s.t_min * (s.t_max / s.t_min) ** (rng.permutation(n) / max(n - 1, 1))
     else:
-        t = s.t_min + u[:, 1] * (s.t_max - s.t_min)
+        t = s.t_min + u[:, d] * (s.t_max - s.t_min)
     if config.acquisition.fixed_t is not None:
         t_grid = grids(config).t
         t = np.full(n, t_grid[np.argmin(np.abs(t_grid - config.acquisition.fixed_t))])
@@ -48,7 +49,7 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
 
 
 def make_point(
-    x: float, t: float, readings: Sequence, model_noise: float | None, reduction: ReductionConfig,
+    x, t: float, readings: Sequence, model_noise: float | None, reduction: ReductionConfig,
     clip_sd: float | None = None,
 ) -> tuple[Point, list[ShotValue]]:
     """A point from its readings (spectra are fitted here) and each shot's value. The point uses
@@ -59,7 +60,7 @@ def make_point(
     measured = model_noise is None
     reduced = reduce_shots(usable(shots, 2 if measured else 1))
     return Point(
-        x=float(x),
+        x=as_position(x),
         t=float(t),
         value=reduced.value,
         shot_std=reduced.shot_std,
@@ -88,8 +89,8 @@ def stand_in_seeds(config: CampaignConfig, seed: int) -> CampaignState:
     """The campaign's seed points with stand-in readings (value = index, noise 1): a state of the
     shapes its first decision works on, before anything is measured."""
     shots = config.schedule.shots_before
-    points = tuple(Point(float(x), float(t), float(i), 1.0, shots, 1.0, True)
-                   for i, (x, t) in enumerate(seed_points(config, seed)))
+    points = tuple(Point(tuple(row[:-1]), float(row[-1]), float(i), 1.0, shots, 1.0, True)
+                   for i, row in enumerate(seed_points(config, seed)))
     return CampaignState(points=points)
 
 

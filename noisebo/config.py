@@ -124,23 +124,116 @@ class ReductionConfig(FrozenModel):
     sho: SHOReductionConfig = SHOReductionConfig()
 
 
-class SpaceConfig(FrozenModel):
-    """The (x, t) search space and the candidate grid over it. t is in seconds (> 0)."""
+AXIS_NAME = r"^[A-Za-z_][A-Za-z0-9_]*$"
+ONE_AXIS_KEYS = ("x_min", "x_max", "n_x")
 
-    x_min: FiniteFloat = 0.0
-    x_max: FiniteFloat = 1.0
+
+class AxisConfig(FrozenModel):
+    """One axis of x: its ``name`` (an identifier), bounds ``low`` < ``high`` and ``units``.
+    ``n``: points along it of the grid decisions are shown on (and, for a single axis, searched
+    over); default 200 for one axis, 64 per axis for two, 12 for more."""
+
+    name: str = Field(pattern=AXIS_NAME, max_length=32)
+    low: FiniteFloat
+    high: FiniteFloat
+    units: str = Field("", max_length=32)
+    n: int | None = Field(None, ge=2, le=20_000)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> AxisConfig:
+        if not self.low < self.high:
+            raise ValueError(f"low ({self.low}) must be below high ({self.high})")
+        return self
+
+
+DEFAULT_POINTS_PER_AXIS = {1: 200, 2: 64}
+MAX_GRID_POINTS = 20_000
+
+
+class SpaceConfig(FrozenModel):
+    """The search space: x over ``axes`` (1 to 4 of them) and t in seconds (> 0) over
+    [``t_min``, ``t_max``] with ``n_t`` grid points.
+
+    One axis may be given the short way, ``x_min``, ``x_max`` and ``n_x`` (an axis named "x").
+    With one axis, proposals lie on its grid; with more, on ``n_candidates`` reference points
+    (the display grid for two axes, a Halton set for more) refined locally, off the grid."""
+
+    axes: tuple[AxisConfig, ...] = (AxisConfig(name="x", low=0.0, high=1.0, n=200),)
     t_min: PositiveFloat = 0.2
     t_max: PositiveFloat = 10.0
-    n_x: int = Field(200, ge=2, le=20_000)
     n_t: int = Field(100, ge=2, le=20_000)
+    n_candidates: int = Field(1024, ge=16, le=20_000)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _one_axis_shorthand(cls, data: Any) -> Any:
+        if not isinstance(data, dict) or not any(k in data for k in ONE_AXIS_KEYS):
+            return data
+        if "axes" in data:
+            raise ValueError("give either axes or x_min/x_max/n_x (one axis named x), not both")
+        low, high = data.get("x_min", 0.0), data.get("x_max", 1.0)
+        for name, v in (("x_min", low), ("x_max", high)):
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ValueError(f"{name} ({v}) must be a finite number")
+        if isinstance(low, (int, float)) and isinstance(high, (int, float)) and not low < high:
+            raise ValueError(f"x_min ({low}) must be below x_max ({high})")
+        rest = {k: v for k, v in data.items() if k not in ONE_AXIS_KEYS}
+        axis = {"name": "x", "low": data.get("x_min", 0.0), "high": data.get("x_max", 1.0), "n": data.get("n_x", 200)}
+        return {**rest, "axes": [axis]}
 
     @model_validator(mode="after")
     def _bounds(self) -> SpaceConfig:
-        if not self.x_min < self.x_max:
-            raise ValueError(f"x_min ({self.x_min}) must be below x_max ({self.x_max})")
+        if not 1 <= len(self.axes) <= 4:
+            raise ValueError(f"axes: 1 to 4 axes, got {len(self.axes)}")
+        names = [a.name for a in self.axes]
+        if len(set(names)) != len(names):
+            raise ValueError(f"axes: names must differ, got {names}")
         if not self.t_min < self.t_max:
             raise ValueError(f"t_min ({self.t_min}) must be below t_max ({self.t_max})")
+        if self.dimensions == 2 and math.prod(self.points_per_axis) > MAX_GRID_POINTS:
+            raise ValueError(f"axes: a {' x '.join(map(str, self.points_per_axis))} grid has more than "
+                             f"{MAX_GRID_POINTS} points")
         return self
+
+    @property
+    def dimensions(self) -> int:
+        """d, the number of axes of x."""
+        return len(self.axes)
+
+    @property
+    def points_per_axis(self) -> tuple[int, ...]:
+        """Grid points along each axis (``AxisConfig.n``, or its default for d axes)."""
+        default = DEFAULT_POINTS_PER_AXIS.get(self.dimensions, 12)
+        return tuple(a.n or default for a in self.axes)
+
+    @property
+    def lows(self) -> tuple[float, ...]:
+        return tuple(a.low for a in self.axes)
+
+    @property
+    def highs(self) -> tuple[float, ...]:
+        return tuple(a.high for a in self.axes)
+
+    def _one_axis(self, what: str) -> AxisConfig:
+        if self.dimensions != 1:
+            raise ValueError(f"space.{what} exists for one axis only; this space has {self.dimensions} (axes)")
+        return self.axes[0]
+
+    @property
+    def x_min(self) -> float:
+        """Lower bound of the single axis (an error for d > 1)."""
+        return self._one_axis("x_min").low
+
+    @property
+    def x_max(self) -> float:
+        """Upper bound of the single axis (an error for d > 1)."""
+        return self._one_axis("x_max").high
+
+    @property
+    def n_x(self) -> int:
+        """Grid points of the single axis (an error for d > 1)."""
+        self._one_axis("n_x")
+        return self.points_per_axis[0]
 
 
 class RewardConfig(FrozenModel):
@@ -296,6 +389,10 @@ class CampaignConfig(FrozenModel):
         for key, value in sections.items():
             old = data.get(key)
             if isinstance(value, dict) and isinstance(old, dict) and value.get("kind", old.get("kind")) == old.get("kind"):
+                if key == "space" and any(k in value for k in ONE_AXIS_KEYS) and len(old.get("axes", ())) == 1:
+                    axis = old["axes"][0]
+                    old = {k: v for k, v in old.items() if k != "axes"} | {
+                        "x_min": axis["low"], "x_max": axis["high"], "n_x": axis["n"] or DEFAULT_POINTS_PER_AXIS[1]}
                 merged = {**old, **value}
                 if key == "instrument" and isinstance(value.get("settings"), dict):
                     merged["settings"] = {**old.get("settings", {}), **value["settings"]}

@@ -23,17 +23,19 @@ from noisebo.config import (
     AcquisitionConfig, CampaignConfig, NoiseModelConfig, PrimaryModelConfig, RewardConfig, SpaceConfig,
 )
 from noisebo.inputs import capacity_for, group_ids
-from noisebo.keys import FIT, jax_key
-from noisebo.policies import Posterior, acquisition_map, argmax_2d
+from noisebo.keys import FIT, PROPOSE, jax_key
+from noisebo.policies import Posterior, acquisition_map, argmax_2d, point_scores
 from noisebo.reward import optimal_index, reward
 from noisebo.schedule import converged, shots_for
-from noisebo.state import CampaignState
+from noisebo.search import STARTS, reference_points, reference_spacing, refine
+from noisebo.state import CampaignState, as_position
 
 N_FINE = 2049  # t grid for the predicted optimal t: spacing (t_max - t_min) / 2048
 
 
 class Grids(NamedTuple):
-    """x: (n_x,) and t: (n_t,) candidate grids; t_fine: (N_FINE,) grid for t_opt."""
+    """x: the reference points (``noisebo.search.reference_points``: the (n_x,) grid for one
+    axis, (m, d) for more); t: (n_t,) candidate grid; t_fine: (N_FINE,) grid for t_opt."""
 
     x: np.ndarray
     t: np.ndarray
@@ -45,9 +47,15 @@ def grids(config: CampaignConfig) -> Grids:
 
 
 def space_grids(s: SpaceConfig) -> Grids:
-    return Grids(
-        np.linspace(s.x_min, s.x_max, s.n_x), np.linspace(s.t_min, s.t_max, s.n_t), np.linspace(s.t_min, s.t_max, N_FINE)
-    )
+    return Grids(reference_points(s), np.linspace(s.t_min, s.t_max, s.n_t), np.linspace(s.t_min, s.t_max, N_FINE))
+
+
+def scaled(space: SpaceConfig, x: np.ndarray) -> np.ndarray:
+    """Raw positions ((n,) for one axis, (n, d)) scaled to [0, 1] per axis."""
+    lows, highs = np.asarray(space.lows), np.asarray(space.highs)
+    if np.ndim(x) == 1:
+        return (x - lows[0]) / (highs[0] - lows[0])
+    return (x - lows) / (highs - lows)
 
 
 class Fitted(NamedTuple):
@@ -67,12 +75,12 @@ class Fitted(NamedTuple):
 
 
 def _models(config: CampaignConfig):
-    return _models_for(config.primary_model, config.noise_model)
+    return _models_for(config.primary_model, config.noise_model, config.space.dimensions)
 
 
 @lru_cache(maxsize=None)
-def _models_for(primary_config: PrimaryModelConfig, noise_config: NoiseModelConfig):
-    return primary.make_model(primary_config), noise_model.make_model(noise_config)
+def _models_for(primary_config: PrimaryModelConfig, noise_config: NoiseModelConfig, dimensions: int):
+    return primary.make_model(primary_config, dimensions), noise_model.make_model(noise_config)
 
 
 def _fit_one(config: CampaignConfig, model, data, key, guesses: list, laplace: int, quadrature: int,
@@ -134,11 +142,11 @@ def fit_models(
     no result, only which compiled programs run)."""
     cap_primary, cap_noise = capacities or (None, None)
     s = config.space
-    x, t, value = state.column("x"), state.column("t"), state.column("value")
+    x, t, value = state.positions(s.dimensions), state.column("t"), state.column("value")
     n_shots, noise = state.column("n_shots"), state.column("noise")
     _check_finite(x=x, t=t, value=value, noise=noise)
     inf = config.inference
-    pdata, std, p_groups = primary.prepare(x, value, noise**2 / n_shots, s.x_min, s.x_max, inf.max_inputs,
+    pdata, std, p_groups = primary.prepare(x, value, noise**2 / n_shots, s.lows, s.highs, inf.max_inputs,
                                            cap_primary)
     train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
     ndata, scale, n_groups = noise_model.prepare(
@@ -150,7 +158,7 @@ def fit_models(
     p_warm = _previous_guesses(previous, "primary", 1.0)
     n_warm = _previous_guesses(previous, "noise", scale, np.asarray(ndata.bounds))
     warm = warm and bool(p_warm) and bool(n_warm)
-    p_guesses = p_warm if warm else [primary.prior_median(config.primary_model)] + p_warm
+    p_guesses = p_warm if warm else [primary.prior_median(config.primary_model, s.dimensions)] + p_warm
     n_guesses = n_warm if warm else [noise_model.initial_guess(ndata, config.noise_model)] + n_warm
     return Fitted(
         _fit_one(config, primary_fn, pdata, k_primary, p_guesses, 0, inf.primary_quadrature, warm),
@@ -197,7 +205,7 @@ def _predict_program(config: CampaignConfig):
 @lru_cache(maxsize=None)
 def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str):
     g = space_grids(s)
-    xs = jnp.asarray((g.x - s.x_min) / (s.x_max - s.x_min))
+    xs = jnp.asarray(scaled(s, g.x))
     n_t = g.t.shape[0]
 
     def predict(fitted: Fitted, primary_first: bool, noise_first: bool, f_best) -> Prediction:
@@ -239,9 +247,7 @@ def _propose_program(config: CampaignConfig):
 @lru_cache(maxsize=None)
 def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig):
     g = space_grids(space)
-    allowed = np.ones(g.t.size, dtype=bool)
-    if acq.fixed_t is not None:
-        allowed = np.arange(g.t.size) == int(np.argmin(np.abs(g.t - acq.fixed_t)))
+    allowed = _allowed_t(acq, g.t)
 
     def propose(post: Posterior, shots):
         values = acquisition_map(post, shots, acq, rew)
@@ -249,6 +255,47 @@ def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceCon
         return values, i, j
 
     return jax.jit(propose)
+
+
+@lru_cache(maxsize=None)
+def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, primary_first: bool):
+    """For d > 1: the policy's map on the reference points, then ``search.refine`` from its best
+    ``STARTS`` entries (each keeps its t). Returns the map's maximum over t at each reference
+    point (m,), the proposal's scaled x (d,), its t index and score."""
+    g = space_grids(space)
+    xs = jnp.asarray(scaled(space, g.x))
+    allowed = jnp.asarray(_allowed_t(acq, g.t))
+    spacing = reference_spacing(space)
+    n_t = g.t.size
+
+    def propose(post: Posterior, shots, fitted: Fitted, key):
+        values = jnp.where(allowed[None, :], acquisition_map(post, shots, acq, rew), -jnp.inf)
+        _, flat = jax.lax.top_k(values.ravel(), STARTS)
+        i, j = flat // n_t, flat % n_t
+        std = fitted.standardisation
+
+        def score(candidates):  # (K, P, d) scaled -> (K, P)
+            k, p, d = candidates.shape
+            mean, var = inference.combine(
+                *primary.predict_samples(fitted.primary.params, fitted.primary_data, candidates.reshape(k * p, d)),
+                primary_first, fitted.primary.weights,
+            )
+            raw_mean, raw_var = std.mean + std.scale * mean, std.scale**2 * var
+            return point_scores(post, raw_mean.reshape(k, p), raw_var.reshape(k, p),
+                                jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew)
+
+        best_x, best_s = refine(score, xs[i], key, spacing)
+        best = jnp.argmax(best_s)
+        return jnp.max(values, axis=1), best_x[best], j[best], best_s[best]
+
+    return jax.jit(propose)
+
+
+def _allowed_t(acq: AcquisitionConfig, t_grid: np.ndarray) -> np.ndarray:
+    """Which t-grid entries a proposal may use: all, or the one nearest ``fixed_t``. (n_t,) bool"""
+    if acq.fixed_t is None:
+        return np.ones(t_grid.size, dtype=bool)
+    return np.arange(t_grid.size) == int(np.argmin(np.abs(t_grid - acq.fixed_t)))
 
 
 def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState) -> Prediction:
@@ -262,15 +309,17 @@ def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState) -> Pre
 
 @dataclass(frozen=True)
 class Decision:
-    """The outcome of one BO step (0-based ``step``): the proposal, how to measure it, and what
-    the models said. ``noise_at_t`` is the noise model's single-shot sd at the proposed t.
-    Arrays: ``acq_map`` (n_x, n_t) float32; ``f_mean``, ``f_var`` (n_x,) on the x grid;
+    """The outcome of one BO step (0-based ``step``): the proposal (x, one float per axis, and
+    t), how to measure it, and what the models said. ``noise_at_t`` is the noise model's
+    single-shot sd at the proposed t. Arrays: ``acq_map`` (n_x, n_t) float32 for one axis, for
+    d > 1 its maximum over t at each of the m reference points, (m,); ``f_mean``, ``f_var`` (m,)
+    on the reference points (the x grid for one axis);
     ``noise_mean``, ``noise_var`` (n_t,) on the t grid. ``latency_s``: the decision's time (s).
     ``primary_inputs``, ``noise_inputs``: the distinct inputs (or bins) each GP was fitted on;
     ``binned``: True when they were bins, an approximation (see ``noisebo.inputs``)."""
 
     step: int
-    x: float
+    x: tuple[float, ...]
     t: float
     acq_value: float
     shots: int
@@ -289,6 +338,9 @@ class Decision:
     noise_inputs: int = 0
     binned: bool = False
 
+    def __post_init__(self) -> None:  # one number is one axis; a list (from a record) a tuple
+        object.__setattr__(self, "x", as_position(self.x))
+
 
 def hyperparameters(fitted: Fitted) -> dict[str, float]:
     """Point summaries of the fitted hyperparameters (MAP, or the posterior or quadrature mean),
@@ -306,9 +358,10 @@ def hyperparameters(fitted: Fitted) -> dict[str, float]:
 
 
 def acquire(
-    config: CampaignConfig, fitted: Fitted, state: CampaignState, step: int
+    config: CampaignConfig, fitted: Fitted, state: CampaignState, step: int, key: jax.Array | None = None
 ) -> tuple[Decision, CampaignState]:
-    """From fitted models: predict, update the convergence record, and propose the next point.
+    """From fitted models: predict, update the convergence record, and propose the next point
+    (with d > 1 axes the local refinement draws from ``key``, default ``propose_key(0, step)``).
 
     Returns the decision and the state with this step's predicted optimal t recorded."""
     prediction = predict(config, fitted, state)
@@ -317,21 +370,30 @@ def acquire(
     now_converged = state.is_converged or converged(history, config.schedule.window, config.schedule.threshold)
     new_state = state.with_t_opt(t_opt, now_converged)
     shots = shots_for(now_converged, config.schedule)
-    values, i, j = _propose_program(config)(prediction.posterior, float(shots))
-    g = grids(config)
-    i, j = int(i), int(j)
+    g, s = grids(config), config.space
+    if s.dimensions == 1:
+        values, i, j = _propose_program(config)(prediction.posterior, float(shots))
+        i, j = int(i), int(j)
+        x, acq_value, acq_map = (float(g.x[i]),), float(values[i, j]), values
+    else:
+        program = _propose_nd_compiled(config.acquisition, config.reward, s, fitted.primary.map_first)
+        acq_map, x_scaled, j, acq_value = program(prediction.posterior, float(shots), fitted,
+                                                  propose_key(0, step) if key is None else key)
+        lows, highs = np.asarray(s.lows), np.asarray(s.highs)
+        x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
+        j, acq_value = int(j), float(acq_value)
     decision = Decision(
         step=step,
-        x=float(g.x[i]),
+        x=x,
         t=float(g.t[j]),
-        acq_value=float(values[i, j]),
+        acq_value=acq_value,
         shots=shots,
         measure_noise=not now_converged,
         noise_at_t=float(prediction.posterior.noise_mean[j]),
         t_opt=t_opt,
         converged=now_converged,
         hyperparameters=hyperparameters(fitted),
-        acq_map=np.asarray(values, dtype=np.float32),
+        acq_map=np.asarray(acq_map, dtype=np.float32),
         f_mean=np.asarray(prediction.posterior.f_mean, dtype=np.float64),
         f_var=np.asarray(prediction.posterior.f_var, dtype=np.float64),
         noise_mean=np.asarray(prediction.posterior.noise_mean, dtype=np.float64),
@@ -348,6 +410,11 @@ def fit_key(seed: int, step: int) -> jax.Array:
     return jax_key(seed, FIT, step)
 
 
+def propose_key(seed: int, step: int) -> jax.Array:
+    """The key of BO step ``step``'s local refinement (d > 1 axes)."""
+    return jax_key(seed, PROPOSE, step)
+
+
 def decide(
     config: CampaignConfig, state: CampaignState, seed: int, step: int, previous: dict | None = None
 ) -> tuple[Decision, CampaignState]:
@@ -356,7 +423,7 @@ def decide(
     _wait_for_compilation(config, state)
     warm = warm_step(config, step, previous, state.is_converged)
     fitted = fit_models(config, state, fit_key(seed, step), previous, warm)
-    return acquire(config, fitted, state, step)
+    return acquire(config, fitted, state, step, propose_key(seed, step))
 
 
 AHEAD_FILL = 0.75  # compile the next capacity once a training set fills this much of its own
@@ -377,12 +444,18 @@ def capacities_ahead(config: CampaignConfig, decision: Decision) -> tuple[int, i
     return wanted if wanted != now else None
 
 
+def _primary_x(state: CampaignState, s: SpaceConfig) -> np.ndarray:
+    x = state.positions(s.dimensions)
+    return x[:, 0] if s.dimensions == 1 else x
+
+
 def capacities_needed(config: CampaignConfig, state: CampaignState) -> tuple[int, int]:
     """The (primary, noise) capacities a decision on ``state`` pads to (see ``fit_models``)."""
     s, limit = config.space, config.inference.max_inputs
     train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
     counts = [int(group_ids(c, lo, hi, limit)[0].max(initial=-1)) + 1
-              for c, lo, hi in ((state.column("x"), s.x_min, s.x_max), (state.column("t")[train], s.t_min, s.t_max))]
+              for c, lo, hi in ((scaled(s, _primary_x(state, s)), 0.0, 1.0),
+                                (state.column("t")[train], s.t_min, s.t_max))]
     return capacity_for(counts[0]), capacity_for(counts[1])
 
 

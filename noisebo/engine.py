@@ -170,13 +170,13 @@ def _point_under_way(state: EngineState) -> Request | None:
     sched = state.config.schedule
     index = len(state.points)
     if index < sched.n_seed:
-        x, t = (float(v) for v in seed_points(state.config, state.seed)[index])
-        return Request(index, -1, (x,), t, state.wanted or sched.shots_before, len(state.taken), None)
+        *x, t = (float(v) for v in seed_points(state.config, state.seed)[index])
+        return Request(index, -1, tuple(x), t, state.wanted or sched.shots_before, len(state.taken), None)
     decision = _pending_decision(state)
     if decision is None:
         return None
     noise = None if decision.measure_noise else decision.noise_at_t
-    return Request(index, decision.step, (decision.x,), decision.t, state.wanted or decision.shots, len(state.taken),
+    return Request(index, decision.step, decision.x, decision.t, state.wanted or decision.shots, len(state.taken),
                    noise)
 
 
@@ -221,7 +221,7 @@ def _reduce(state: EngineState, request: Request) -> list[Event]:
     cfg = state.config
     readings = [s.reading for s in state.taken]
     try:
-        point, values = make_point(request.x[0], request.t, readings, request.model_noise, cfg.reduction,
+        point, values = make_point(request.x, request.t, readings, request.model_noise, cfg.reduction,
                                    cfg.schedule.clip_sd)
     except NoUsableShots as short:
         more = MoreShots(request.point, len(readings) + short.missing, short.rejected, str(short))

@@ -1,4 +1,4 @@
-"""Covariance functions. Inputs are 1-D coordinates; outputs are (n, m) covariance matrices."""
+"""Covariance functions. Inputs are coordinates, (n,) or (n, d); outputs are (n, m) covariance matrices."""
 
 from __future__ import annotations
 
@@ -15,6 +15,18 @@ def matern52(a: jnp.ndarray, b: jnp.ndarray, amplitude: jnp.ndarray, length: jnp
     r = jnp.abs(a[:, None] - b[None, :]) / length
     s5r = jnp.sqrt(5.0) * r
     return amplitude * (1.0 + s5r + (5.0 / 3.0) * r**2) * jnp.exp(-s5r)
+
+
+def ard_matern52(a: jnp.ndarray, b: jnp.ndarray, amplitude: jnp.ndarray, lengths: jnp.ndarray) -> jnp.ndarray:
+    """Matern 5/2 with one length per dimension (ARD): r^2 = sum_k ((a_ik - b_jk) / lengths_k)^2.
+
+    a: (n, d), b: (m, d); lengths: (d,) in the coordinates' units. Returns (n, m). Its gradient
+    is finite at r = 0 (where sqrt's is not), so it can be trained on coincident inputs."""
+    r2 = jnp.sum(((a[:, None, :] - b[None, :, :]) / lengths) ** 2, axis=-1)
+    positive = r2 > 0
+    r = jnp.where(positive, jnp.sqrt(jnp.where(positive, r2, 1.0)), 0.0)
+    s5r = jnp.sqrt(5.0) * r
+    return amplitude * (1.0 + s5r + (5.0 / 3.0) * r2) * jnp.exp(-s5r)
 
 
 def xt_matern52(xt_a: jnp.ndarray, xt_b: jnp.ndarray, amplitude, length) -> jnp.ndarray:

@@ -13,6 +13,7 @@ import numpy as np
 SEED_POINTS = 1
 MEASURE = 2
 FIT = 3
+PROPOSE = 4
 
 
 def numpy_rng(seed: int, purpose: int, *path: int) -> np.random.Generator:

@@ -43,7 +43,7 @@ def campaign_figures(
     """The benchmark figures of one finished campaign.
 
     t* comes from the instrument's true noise law and the configured reward; RMSE compares the
-    final f prediction (interpolated from the x grid) with the truth at 200 evenly spaced x. Either
+    final f prediction (interpolated from the x grid) with the truth at 200 evenly spaced x (for d > 1 axes, at the reference points). Either
     is None when the instrument does not know its truth."""
     from noisebo.reward import true_optimal_t
     from noisebo.schedule import first_converged_step
@@ -55,8 +55,14 @@ def campaign_figures(
     simulator = simulates(instrument)
     if simulator:
         t_star = true_optimal_t(instrument.noise_law, s.t_min, s.t_max, rew.alpha, rew.beta)
-    x_eval = np.linspace(s.x_min, s.x_max, RMSE_POINTS)
-    truth = instrument.truth(x_eval[:, None]) if simulator else None
+    grid_x = np.asarray(grid_x, dtype=np.float64)
+    if s.dimensions == 1:
+        x_eval = np.linspace(s.x_min, s.x_max, RMSE_POINTS)
+        truth = instrument.truth(x_eval[:, None]) if simulator else None
+        predicted = None if truth is None else np.interp(x_eval, grid_x, f_mean_final)
+    else:  # the reference points themselves: a grid over the area (two axes) or a Halton set
+        truth = instrument.truth(grid_x) if simulator else None
+        predicted = np.asarray(f_mean_final, dtype=np.float64)
     history = [float(v) for v in t_opt_history]
     return {
         "policy": config.acquisition.policy,
@@ -64,7 +70,7 @@ def campaign_figures(
         "t_opt_pred": history + [float(t_opt_final)],
         "t_star": t_star,
         "t_opt_rel_error": None if t_star is None else relative_error(t_opt_final, t_star),
-        "rmse_f": None if truth is None else rmse(np.interp(x_eval, grid_x, f_mean_final), truth),
+        "rmse_f": None if truth is None else rmse(predicted, truth),
         "total_measurement_time": float(np.sum(shot_t)),
         "step_latency_s": [float(v) for v in latencies_s],
     }

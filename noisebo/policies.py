@@ -1,6 +1,7 @@
 """The two policies that fold the reward into the acquisition (section 2.2).
 
-Shapes: x grid (n_x,), t grid (n_t,); the acquisition map is (n_x, n_t). Variances are in the
+Shapes: x grid (n_x,) (or m reference points in d > 1), t grid (n_t,); the acquisition map is
+(n_x, n_t). Variances are in the
 squared units of f; noise is the single-shot standard deviation; ``shots`` is how many shots the
 next point will get, so the measurement variance at t is Noise(t)^2 / shots (Eq. 4).
 """
@@ -75,6 +76,24 @@ def acquisition_map(post: Posterior, shots: int, acq: AcquisitionConfig, rew: Re
     if acq.policy == "reward":
         return reward_driven(post, shots, acq, rew)
     return double_acquisition(post, shots, acq, rew)
+
+
+def point_scores(post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.ndarray, shots,
+                 acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
+    """The configured policy's score at points off the x grid: latent f ``mean`` and ``var``
+    (any shape) at each point, paired with the t-grid index ``j`` (same shape). Shifts and
+    normalisers are the ones ``acquisition_map`` takes from the grid in ``post``, so at a grid
+    point the score equals its map entry."""
+    if acq.policy == "reward":
+        grid_var = post.f_var[:, None] + (post.noise_mean**2)[None, :] / shots
+        shift = jnp.minimum(jnp.min(_acq_x(post, grid_var, post.f_mean[:, None], acq)), 0.0)
+        weight = normalise(reward(post.t, post.noise_mean, rew.alpha, rew.beta)) ** rew.gamma
+        return (_acq_x(post, var + post.noise_mean[j] ** 2 / shots, mean, acq) - shift) * weight[j]
+    grid = _acq_x(post, post.f_var + post.noise_at_t_opt**2 / shots, post.f_mean, acq)
+    lo, span = jnp.min(grid), jnp.max(grid) - jnp.min(grid)
+    here = _acq_x(post, var + post.noise_at_t_opt**2 / shots, mean, acq)
+    x_part = jnp.where(span > 0, (here - lo) / jnp.where(span > 0, span, 1.0), 0.0)
+    return 0.5 * (x_part + normalise(time_acquisition(post, acq, rew))[j])
 
 
 def argmax_2d(values: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:

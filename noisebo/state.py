@@ -7,19 +7,34 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 
+def as_position(x) -> tuple[float, ...]:
+    """A coordinate vector as a tuple of floats: a number is a one-axis position."""
+    return tuple(float(v) for v in np.ravel(np.asarray(x, dtype=np.float64)))
+
+
+def format_position(x, digits: int = 4) -> str:
+    """A position for people: "0.4123" for one axis, "(0.4123, 1.2)" for more."""
+    parts = [f"{v:.{digits}g}" for v in as_position(x)]
+    return parts[0] if len(parts) == 1 else "(" + ", ".join(parts) + ")"
+
+
 @dataclass(frozen=True)
 class Point:
-    """One measured point. value: mean of its shots; shot_std: their sample sd (NaN below 2 shots);
+    """One measured point at x, a coordinate vector (one float per axis), and exposure t (s).
+    value: mean of its shots; shot_std: their sample sd (NaN below 2 shots);
     noise: the single-shot noise sd the primary GP uses (shot_std if measured, else the noise
     model's prediction at t); the GP diagonal is noise^2 / n_shots."""
 
-    x: float
+    x: tuple[float, ...]
     t: float
     value: float
     shot_std: float
     n_shots: int
     noise: float
     noise_measured: bool
+
+    def __post_init__(self) -> None:  # one number is one axis; a list becomes a tuple
+        object.__setattr__(self, "x", as_position(self.x))
 
 
 @dataclass(frozen=True)
@@ -46,8 +61,14 @@ class CampaignState:
         return self.converged_step is not None
 
     def column(self, name: str) -> np.ndarray:
-        """One field of every point as an array (n,)."""
+        """One scalar field of every point as an array (n,); for x see ``positions``."""
+        if name == "x":
+            raise ValueError("x is a coordinate vector: use positions() for the (n, d) array")
         return np.asarray([getattr(p, name) for p in self.points])
+
+    def positions(self, dimensions: int) -> np.ndarray:
+        """Every point's x as an array (n, d)."""
+        return np.asarray([p.x for p in self.points], dtype=np.float64).reshape(len(self.points), dimensions)
 
     def noise_training_mask(self, include_unmeasured: bool, full_shots: int = 2) -> np.ndarray:
         """Which points train the noise model: those whose noise was measured, and (optionally)

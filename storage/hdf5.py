@@ -89,20 +89,35 @@ def column_dtype(name: str, units: str) -> np.dtype:
 
 
 def array_shapes(state: EngineState) -> dict[str, tuple[int, ...]]:
-    """The per-step array shapes (without the step axis): acq_map (n_x, n_t), f_* (n_x,), noise_* (n_t,)."""
-    n_x, n_t = state.config.space.n_x, state.config.space.n_t
-    return {"acq_map": (n_x, n_t), "f_mean": (n_x,), "f_var": (n_x,), "noise_mean": (n_t,), "noise_var": (n_t,)}
+    """The per-step array shapes (without the step axis): acq_map (n_x, n_t), f_* (n_x,),
+    noise_* (n_t,); for d > 1 axes, acq_map and f_* are (m,) on the m reference points."""
+    s = state.config.space
+    m, n_t = grids(state.config).x.shape[0], s.n_t
+    acq = (m, n_t) if s.dimensions == 1 else (m,)
+    return {"acq_map": acq, "f_mean": (m,), "f_var": (m,), "noise_mean": (n_t,), "noise_var": (n_t,)}
+
+
+def x_tail(dimensions: int) -> tuple[int, ...]:
+    """The shape of one row of an x column: () for one axis (x is (n,)), (d,) for more ((n, d))."""
+    return () if dimensions == 1 else (dimensions,)
+
+
+def positions(xs: Sequence[Sequence[float]], dimensions: int) -> np.ndarray:
+    """Coordinate vectors as an x column: (n,) for one axis, (n, d) for more."""
+    return np.asarray(xs, dtype=np.float64).reshape(len(xs), dimensions).reshape((len(xs), *x_tail(dimensions)))
 
 
 def array_dtype(name: str) -> np.dtype:
     return np.dtype(np.float32 if name == "acq_map" else np.float64)
 
 
-def point_rows(entries: Sequence[PointEntry]) -> dict[str, np.ndarray]:
-    """/points columns (POINT_COLUMNS and "step") of these committed points, (len(entries),) each."""
+def point_rows(entries: Sequence[PointEntry], dimensions: int) -> dict[str, np.ndarray]:
+    """/points columns (POINT_COLUMNS and "step") of these committed points, (len(entries),)
+    each; x (len(entries), d) for d > 1 axes."""
     points = [e.committed.point for e in entries]
     rows = {name: np.asarray([getattr(p, name) for p in points], dtype=column_dtype(name, units))
-            for name, (units, _) in POINT_COLUMNS.items()}
+            for name, (units, _) in POINT_COLUMNS.items() if name != "x"}
+    rows["x"] = positions([p.x for p in points], dimensions)
     rows["step"] = np.asarray([e.committed.step for e in entries], dtype=np.int32)
     return rows
 
@@ -112,11 +127,13 @@ def hyperparameter_names(decisions: Sequence[Decision]) -> list[str]:
     return sorted({k for d in decisions for k in d.hyperparameters})
 
 
-def step_rows(decisions: Sequence[Decision], names: Sequence[str], shapes: dict) -> dict:
-    """/steps columns of these decisions: STEP_COLUMNS (len,), the ARRAY_COLUMNS (len, *shape)
-    and "hyperparameters" {name: (len,)} (NaN where a decision lacks one of ``names``)."""
+def step_rows(decisions: Sequence[Decision], names: Sequence[str], shapes: dict, dimensions: int) -> dict:
+    """/steps columns of these decisions: STEP_COLUMNS (len,) (x (len, d) for d > 1 axes), the
+    ARRAY_COLUMNS (len, *shape) and "hyperparameters" {name: (len,)} (NaN where a decision
+    lacks one of ``names``)."""
     rows = {name: np.asarray([getattr(d, name) for d in decisions], dtype=column_dtype(name, units))
-            for name, (units, _) in STEP_COLUMNS.items()}
+            for name, (units, _) in STEP_COLUMNS.items() if name != "x"}
+    rows["x"] = positions([d.x for d in decisions], dimensions)
     rows["hyperparameters"] = {
         name: np.asarray([d.hyperparameters.get(name, np.nan) for d in decisions], dtype=np.float64) for name in names}
     for name, shape in shapes.items():
@@ -131,13 +148,14 @@ def campaign_tables(state: EngineState) -> dict:
     "summary" (None until done)."""
     g = grids(state.config)
     decisions = state.decisions
-    steps = step_rows(decisions, hyperparameter_names(decisions), array_shapes(state))
+    d = state.config.space.dimensions
+    steps = step_rows(decisions, hyperparameter_names(decisions), array_shapes(state), d)
     summary = None
     if state.summary is not None:
         s = state.summary
         summary = {"f_mean": s.f_mean, "f_var": s.f_var, "noise_fine": s.noise_fine, "t_opt": float(s.t_opt),
                    "hyperparameters": dict(s.hyperparameters)}
-    return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points), "steps": steps,
+    return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points, d), "steps": steps,
             "shots": shot_columns(state), "summary": summary}
 
 
@@ -239,12 +257,13 @@ SPECTRA_ROWS = "frequency_hz, amplitude_pm, phase_deg"
 def shot_columns(state: EngineState) -> dict:
     """Every shot as columns (SHOT_COLUMNS, "reason", "note" and the FIT_UNITS columns): those
     of committed points with their reduced values, then the shots of the point under way."""
-    return shot_rows(state.points, state.taken)
+    return shot_rows(state.points, state.taken, state.config.space.dimensions)
 
 
-def shot_rows(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = ()) -> dict:
+def shot_rows(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = (), dimensions: int = 1) -> dict:
     """The shots of these committed points, then the shots ``taken`` of the point under way, as
-    columns: SHOT_COLUMNS (n,), "reason" and "note" (lists of str) and "fit" {FIT_UNITS name: (n,)}."""
+    columns: SHOT_COLUMNS (n,) (x (n, d) for d > 1 axes), "reason" and "note" (lists of str) and
+    "fit" {FIT_UNITS name: (n,)}."""
     cols: dict[str, list] = {name: [] for name, *_ in SHOT_COLUMNS}
     cols |= {"reason": [], "note": []} | {name: [] for name in FIT_UNITS}
     for entry in entries:
@@ -252,7 +271,8 @@ def shot_rows(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = ()) ->
             _add_shot(cols, shot, value)
     for shot in taken:
         _add_shot(cols, shot, None)
-    out = {name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS}
+    out = {name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS if name != "x"}
+    out["x"] = positions(cols["x"], dimensions)
     out["reason"], out["note"] = cols["reason"], cols["note"]
     out["fit"] = {name: np.asarray(cols[name], dtype=np.float64) for name in FIT_UNITS}
     return out
@@ -262,7 +282,7 @@ def _add_shot(cols: dict, shot, value) -> None:
     raw = shot.reading.value
     cols["point"].append(shot.point)
     cols["shot"].append(shot.shot)
-    cols["x"].append(shot.x[0])
+    cols["x"].append(shot.x)
     cols["t"].append(shot.t)
     cols["value"].append(value.value if value is not None else (np.nan if raw is None else raw))
     cols["committed"].append(value is not None)
@@ -293,17 +313,19 @@ FAILURE_TEXT = {"kind": "timeout | instrument error", "reason": "the error messa
 FAILURES_DESCRIPTION = "failed attempts at shots (instrument errors, timeouts); each was tried again"
 
 
-def failure_rows(rows: Sequence[ShotFailed]) -> dict:
-    """/failures columns of these failed attempts: FAILURE_COLUMNS (n,), "kind" and "reason" (lists of str)."""
-    out = {name: np.asarray([r.x[0] if name == "x" else getattr(r, name) for r in rows], dtype=dtype)
-           for name, dtype, _, _ in FAILURE_COLUMNS}
+def failure_rows(rows: Sequence[ShotFailed], dimensions: int) -> dict:
+    """/failures columns of these failed attempts: FAILURE_COLUMNS (n,) (x (n, d) for d > 1
+    axes), "kind" and "reason" (lists of str)."""
+    out = {name: np.asarray([getattr(r, name) for r in rows], dtype=dtype)
+           for name, dtype, _, _ in FAILURE_COLUMNS if name != "x"}
+    out["x"] = positions([r.x for r in rows], dimensions)
     return out | {name: [getattr(r, name) for r in rows] for name in FAILURE_TEXT}
 
 
 def _fill_failures(f: h5py.File, state: EngineState) -> None:
     group = f.create_group("failures")
     group.attrs["description"] = FAILURES_DESCRIPTION
-    rows = failure_rows(state.failures)
+    rows = failure_rows(state.failures, state.config.space.dimensions)
     for name, _, units, description in FAILURE_COLUMNS:
         _put(group, name, rows[name], units, description)
     for name, description in FAILURE_TEXT.items():

@@ -45,7 +45,7 @@ from storage.hdf5 import (
     ARRAY_COLUMNS, FAILURE_COLUMNS, FAILURE_TEXT, FAILURES_DESCRIPTION, FIT_NOTE, FIT_UNITS, LIBVER, MUTABLE_ATTRS,
     POINT_COLUMNS, POINT_STEP, SHOT_COLUMNS, SHOT_TEXT, SPECTRA_DESCRIPTION, SPECTRA_ROWS, STEP_COLUMNS,
     CampaignFileError, array_dtype, array_shapes, column_dtype, failure_rows, fill_grid, fill_summary, fsync_file,
-    hyperparameter_names, point_rows, root_attrs, shot_rows, spectra_of, step_rows, temporary_path,
+    hyperparameter_names, point_rows, root_attrs, shot_rows, spectra_of, step_rows, temporary_path, x_tail,
 )
 from storage.journal import _fsync_dir
 
@@ -155,6 +155,7 @@ class LiveFile:
         self._summary = state.summary
         self._names = tuple(hyperparameter_names(state.decisions))
         self._shapes = array_shapes(state)
+        self._dimensions = state.config.space.dimensions
         # rows of committed things written: points, steps, failures, shots and spectra of committed points
         self._rows = dict.fromkeys(("points", "steps", "failures", "shots", "spectra"), 0)
         self._columns: dict[str, _Column] = {}  # by path: "points/x"
@@ -225,10 +226,10 @@ class LiveFile:
     def _layout_points_and_steps(self) -> None:
         points = self._f.create_group("points")
         for name, (units, description) in (POINT_COLUMNS | {"step": POINT_STEP}).items():
-            self._add(_column(points, name, column_dtype(name, units), units, description))
+            self._add(_column(points, name, column_dtype(name, units), units, description, self._tail(name)))
         steps = self._f.create_group("steps")
         for name, (units, description) in STEP_COLUMNS.items():
-            self._add(_column(steps, name, column_dtype(name, units), units, description))
+            self._add(_column(steps, name, column_dtype(name, units), units, description, self._tail(name)))
         hyper = steps.create_group("hyperparameters")
         for name in self._names:
             self._add(_column(hyper, name, np.float64, "model units",
@@ -239,7 +240,7 @@ class LiveFile:
     def _layout_shots_and_failures(self) -> None:
         shots = self._f.create_group("shots")
         for name, dtype, units, description in SHOT_COLUMNS:
-            self._add(_column(shots, name, dtype, units, description))
+            self._add(_column(shots, name, dtype, units, description, self._tail(name)))
         self._texts["shots/reason"] = _Blobs.text(shots, "reason", SHOT_TEXT["reason"])
         fit = shots.create_group("fit")
         for name, (units, description) in FIT_UNITS.items():
@@ -248,7 +249,7 @@ class LiveFile:
         failures = self._f.create_group("failures")
         failures.attrs["description"] = FAILURES_DESCRIPTION
         for name, dtype, units, description in FAILURE_COLUMNS:
-            self._add(_column(failures, name, dtype, units, description))
+            self._add(_column(failures, name, dtype, units, description, self._tail(name)))
         for name, description in FAILURE_TEXT.items():
             self._texts[f"failures/{name}"] = _Blobs.text(failures, name, description)
 
@@ -269,15 +270,15 @@ class LiveFile:
         last, to be written again), a flush, then the counters that make them count, a flush."""
         rows, f = self._rows, self._f
         new_points = state.points[rows["points"]:]
-        self._write_table("points", rows["points"], point_rows(new_points))
+        self._write_table("points", rows["points"], point_rows(new_points, self._dimensions))
         crash()
-        steps = step_rows(state.decisions[rows["steps"]:], self._names, self._shapes)
+        steps = step_rows(state.decisions[rows["steps"]:], self._names, self._shapes, self._dimensions)
         self._write_table("steps", rows["steps"], steps)
         self._write_table("steps/hyperparameters", rows["steps"], steps["hyperparameters"])
         crash()
         self._write_failures(state.failures[rows["failures"]:])
         crash()
-        shots = shot_rows(new_points, state.taken)
+        shots = shot_rows(new_points, state.taken, self._dimensions)
         self._write_shots(shots)
         crash()
         spectra = self._write_spectra(new_points, state.taken, len(state.points) - len(new_points))
@@ -294,6 +295,10 @@ class LiveFile:
                     shots=rows["shots"] + sum(len(e.shots) for e in new_points),
                     spectra=rows["spectra"] + committed_spectra)
 
+    def _tail(self, name: str) -> tuple[int, ...]:
+        """Row shape of a points/steps/shots/failures column: x has one entry per axis for d > 1."""
+        return x_tail(self._dimensions) if name == "x" else ()
+
     def _add(self, column: _Column) -> None:
         self._columns[column.ds.name.lstrip("/")] = column
 
@@ -305,7 +310,7 @@ class LiveFile:
 
     def _write_failures(self, failures) -> None:
         start = self._rows["failures"]
-        columns = failure_rows(failures)
+        columns = failure_rows(failures, self._dimensions)
         self._write_table("failures", start, columns)
         for name in FAILURE_TEXT:
             self._texts[f"failures/{name}"].write(start, [s.encode() for s in columns[name]])

@@ -7,7 +7,8 @@ from noisebo.config import CampaignConfig
 
 def blueprint(config: CampaignConfig):
     """The ``rerun.blueprint.Blueprint``: acquisition map with the measured points, f with its
-    band and the truth, the noise model with its data, the normalised reward with t_opt (and the
+    band and the truth (for two axes: images of the GP mean and sd, the truth and the
+    acquisition over the area; for more, the table of points), the noise model with its data, the normalised reward with t_opt (and the
     latest sweep for PFM); below them the scalar traces and the decision log."""
     import rerun.blueprint as rrb
 
@@ -15,6 +16,15 @@ def blueprint(config: CampaignConfig):
         rrb.Spatial2DView(origin="acquisition", name="acquisition over (x, t); points by step"),
         rrb.Spatial2DView(origin="f", name="f(x): mean, +-2 sd band, truth, points"),
     ]
+    if config.space.dimensions == 2:
+        top = [
+            rrb.Spatial2DView(origin="area/f_mean", name="f: GP mean over the area; points by t"),
+            rrb.Spatial2DView(origin="area/f_sd", name="f: GP sd"),
+            rrb.Spatial2DView(origin="area/truth", name="truth (simulator)"),
+            rrb.Spatial2DView(origin="area/acquisition", name="acquisition, best over t"),
+        ]
+    elif config.space.dimensions > 2:
+        top = [rrb.DataframeView(origin="campaign", name="measured points (x has more than two axes)")]
     middle = [
         rrb.Spatial2DView(origin="noise", name="Noise(t): model, +-2 sd band, law, measured"),
         rrb.Spatial2DView(origin="reward", name="normalised reward and predicted optimal t"),

@@ -18,6 +18,7 @@ import numpy as np
 
 from noisebo.config import CampaignConfig
 from noisebo.reward import normalise, reward
+from noisebo.state import format_position
 
 POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured")
 
@@ -36,7 +37,9 @@ class Frame:
     """The campaign at one frame. ``points``: columns of POINT_FIELDS plus "frame" (the frame
     that measured each point) for every point committed by then; ``f``, ``noise`` (single-shot
     sd) and ``reward`` (normalised to [0, 1] on the noise grid, sd 0) are None where no model
-    exists yet (frame 0); ``acq_map`` (n_x, n_t) only for BO steps; ``scalars`` the traces."""
+    exists yet (frame 0); ``acq_map`` (n_x, n_t) only for BO steps ((m,), its best over t at
+    each reference point, for d > 1 axes); ``proposal`` (x, t), x a float for one axis, a tuple
+    for more; ``scalars`` the traces."""
 
     step: int
     points: dict
@@ -45,7 +48,7 @@ class Frame:
     reward: Curve | None
     acq_map: np.ndarray | None
     t_opt: float | None
-    proposal: tuple[float, float] | None
+    proposal: tuple | None
     scalars: dict
     text: str
     latest_point: int | None
@@ -83,8 +86,9 @@ def frame_at(tables: dict, config: CampaignConfig, k: int) -> Frame:
     hyper = {name: float(v[bo]) for name, v in steps["hyperparameters"].items()}
     scalars |= {"t_opt_s": t_opt, "latency_s": float(steps["latency_s"][bo])}
     scalars |= {name: hyper[f"noise.{name}"] for name in ("a0", "a1") if f"noise.{name}" in hyper}
-    x, t = float(steps["x"][bo]), float(steps["t"][bo])
-    text = (f"step {bo + 1}: measure x={x:.4g} at t={t:.4g} s with {int(steps['shots'][bo])} shots; "
+    x, t = steps["x"][bo], float(steps["t"][bo])
+    x = float(x) if np.ndim(x) == 0 else tuple(float(v) for v in x)
+    text = (f"step {bo + 1}: measure x={format_position(x)} at t={t:.4g} s with {int(steps['shots'][bo])} shots; "
             f"predicted optimal t {t_opt:.4g} s{' (noise model converged)' if steps['converged'][bo] else ''}; "
             f"decision {float(steps['latency_s'][bo]):.3f} s")
     return Frame(

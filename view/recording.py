@@ -50,7 +50,8 @@ def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[s
 
         if not is_simulator(instrument):
             return None, None
-        truth = instrument.truth(grids(config).x[:, None])
+        x = grids(config).x
+        truth = instrument.truth(x.reshape(len(x), -1))
         return np.asarray(truth, dtype=np.float64), instrument.noise_law
     except Exception:  # noqa: BLE001 - e.g. a replayed PFM file whose scan is not on this machine
         return None, None
@@ -94,10 +95,11 @@ class CampaignRecording:
             self._shot_t += [s.t for s in entry.shots]
         self._shots_of = len(state.points)
         decisions = state.decisions
-        steps = step_rows(decisions, hyperparameter_names(decisions), {})
+        d = self.config.space.dimensions
+        steps = step_rows(decisions, hyperparameter_names(decisions), {}, d)
         steps |= {name: _PerStep(decisions, name) for name in array_shapes(state)}
         g = grids(self.config)
-        return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points), "steps": steps,
+        return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points, d), "steps": steps,
                 "shots": {"point": np.asarray(self._shot_point), "t": np.asarray(self._shot_t)}, "summary": None}
 
     def update(self, state) -> None:

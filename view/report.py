@@ -18,7 +18,9 @@ from matplotlib.figure import Figure
 from noisebo.config import CampaignConfig, parse_config
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
 from noisebo.reward import true_optimal_t
+from noisebo.state import format_position
 from storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits
+from view.area import axis_labels, draw_image
 from view.recording import instrument_curves, last_sweep
 from view.style import step_colours
 
@@ -43,7 +45,9 @@ def report(target: Path, out_dir: Path | None = None) -> list[Path]:
 
 
 def _units(config: CampaignConfig) -> tuple[str, str]:
-    return ("x (um)", "PFM response (pm)") if config.instrument.kind == "pfm" else ("x", "f(x)")
+    axis = config.space.axes[0]
+    x_label = f"{axis.name} ({axis.units})" if axis.units else ("x (um)" if config.instrument.kind == "pfm" else axis.name)
+    return x_label, "PFM response (pm)" if config.instrument.kind == "pfm" else "f(x)"
 
 
 def campaign_report(path: Path, out_dir: Path) -> list[Path]:
@@ -51,14 +55,22 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
     config = parse_config(data["attrs"]["config"])
     truth, law = instrument_curves(config, warn=_warn, source=(path, data["attrs"]["driver"]))
     out_dir.mkdir(parents=True, exist_ok=True)
-    fig = Figure(figsize=(12, 8.5), layout="constrained")
-    (ax_map, ax_t), (ax_f, ax_noise) = fig.subplots(2, 2)
     steps = np.asarray(data["points"]["step"]) + 1  # 0 = seed point
     colours = step_colours(steps, config.schedule.n_steps)
-    _trajectory(ax_map, data, config, colours)
-    _t_opt(ax_t, data, config, law)
-    _f(ax_f, data, config, truth, colours)
-    _noise(ax_noise, data, config, law, colours)
+    if config.space.dimensions == 1:
+        fig = Figure(figsize=(12, 8.5), layout="constrained")
+        (ax_map, ax_t), (ax_f, ax_noise) = fig.subplots(2, 2)
+        _trajectory(ax_map, data, config, colours)
+        _t_opt(ax_t, data, config, law)
+        _f(ax_f, data, config, truth, colours)
+        _noise(ax_noise, data, config, law, colours)
+    else:
+        fig = Figure(figsize=(16, 9), layout="constrained")
+        axes = fig.subplots(2, 3)
+        _area_panels(axes[0], data, config, truth)
+        _t_opt(axes[1, 0], data, config, law)
+        _noise(axes[1, 1], data, config, law, colours)
+        _points_by_value(axes[1, 2], data, config)
     a = data["attrs"]
     fig.suptitle(f"{a['name']}: seed {a['seed']}, {a['policy']} policy, {a['n_points']} points "
                  f"({a['status']})", fontsize=13)
@@ -68,6 +80,51 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
     if fits is not None and len(data["points"]["x"]):
         written.append(_sweep_figure(path, data, fits, out_dir))
     return written
+
+
+def _final_f(data: dict) -> dict | None:
+    if data["summary"] is not None:
+        return data["summary"]
+    steps = data["steps"]
+    return {"f_mean": steps["f_mean"][-1], "f_var": steps["f_var"][-1]} if len(steps["f_mean"]) else None
+
+
+def _area_panels(axes, data: dict, config: CampaignConfig, truth) -> None:
+    """Two axes: GP mean and sd over the area with the measured points coloured by their t, and
+    the truth (or, without one, the last acquisition map's best over t). Beyond two axes, the
+    reference points are not a grid: the panels show the first two axes' projection."""
+    _, f_label = _units(config)
+    p, final = data["points"], _final_f(data)
+    xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), -1)
+    if config.space.dimensions != 2 or final is None:
+        for ax in axes:
+            ax.set_axis_off()
+        axes[0].text(0.5, 0.5, "no model yet" if final is None else
+                     f"{config.space.dimensions} axes: see the projection below", ha="center", va="center")
+        return
+    draw_image(axes[0], final["f_mean"], config, "f: GP mean, points coloured by t", f_label, points=xy,
+               point_colours=np.log(p["t"]))
+    draw_image(axes[1], np.sqrt(np.maximum(final["f_var"], 0.0)), config, "f: GP sd", f"sd ({f_label})",
+               cmap="magma", points=xy, point_colours="w")
+    if truth is not None:
+        draw_image(axes[2], truth, config, "truth (the simulator's)", f_label, points=xy, point_colours="w")
+    elif len(data["steps"]["acq_map"]):
+        draw_image(axes[2], data["steps"]["acq_map"][-1], config, "last acquisition (best over t)", "1",
+                   cmap="Greys", points=xy, point_colours="tab:red")
+
+
+def _points_by_value(ax, data: dict, config: CampaignConfig) -> None:
+    """The measured points over the first two axes, coloured by value, sized by t."""
+    _, f_label = _units(config)
+    p = data["points"]
+    xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), -1)
+    t = np.asarray(p["t"], dtype=np.float64)
+    size = 10 + 60 * (t - config.space.t_min) / (config.space.t_max - config.space.t_min)
+    dots = ax.scatter(xy[:, 0], xy[:, 1], c=p["value"], s=size, cmap="viridis", edgecolor="k", linewidth=0.4)
+    ax.figure.colorbar(dots, ax=ax, label=f_label, fraction=0.046, pad=0.02)
+    labels = axis_labels(config)
+    ax.set(xlabel=labels[0], ylabel=labels[1], xlim=(config.space.lows[0], config.space.highs[0]),
+           ylim=(config.space.lows[1], config.space.highs[1]), title="measured values (marker size: t)")
 
 
 def _step_colourbar(fig_ax, n_steps: int) -> None:
@@ -169,7 +226,7 @@ def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
                       f"f0 = {fit['resonance_hz'] / 1e3:.2f} kHz, Q = {fit['q']:.0f}")
     t = float(data["points"]["t"][last])
     ax.set(xlabel="drive frequency (kHz)", ylabel="amplitude (nm)",
-           title=f"last sweep of point {last} (x = {data['points']['x'][last]:.3g} um, t = {t:.3g} s)")
+           title=f"last sweep of point {last} (x = {format_position(data['points']['x'][last], 3)} um, t = {t:.3g} s)")
     ax.legend(fontsize=8)
     out = out_dir / f"{path.stem}_sweep.png"
     fig.savefig(out, dpi=DPI)

@@ -30,6 +30,8 @@ from urllib.parse import urlparse
 import numpy as np
 
 from noisebo.config import CampaignConfig
+from noisebo.state import format_position
+from view.area import as_image
 from view.frames import Curve, Frame
 from view.style import step_colours
 
@@ -52,6 +54,18 @@ def acquisition_image(acq_map: np.ndarray) -> np.ndarray:
     lo, hi = (a[finite].min(), a[finite].max()) if finite.any() else (0.0, 1.0)
     scaled = np.where(finite, (a - lo) / (hi - lo if hi > lo else 1.0), 0.0)
     return (colormaps["viridis"](scaled)[..., :3] * 255).astype(np.uint8)
+
+
+def colour_image(values: np.ndarray, cmap: str = "viridis", limits: tuple[float, float] | None = None) -> np.ndarray:
+    """(rows, columns, 3) uint8 image of a 2-D array through a matplotlib colour map, scaled to
+    ``limits`` (default: the finite values' range); non-finite values are drawn as the lowest."""
+    from matplotlib import colormaps
+
+    a = np.asarray(values, dtype=np.float64)
+    finite = np.isfinite(a)
+    lo, hi = limits or ((a[finite].min(), a[finite].max()) if finite.any() else (0.0, 1.0))
+    scaled = np.clip(np.where(finite, (a - lo) / (hi - lo if hi > lo else 1.0), 0.0), 0.0, 1.0)
+    return (colormaps[cmap](scaled)[..., :3] * 255).astype(np.uint8)
 
 
 class Box:
@@ -179,7 +193,7 @@ class RerunView:
         if frame.noise is not None:
             noise += [frame.noise.mean + 2 * frame.noise.sd, frame.noise.mean - 2 * frame.noise.sd]
         self._noise_range = _grow(self._noise_range, np.concatenate([np.ravel(v) for v in noise] + [[0.0]]))
-        return Box((s.x_min, s.x_max), self._f_range), Box((s.t_min, s.t_max), self._noise_range)
+        return Box((s.lows[0], s.highs[0]), self._f_range), Box((s.t_min, s.t_max), self._noise_range)
 
     def _log(self, frame: Frame, spectrum, fit) -> None:
         rr, st = self.rr, self.stream
@@ -187,20 +201,53 @@ class RerunView:
         if self.wall_clock:
             st.set_time("wall", timestamp=time.time())
         f_box, n_box = self._ranges(frame)
-        self._log_points_on_map(frame)
-        if frame.acq_map is not None:
-            st.log("acquisition/map", rr.Image(acquisition_image(frame.acq_map)))
-        self._log_f(frame, f_box)
+        if self.config.space.dimensions == 1:
+            self._log_points_on_map(frame)
+            if frame.acq_map is not None:
+                st.log("acquisition/map", rr.Image(acquisition_image(frame.acq_map)))
+            self._log_f(frame, f_box)
+        elif self.config.space.dimensions == 2:
+            self._log_area(frame)
         self._log_noise(frame, n_box)
         for name in TRACES:
             if name in frame.scalars:
                 st.log(f"traces/{name}", rr.Scalars([frame.scalars[name]]))
         st.log("log", rr.TextLog(frame.text, level="INFO"))
         p = frame.points
-        st.log("campaign/points", rr.AnyValues(x=p["x"], t=p["t"], value=p["value"], noise=p["noise"],
+        xs = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), -1)
+        coords = {f"x_{a.name}": xs[:, k] for k, a in enumerate(self.config.space.axes)} if xs.shape[1] > 1 else {"x": xs[:, 0]}
+        st.log("campaign/points", rr.AnyValues(**coords, t=p["t"], value=p["value"], noise=p["noise"],
                                                from_step=p["frame"].astype(np.int64)))
         if spectrum is not None:
             self._log_spectrum(spectrum, fit)
+
+    def _log_area(self, frame: Frame) -> None:
+        """Two axes: GP mean and sd over the area (and the truth, and the acquisition's best
+        over t) as images, the measured points on each coloured by their t (log scale)."""
+        rr, st, s, p = self.rr, self.stream, self.config.space, frame.points
+        n0, n1 = s.points_per_axis
+        xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), 2)
+        px = (xy[:, 0] - s.lows[0]) / (s.highs[0] - s.lows[0]) * (n0 - 1) + 0.5
+        py = (s.highs[1] - xy[:, 1]) / (s.highs[1] - s.lows[1]) * (n1 - 1) + 0.5
+        t_colour = colour_image(np.log(np.asarray(p["t"], dtype=np.float64))[None, :], "plasma",
+                                (np.log(s.t_min), np.log(s.t_max)))[0]
+        labels = [f"{'seed' if k == 0 else f'step {k}'}: x={format_position(x)}, t={t:.3g} s"
+                  for k, x, t in zip(p["frame"], xy, p["t"])]
+        images = {}
+        if frame.f is not None:
+            images["f_mean"] = frame.f.mean
+            images["f_sd"] = frame.f.sd
+        if self.truth is not None and frame.step == 0:
+            images["truth"] = self.truth
+        if frame.acq_map is not None:
+            images["acquisition"] = frame.acq_map
+        for name, values in images.items():
+            st.log(f"area/{name}/image", rr.Image(colour_image(as_image(values, self.config)[::-1],
+                                                               "magma" if name == "f_sd" else "viridis")))
+        for name in ("f_mean", "f_sd", "truth", "acquisition"):
+            st.log(f"area/{name}/points", rr.Points2D(np.stack([px, py], axis=-1), colors=t_colour,
+                                                      radii=np.where(p["frame"] == frame.step, 2.0, 1.2),
+                                                      labels=labels, show_labels=False))
 
     def _log_points_on_map(self, frame: Frame) -> None:
         s, p = self.config.space, frame.points

@@ -64,7 +64,7 @@ BAD_CONFIGS = {  # file -> text; each is also a CASES row
 CASES = [
     (["run", "no_kind.yaml"], "instrument.kind: Field required"),
     (["run", "wrong_type.yaml"], "schedule.n_steps: Input should be a valid integer"),
-    (["run", "nan.yaml"], "space.x_max: Input should be a finite number"),
+    (["run", "nan.yaml"], "x_max (nan) must be a finite number"),
     (["run", "inf.yaml"], "space.t_max: Input should be a finite number"),
     (["run", "zero_shots.yaml"], "schedule.shots_after: Input should be greater than or equal to 1"),
     (["run", "negative_shots.yaml"], "schedule.shots_before: Input should be greater than or equal to 2"),
@@ -72,7 +72,7 @@ CASES = [
     (["run", "empty.yaml"], "empty.yaml: the file is empty"),
     (["run", "broken.yaml"], "broken.yaml: not valid YAML at line 2"),
     (["run", "inverted.yaml"], "t_min (5.0) must be below t_max (1.0)"),
-    (["run", "laser.yaml"], "instrument.kind: no installed instrument driver 'laser'; installed: forrester, manual, pfm, remote"),
+    (["run", "laser.yaml"], "instrument.kind: no installed instrument driver 'laser'; installed: branin, forrester, manual, pfm, remote"),
     (["run", "bad_setting.yaml"], "instrument.settings.a0: Input should be greater than or equal to 0"),
     (["run", "unknown_setting.yaml"], "instrument.settings.colour: Extra inputs are not permitted"),
     (["run", "v1_layout.yaml"], "instrument.a0: Extra inputs are not permitted (a driver's own settings go under"),

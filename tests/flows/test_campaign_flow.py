@@ -31,7 +31,7 @@ def test_flow_campaign_equals_the_pure_loop(tiny_config, finished):
     points, shots, attrs = points_of(finished)
     pure = run_campaign(tiny_config, build(tiny_config.instrument), 5)
     assert attrs["status"] == "completed" and attrs["n_points"] == 3 + 4
-    np.testing.assert_array_equal(points["x"], [p.x for p in pure.state.points])
+    np.testing.assert_array_equal(points["x"], [p.x[0] for p in pure.state.points])
     np.testing.assert_array_equal(points["t"], [p.t for p in pure.state.points])
     np.testing.assert_array_equal(points["value"], [p.value for p in pure.state.points])
     np.testing.assert_array_equal(points["n_shots"], [p.n_shots for p in pure.state.points])

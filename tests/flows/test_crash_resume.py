@@ -44,7 +44,7 @@ def assert_equals_reference(path, reference):
     state, shots = reference
     with h5py.File(path, "r") as f:  # plain h5py, no SWMR, no repair tool
         assert f.attrs["status"] == "completed"
-        np.testing.assert_array_equal(f["points/x"][()], [p.x for p in state.points])
+        np.testing.assert_array_equal(f["points/x"][()], [p.x[0] for p in state.points])
         np.testing.assert_array_equal(f["points/t"][()], [p.t for p in state.points])
         np.testing.assert_array_equal(f["points/value"][()], [p.value for p in state.points])
         np.testing.assert_array_equal(f["points/noise"][()], [p.noise for p in state.points])

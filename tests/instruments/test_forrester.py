@@ -46,3 +46,10 @@ def test_truth_takes_positions_as_rows_of_coordinates():
 def test_bad_coordinates_are_rejected(x, t):
     with pytest.raises(ValueError, match="Forrester shot"):
         ForresterInstrument().measure(np.array(x), t)
+
+
+def test_noise_law_at_is_the_same_law_at_every_x_and_the_domain_is_the_unit_interval():
+    inst = ForresterInstrument(ForresterSettings(a0=0.1, a1=2.0))
+    at = inst.noise_law_at(np.array([[0.0], [0.5], [1.0]]), np.array([1.0, 4.0]))
+    np.testing.assert_allclose(at, [[2.1, 1.1]] * 3, rtol=1e-12)
+    assert inst.dimensions == 1 and inst.bounds == [(0.0, 1.0)]

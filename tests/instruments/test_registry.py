@@ -103,7 +103,7 @@ def drivers(tmp_path, monkeypatch):
 
 def test_built_in_and_third_party_drivers_are_listed(drivers):
     found = registry.installed()
-    assert {"forrester", "pfm", "lamp", "jammed"} <= set(found)
+    assert {"branin", "forrester", "pfm", "lamp", "jammed"} <= set(found)
     assert found["forrester"].distribution == "noisebo" and found["lamp"].distribution == "test-drivers"
 
 
@@ -121,7 +121,7 @@ def config_of(kind, **settings):
 
 
 @pytest.mark.parametrize("config, error, message", [
-    (config_of("laser"), registry.DriverNotInstalled, "no installed instrument driver 'laser'; installed: counter, forrester, halfdone, "),
+    (config_of("laser"), registry.DriverNotInstalled, "no installed instrument driver 'laser'; installed: branin, counter, forrester, halfdone, "),
     (config_of("lamp", watts=-1), ConfigError, "instrument.settings.watts: Input should be greater than 0"),
     (config_of("lamp", colour="red"), ConfigError, "instrument.settings.colour: Extra inputs are not permitted"),
     (config_of("forrester", a1="loud"), ConfigError, "instrument.settings.a1: Input should be a valid number"),
@@ -178,3 +178,18 @@ def test_a_driver_brings_its_own_named_reduction(drivers):
 
     value = shot_value(reading, config.reduction)
     assert not value.ok and value.reason == "rate: expected rows (time, counts), got 3 rows"
+
+
+@pytest.mark.parametrize("overrides, message", [
+    ({"instrument": {"kind": "branin"}}, "space.axes: the branin instrument measures over 2 axis(es), the space has 1"),
+    ({"space": {"x_min": 0.0, "x_max": 1.5}}, "space.axes.0 (x): [0, 1.5] leaves the instrument's extent [0, 1]"),
+    ({"instrument": {"kind": "branin"}, "space": {"axes": [{"name": "a", "low": -5, "high": 10},
+                                                           {"name": "b", "low": -1, "high": 15}]}},
+     "space.axes.1 (b): [-1, 15] leaves the instrument's extent [0, 15]"),
+])
+def test_a_space_the_simulator_cannot_measure_is_a_config_error(overrides, message):
+    from noisebo.config import CampaignConfig
+
+    with pytest.raises(ConfigError) as info:
+        registry.validated(CampaignConfig().with_overrides(**overrides))
+    assert message in str(info.value)

@@ -47,7 +47,7 @@ def test_campaign_shape_and_bookkeeping(short_run):
     state = short_run.state
     assert len(state.points) == 3 + 5 and len(state.t_opt_history) == 5
     for p in state.points:
-        assert 0.0 <= p.x <= 1.0 and 0.2 <= p.t <= 10.0
+        assert len(p.x) == 1 and 0.0 <= p.x[0] <= 1.0 and 0.2 <= p.t <= 10.0
     # Points proposed after convergence get 3 shots and model noise; before, 30 and measured noise.
     for step, decision in enumerate(short_run.decisions):
         point = state.points[3 + step]

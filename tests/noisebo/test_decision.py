@@ -49,7 +49,7 @@ def test_padding_changes_no_decision(crossing):
 
 def test_repeated_inputs_are_merged_and_recorded(crossing):
     d, _ = decision.decide(CONFIG, crossing, 0, 0)
-    x, t = crossing.column("x"), crossing.column("t")
+    x, t = crossing.positions(1)[:, 0], crossing.column("t")
     assert (d.primary_inputs, d.noise_inputs, d.binned) == (np.unique(x).size, np.unique(t).size, False)
 
 

@@ -106,7 +106,7 @@ def test_after_the_seed_points_a_decision_is_due_and_tell_makes_it():
     state, events = engine.tell(state, request, {request.taken: last})
     assert isinstance(events[-1], Decided) and events[-1].decision.step == 0
     nxt = engine.ask(state)
-    assert (nxt.point, nxt.step, nxt.x, nxt.t) == (2, 0, (events[-1].decision.x,), events[-1].decision.t)
+    assert (nxt.point, nxt.step, nxt.x, nxt.t) == (2, 0, events[-1].decision.x, events[-1].decision.t)
 
 
 def test_events_replayed_give_the_same_campaign():

@@ -98,3 +98,23 @@ def test_merged_noise_likelihood_differs_by_a_constant_and_predicts_the_same():
                         noise_model.predict_samples("inv_sqrt", batch, raw, tq, (tq - 0.2) / 9.8)):
             np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7)  # up to the 1e-8 jitter per row
     np.testing.assert_allclose(gaps, gaps[0], atol=1e-8)
+
+
+def test_points_at_the_same_position_in_two_dimensions_merge_exactly():
+    coord = np.array([[0.2, 0.5], [0.9, 0.1], [0.2, 0.5], [0.2, 0.6]])
+    grouped = merge(coord, np.array([1.0, 5.0, 3.0, 7.0]), np.array([1.0, 1.0, 1.0, 2.0]), 0.0, 1.0, 16)
+    assert not grouped.binned
+    np.testing.assert_array_equal(grouped.coord, [[0.2, 0.5], [0.2, 0.6], [0.9, 0.1]])
+    np.testing.assert_allclose(grouped.mean, [2.0, 7.0, 5.0])
+    np.testing.assert_allclose(grouped.var, [0.5, 2.0, 1.0])
+    np.testing.assert_array_equal(grouped.count, [2, 1, 1])
+    np.testing.assert_allclose(grouped.scatter, [2.0, 0.0, 0.0])
+
+
+def test_beyond_max_inputs_two_dimensions_bin_per_axis():
+    rng = np.random.default_rng(0)
+    coord = rng.random((500, 2))
+    grouped = merge(coord, np.ones(500), np.ones(500), 0.0, 1.0, 64)  # 8 x 8 cells
+    assert grouped.binned and grouped.coord.shape == (64, 2) and grouped.count.sum() == 500
+    cells = np.floor(grouped.coord * 8).astype(int)
+    assert len({tuple(c) for c in cells}) == 64  # each bin's centre lies in its own cell

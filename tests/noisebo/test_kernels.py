@@ -28,3 +28,25 @@ def test_masked_covariance_decouples_padding():
     np.testing.assert_allclose(cov[:2, :2], [[1.1, 1.0], [1.0, 1.2]], atol=1e-7)
     np.testing.assert_array_equal(cov[2], [0.0, 0.0, 1.0])
     np.testing.assert_array_equal(cov[:, 2], [0.0, 0.0, 1.0])
+
+
+def test_ard_matern52_is_matern52_of_the_scaled_euclidean_distance():
+    from noisebo.kernels import ard_matern52
+
+    a = jnp.array([[0.0, 0.0], [0.3, 0.4]])
+    b = jnp.array([[0.0, 0.0], [0.6, 0.8]])
+    # lengths (0.5, 2): scaled points (0, 0), (0.6, 0.2), (1.2, 0.4); distances by hand
+    k = np.asarray(ard_matern52(a, b, 1.5, jnp.array([0.5, 2.0])))
+    r = np.array([[0.0, math.hypot(1.2, 0.4)], [math.hypot(0.6, 0.2), math.hypot(0.6, 0.2)]])
+    expected = np.asarray(matern52(jnp.zeros(1), jnp.asarray(r.ravel()), 1.5, 1.0)).reshape(2, 2)
+    np.testing.assert_allclose(k, expected, rtol=1e-12)
+
+
+def test_ard_matern52_has_a_finite_gradient_on_coincident_inputs():
+    import jax
+
+    from noisebo.kernels import ard_matern52
+
+    x = jnp.array([[0.2, 0.5], [0.2, 0.5], [0.9, 0.1]])
+    grad = jax.grad(lambda lengths: jnp.sum(ard_matern52(x, x, 1.0, lengths)))(jnp.array([0.3, 0.7]))
+    assert np.all(np.isfinite(np.asarray(grad)))

@@ -54,3 +54,20 @@ def test_every_combination_gives_a_finite_map(policy, f_acq):
 
 def test_argmax_2d_takes_the_first_of_ties():
     assert tuple(int(v) for v in argmax_2d(jnp.array([[0.0, 2.0], [2.0, 1.0]]))) == (0, 1)
+
+
+@pytest.mark.parametrize("policy, f_acquisition", [("reward", "ue"), ("reward", "ucb"), ("double", "ue"),
+                                                   ("double", "ei")])
+def test_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
+    from noisebo.policies import point_scores
+
+    acq = AcquisitionConfig(policy=policy, f_acquisition=f_acquisition)
+    post = POST._replace(f_mean=jnp.array([-1.0, 0.5]))
+    values = np.asarray(acquisition_map(post, 3, acq, REWARD))
+    i, j = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
+    scores = point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD)
+    np.testing.assert_allclose(np.asarray(scores), values, rtol=1e-12, atol=1e-15)
+    # off the grid: a larger f variance scores higher under UE at every t
+    if f_acquisition == "ue":
+        assert np.all(np.asarray(point_scores(post, jnp.zeros(3), jnp.full(3, 5.0), jnp.arange(3), 3, acq, REWARD))
+                      >= values[1] - 1e-12)

@@ -63,7 +63,7 @@ def test_measure_point_commits_every_shot_as_it_is_taken(tiny_config):
     wanted = tiny_config.schedule.shots_before
     assert len(seen) == wanted and len(state.points) == 1  # one commit per shot, the last reduces
     point = state.points[0].committed.point
-    expected = [inst.simulate(np.array([point.x]), point.t, numpy_rng(7, MEASURE, 0, k)).value for k in range(wanted)]
+    expected = [inst.simulate(np.array(point.x), point.t, numpy_rng(7, MEASURE, 0, k)).value for k in range(wanted)]
     np.testing.assert_allclose([s.reading.value for s in state.points[0].shots], expected)
     assert isinstance(engine.ask(state), Request) and engine.ask(state).point == 1  # stops at the next point
 
