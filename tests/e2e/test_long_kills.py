@@ -46,7 +46,8 @@ def assert_equals_reference(path, final):
     data = read_campaign(path)
     assert data["attrs"]["status"] == "completed" and data["attrs"]["n_points"] == POINTS
     points = [e.committed.point for e in final.points]
-    for name in ("x", "t", "value", "noise", "shot_std"):
+    np.testing.assert_array_equal(data["points"]["x"], [p.x[0] for p in points], err_msg="x")  # one axis: (n,)
+    for name in ("t", "value", "noise", "shot_std"):
         np.testing.assert_array_equal(data["points"][name], [getattr(p, name) for p in points], err_msg=name)
     got = list(zip(data["shots"]["point"].tolist(), data["shots"]["shot"].tolist()))
     assert got == [(s.point, s.shot) for e in final.points for s in e.shots]  # every shot once, in order
