@@ -1,9 +1,12 @@
 """The Forrester benchmark instrument: f(x) = (6x - 2)^2 sin(12x - 4) with Gaussian shot noise
-of standard deviation A1/sqrt(t) + A0."""
+of standard deviation A1/sqrt(t) + A0 (the paper's), or sqrt(A1^2/t + A0^2); optionally with a
+noisy patch where the time-independent part A0 grows (noise that depends on x)."""
 
 from __future__ import annotations
 
 import numpy as np
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 import noisebo
@@ -17,12 +20,19 @@ def forrester(x: np.ndarray) -> np.ndarray:
 
 
 class ForresterSettings(BaseModel):
-    """a0, a1: the noise law A1/sqrt(t) + A0 (value units); seed: the random stream of shots
-    measured outside a campaign (a campaign draws each shot from its own key)."""
+    """a0, a1: the noise law (value units), ``law`` "inv_sqrt" A1/sqrt(t) + A0 (the paper's) or
+    "quadrature" sqrt(A1^2/t + A0^2); a noisy patch adds ``patch_a0`` exp(-(x - patch_x)^2 /
+    (2 patch_width^2)) to A0 (0: the same noise at every x, the paper's setting); seed: the
+    random stream of shots measured outside a campaign (a campaign draws each shot from its own
+    key)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
     a0: float = Field(0.1, ge=0, allow_inf_nan=False)
     a1: float = Field(2.0, ge=0, allow_inf_nan=False)
+    law: Literal["inv_sqrt", "quadrature"] = "inv_sqrt"
+    patch_a0: float = Field(0.0, ge=0, allow_inf_nan=False)
+    patch_x: float = Field(0.5, ge=0, le=1, allow_inf_nan=False)
+    patch_width: float = Field(0.05, gt=0, allow_inf_nan=False)
     seed: int = Field(0, ge=0)
 
 
@@ -43,17 +53,34 @@ class ForresterInstrument:
         self.settings = settings or ForresterSettings()
         self._rng = np.random.default_rng(self.settings.seed)
 
+    def _law(self, t: np.ndarray, a0) -> np.ndarray:
+        s = self.settings
+        if s.law == "quadrature":
+            return np.sqrt(s.a1**2 / t + a0**2)
+        return s.a1 / np.sqrt(t) + a0
+
+    def a0_at(self, x: np.ndarray) -> np.ndarray:
+        """The time-independent part A0 at positions x (n,) in [0, 1]: (n,)."""
+        s = self.settings
+        return s.a0 + s.patch_a0 * np.exp(-0.5 * ((np.asarray(x, dtype=np.float64) - s.patch_x) / s.patch_width) ** 2)
+
     def noise_law(self, t: np.ndarray) -> np.ndarray:
-        """Single-shot noise sd at exposure t (s): A1/sqrt(t) + A0."""
+        """Single-shot noise sd at exposure t (s): A1/sqrt(t) + A0 (or the quadrature law); with
+        a patch, its mean over 1001 evenly spaced x."""
         t = np.asarray(t, dtype=np.float64)
-        return self.settings.a1 / np.sqrt(t) + self.settings.a0
+        if self.settings.patch_a0 == 0:
+            return self._law(t, self.settings.a0)
+        a0 = self.a0_at(np.linspace(0.0, 1.0, 1001))
+        return np.mean(self._law(t[..., None], a0), axis=-1)
 
     def noise_law_at(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """Single-shot noise sd at positions x (n, 1) and exposures t (m,): (n, m), the same law
-        A1/sqrt(t) + A0 at every x."""
+        """Single-shot noise sd at positions x (n, 1) and exposures t (m,): (n, m)."""
         x = np.asarray(x, dtype=np.float64)
-        law = self.noise_law(t)
-        return np.broadcast_to(law, (x.shape[0],) + law.shape).copy()
+        t = np.asarray(t, dtype=np.float64)
+        if self.settings.patch_a0 == 0:
+            law = self.noise_law(t)
+            return np.broadcast_to(law, (x.shape[0],) + law.shape).copy()
+        return self._law(t[None, :], self.a0_at(x[:, 0])[:, None])
 
     def truth(self, x: np.ndarray) -> np.ndarray:
         """f at positions x (n, 1): (n,)."""
@@ -63,7 +90,8 @@ class ForresterInstrument:
         x = np.asarray(x, dtype=np.float64)
         if x.shape != (1,) or not (np.isfinite(x[0]) and np.isfinite(t) and t > 0):
             raise ValueError(f"Forrester shot needs one finite coordinate and t > 0, got x={x.tolist()}, t={t}")
-        return Reading(float(forrester(x[0]) + self.noise_law(t) * rng.standard_normal()))
+        sd = self._law(np.float64(t), self.a0_at(x[0])) if self.settings.patch_a0 else self.noise_law(t)
+        return Reading(float(forrester(x[0]) + sd * rng.standard_normal()))
 
     def measure(self, x: np.ndarray, t: float) -> Reading:
         return self.simulate(x, t, self._rng)

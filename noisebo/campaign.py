@@ -25,7 +25,8 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     noise model from the start. "uniform" draws each coordinate uniformly. ``seed_t_scale``
     "log_span" replaces the random t by n values evenly spaced on a log scale from t_min to t_max
     inclusive (in random order): the ends of the range are where the two terms of the noise law
-    differ most, so they pin A0 and A1 best."""
+    differ most, so they pin A0 and A1 best. With a noise field (``noise_model.field``) the
+    seeds come in pairs at one position (``paired_positions``)."""
     s, sched = config.space, config.schedule
     n, d = sched.n_seed, s.dimensions
     rng = numpy_rng(seed, SEED_POINTS)
@@ -45,7 +46,21 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     if config.acquisition.fixed_t is not None:
         t_grid = grids(config).t
         t = np.full(n, t_grid[np.argmin(np.abs(t_grid - config.acquisition.fixed_t))])
+    elif config.noise_model.field is not None:
+        x = paired_positions(x, t)
     return np.column_stack([x, t])
+
+
+def paired_positions(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Seed positions x (n, d) for a noise field: the seed with the k-th longest t moves to the
+    position of the seed with the k-th shortest, so floor(n/2) positions are each measured at a
+    short and a long t. A field can explain any one noise per position by where it is; only
+    two times at one position tell the time-dependent part from the position-dependent one."""
+    order = np.argsort(t, kind="stable")
+    paired = x.copy()
+    for k in range(x.shape[0] // 2):
+        paired[order[-1 - k]] = x[order[k]]
+    return paired
 
 
 def make_point(
@@ -80,6 +95,9 @@ def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summar
         noise_fine=np.asarray(pred.noise_fine, dtype=np.float64),
         t_opt=float(pred.posterior.t_opt),
         hyperparameters=hyperparameters(fitted),
+        **({} if pred.posterior.t_opt_map is None else {
+            "t_opt_map": np.asarray(pred.posterior.t_opt_map, dtype=np.float64),
+            "noise_map": np.asarray(pred.posterior.noise_at_t_opt, dtype=np.float64)}),
     )
 
 

@@ -273,6 +273,36 @@ class PrimaryModelConfig(FrozenModel):
     length_scale: PositiveFloat = 0.5
 
 
+class NoiseFieldConfig(FrozenModel):
+    """How the noise law's parameters vary over x (see the module docstring). The law, the
+    A0/A1/p priors and the residual GP over t come from ``NoiseModelConfig``.
+
+    ``varies``: "a0" (log A0(x) = log a0 + g0(x), A1 and p shared) or "a0_a1" (also
+    log A1(x) = log a1 + g1(x), an independent field with the same priors).
+    Priors of each field, on x scaled to [0, 1] per axis:
+    ``amplitude``: LogNormal(loc, scale) of the field's standard deviation in log units. Default
+    median 0.5 (a factor 1.65), 95 % in [0.07, 3.5] (a factor up to 35 either way of the level
+    a0): small enough to shrink towards the x-independent model when the data show no variation,
+    wide enough for a domain wall an order of magnitude noisier than its surroundings.
+    ``length``: LogNormal(loc, scale) of each axis's length. Default median 0.2 as the primary
+    model's, but scale 0.75 (95 % in [0.046, 0.87]): noise features (walls, edges, a dirty
+    patch) can be narrower than the property's.
+    ``basis_per_axis``: basis functions per axis of the approximate GP (default by dimension: 96,
+    24, 10, 7 for d = 1..4); lengths below ~0.9 * boundary_factor / basis_per_axis are not resolved.
+    ``boundary_factor``: the basis lives on a box this many times the unit cube's width, centred
+    on it (2: the kernel within a few % for lengths up to ~0.3 of an axis; longer lengths come
+    out with less variance near the cube's faces; a larger factor needs more functions).
+    """
+
+    varies: Literal["a0", "a0_a1"] = "a0"
+    amplitude_loc: FiniteFloat = math.log(0.5)
+    amplitude_scale: PositiveFloat = 1.0
+    length_loc: FiniteFloat = math.log(0.2)
+    length_scale: PositiveFloat = 0.75
+    basis_per_axis: int | None = Field(None, ge=2, le=256)
+    boundary_factor: float = Field(2.0, ge=1.1, le=4.0, allow_inf_nan=False)
+
+
 class NoiseModelConfig(FrozenModel):
     """Structured GP for the single-shot noise standard deviation Noise(t).
 
@@ -282,6 +312,9 @@ class NoiseModelConfig(FrozenModel):
     Priors on A0 and A1 are Uniform in the units of the measured value.
     ``learn_after_convergence``: also train on the few-shot noise estimates taken after convergence
     (weighted by their larger sampling error) instead of freezing the noise model's data.
+    ``field``: None (default) for noise that does not depend on x, as the paper assumes; a
+    ``NoiseFieldConfig`` to learn how the law's time-independent part (and optionally the
+    time-dependent one) varies over x (``noisebo.noise_field``): the optimal time becomes t*(x).
     """
 
     mean: Literal["inv_sqrt", "power", "quadrature"] = "inv_sqrt"
@@ -291,6 +324,7 @@ class NoiseModelConfig(FrozenModel):
     residual_amplitude_loc: FiniteFloat = math.log(0.05)
     residual_amplitude_scale: PositiveFloat = 1.0
     learn_after_convergence: bool = True
+    field: NoiseFieldConfig | None = None
 
 
 class InferenceConfig(FrozenModel):
@@ -372,6 +406,13 @@ class CampaignConfig(FrozenModel):
         fixed, s = self.acquisition.fixed_t, self.space
         if fixed is not None and not s.t_min <= fixed <= s.t_max:
             raise ValueError(f"acquisition.fixed_t ({fixed}) must lie in [t_min, t_max] = [{s.t_min}, {s.t_max}]")
+        return self
+
+    @model_validator(mode="after")
+    def _field_by_map(self) -> CampaignConfig:
+        if self.noise_model.field is not None and self.inference.mode != "map":
+            raise ValueError("noise_model.field: the noise field is fitted by MAP with a Laplace approximation; "
+                             "set inference.mode: map")
         return self
 
     @field_validator("schema_version")

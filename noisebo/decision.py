@@ -10,7 +10,7 @@ never needs more than g inputs however long it runs.
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -18,15 +18,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from noisebo import inference, noise_model, primary
+from noisebo import decision_field, inference, noise_field, noise_model, primary
 from noisebo.config import (
     AcquisitionConfig, CampaignConfig, NoiseModelConfig, PrimaryModelConfig, RewardConfig, SpaceConfig,
 )
 from noisebo.inputs import capacity_for, group_ids
 from noisebo.keys import FIT, PROPOSE, jax_key
-from noisebo.policies import Posterior, acquisition_map, argmax_2d, point_scores
+from noisebo.policies import NoiseRows, Posterior, acquisition_map, argmax_2d, point_scores
 from noisebo.reward import optimal_index, reward
-from noisebo.schedule import converged, shots_for
+from noisebo.schedule import converged, converged_map, shots_for
 from noisebo.search import STARTS, reference_points, reference_spacing, refine
 from noisebo.state import CampaignState, as_position
 
@@ -59,15 +59,17 @@ def scaled(space: SpaceConfig, x: np.ndarray) -> np.ndarray:
 
 
 class Fitted(NamedTuple):
-    """Both fitted models with the data they were fitted on. ``primary_inputs`` and
-    ``noise_inputs``: how many merged inputs each saw; ``binned``: whether either were bins (the
-    approximation beyond ``inference.max_inputs`` distinct inputs)."""
+    """Both fitted models with the data they were fitted on (``noise_data`` a
+    ``noise_field.FieldData`` when the noise depends on x). ``primary_inputs`` and
+    ``noise_inputs``: how many merged inputs each saw ((x, t) groups for a noise field);
+    ``binned``: whether either were bins (the approximation beyond ``inference.max_inputs``
+    distinct inputs)."""
 
     primary: inference.Samples
     primary_data: primary.PrimaryData
     standardisation: primary.Standardisation
     noise: inference.Samples
-    noise_data: noise_model.NoiseData
+    noise_data: noise_model.NoiseData | noise_field.FieldData
     noise_scale: float
     primary_inputs: int = 0
     noise_inputs: int = 0
@@ -134,7 +136,8 @@ def fit_models(
     config: CampaignConfig, state: CampaignState, key: jax.Array, previous: dict | None = None, warm: bool = False,
     capacities: tuple[int, int] | None = None,
 ) -> Fitted:
-    """Fit the primary GP on every point and the noise model on its training points.
+    """Fit the primary GP on every point and the noise model (or the noise field, when
+    ``noise_model.field`` is set) on its training points.
 
     ``previous``: the hyperparameters of the previous fit (``hyperparameters``), an extra start;
     ``warm``: start from it alone (when it has every hyperparameter). ``capacities``: the padded
@@ -148,28 +151,35 @@ def fit_models(
     inf = config.inference
     pdata, std, p_groups = primary.prepare(x, value, noise**2 / n_shots, s.lows, s.highs, inf.max_inputs,
                                            cap_primary)
-    train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
-    ndata, scale, n_groups = noise_model.prepare(
-        t[train], state.column("shot_std")[train], n_shots[train], config.noise_model, s.t_min, s.t_max,
-        inf.max_inputs, cap_noise,
-    )
     primary_fn, noise_fn = _models(config)
     k_primary, k_noise = jax.random.split(key)
     p_warm = _previous_guesses(previous, "primary", 1.0)
-    n_warm = _previous_guesses(previous, "noise", scale, np.asarray(ndata.bounds))
-    warm = warm and bool(p_warm) and bool(n_warm)
+    if config.noise_model.field is None:
+        train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
+        ndata, scale, n_groups = noise_model.prepare(
+            t[train], state.column("shot_std")[train], n_shots[train], config.noise_model, s.t_min, s.t_max,
+            inf.max_inputs, cap_noise,
+        )
+        n_warm = _previous_guesses(previous, "noise", scale, np.asarray(ndata.bounds))
+        warm = warm and bool(p_warm) and bool(n_warm)
+        n_guesses = n_warm if warm else [noise_model.initial_guess(ndata, config.noise_model)] + n_warm
+        noise_fit = _fit_one(config, noise_fn, ndata, k_noise, n_guesses, inf.laplace_samples, 0, warm)
+        n_inputs, n_binned = n_groups.count.size, n_groups.binned
+    else:
+        warm = warm and bool(p_warm)
+        noise_fit, ndata, scale, n_inputs, n_binned = decision_field.fit_field(
+            config, state, scaled(s, x), k_noise, previous, warm, cap_noise)
     p_guesses = p_warm if warm else [primary.prior_median(config.primary_model, s.dimensions)] + p_warm
-    n_guesses = n_warm if warm else [noise_model.initial_guess(ndata, config.noise_model)] + n_warm
     return Fitted(
         _fit_one(config, primary_fn, pdata, k_primary, p_guesses, 0, inf.primary_quadrature, warm),
         pdata,
         std,
-        _fit_one(config, noise_fn, ndata, k_noise, n_guesses, inf.laplace_samples, 0, warm),
+        noise_fit,
         ndata,
         scale,
         p_groups.count.size,
-        n_groups.count.size,
-        p_groups.binned or n_groups.binned,
+        n_inputs,
+        p_groups.binned or n_binned,
     )
 
 
@@ -199,11 +209,37 @@ def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first:
 
 
 def _predict_program(config: CampaignConfig):
-    return _predict_compiled(config.space, config.reward, config.noise_model.mean)
+    return _predict_compiled(config.space, config.reward, config.noise_model.mean, config.noise_model.field is not None)
+
+
+def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray) -> decision_field.FieldRows:
+    """The fitted noise field at scaled positions xs (m, d) on the space's t grids."""
+    g = space_grids(s)
+    t, t_fine = jnp.asarray(g.t), jnp.asarray(g.t_fine)
+    span = s.t_max - s.t_min
+    return decision_field.rows(kind, fitted.noise, fitted.noise_data, fitted.noise_scale, xs, t, (t - s.t_min) / span,
+                               t_fine, (t_fine - s.t_min) / span, rew.alpha, rew.beta)
+
+
+def _field_prediction(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray, f_mean,
+                      f_var, f_best) -> Prediction:
+    """The policies' posterior with a noise field: a noise curve per reference point, t*(x), and
+    for the whole sample the t that maximises the x-averaged reward (on the x-averaged curve,
+    which the prediction's ``noise_fine`` holds)."""
+    rows = field_rows(kind, s, rew, fitted, xs.reshape(xs.shape[0], -1))
+    t, t_fine = jnp.asarray(space_grids(s).t), jnp.asarray(space_grids(s).t_fine)
+    noise_fine = jnp.mean(rows.fine, axis=0)
+    best_i = optimal_index(t_fine, noise_fine, rew.alpha, rew.beta)
+    best_reward = decision_field.best_training_reward(kind, fitted.noise, fitted.noise_data, fitted.noise_scale, t,
+                                                      s.t_min, s.t_max, rew.alpha, rew.beta)
+    post = Posterior(f_mean=f_mean, f_var=f_var, noise_mean=rows.mean, noise_var=rows.var, t=t,
+                     t_opt=t_fine[best_i], noise_at_t_opt=rows.at_t_opt, f_best=f_best, reward_best=best_reward,
+                     t_opt_map=rows.t_opt)
+    return Prediction(post, noise_fine)
 
 
 @lru_cache(maxsize=None)
-def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str):
+def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: bool = False):
     g = space_grids(s)
     xs = jnp.asarray(scaled(s, g.x))
     n_t = g.t.shape[0]
@@ -214,6 +250,9 @@ def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str):
             *primary.predict_samples(fitted.primary.params, fitted.primary_data, xs), primary_first,
             fitted.primary.weights,
         )
+        if has_field:
+            return _field_prediction(kind, s, rew, fitted, xs, std.mean + std.scale * f_mean, std.scale**2 * f_var,
+                                     f_best)
         t_train = fitted.noise_data.t
         t_all = jnp.concatenate([jnp.asarray(g.t), jnp.asarray(g.t_fine), t_train])
         ts_all = (t_all - s.t_min) / (s.t_max - s.t_min)
@@ -258,10 +297,13 @@ def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceCon
 
 
 @lru_cache(maxsize=None)
-def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, primary_first: bool):
+def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, primary_first: bool,
+                         field_kind: str | None = None):
     """For d > 1: the policy's map on the reference points, then ``search.refine`` from its best
-    ``STARTS`` entries (each keeps its t). Returns the map's maximum over t at each reference
-    point (m,), the proposal's scaled x (d,), its t index and score."""
+    ``STARTS`` entries (each keeps its t); with a noise field (its law ``field_kind``) each
+    candidate is scored with the noise predicted where it lies. Returns the map's maximum over t
+    at each reference point (m,), the proposal's scaled x (d,), its t index, score and the
+    noise there at that t."""
     g = space_grids(space)
     xs = jnp.asarray(scaled(space, g.x))
     allowed = jnp.asarray(_allowed_t(acq, g.t))
@@ -274,19 +316,33 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
         i, j = flat // n_t, flat % n_t
         std = fitted.standardisation
 
+        def noise_rows(flat):  # (n, d) scaled -> NoiseRows (n, ...)
+            rows = field_rows(field_kind, space, rew, fitted, flat)
+            return NoiseRows(rows.mean, rows.var, rows.at_t_opt)
+
         def score(candidates):  # (K, P, d) scaled -> (K, P)
             k, p, d = candidates.shape
+            flat = candidates.reshape(k * p, d)
             mean, var = inference.combine(
-                *primary.predict_samples(fitted.primary.params, fitted.primary_data, candidates.reshape(k * p, d)),
+                *primary.predict_samples(fitted.primary.params, fitted.primary_data, flat),
                 primary_first, fitted.primary.weights,
             )
             raw_mean, raw_var = std.mean + std.scale * mean, std.scale**2 * var
+            noise = None
+            if field_kind is not None:
+                rows = noise_rows(flat)
+                noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t),
+                                  rows.at_t_opt.reshape(k, p))
             return point_scores(post, raw_mean.reshape(k, p), raw_var.reshape(k, p),
-                                jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew)
+                                jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew, noise)
 
         best_x, best_s = refine(score, xs[i], key, spacing)
         best = jnp.argmax(best_s)
-        return jnp.max(values, axis=1), best_x[best], j[best], best_s[best]
+        if field_kind is None:
+            noise_at = post.noise_mean[j[best]]
+        else:
+            noise_at = noise_rows(best_x[best][None, :]).mean[0, j[best]]
+        return jnp.max(values, axis=1), best_x[best], j[best], best_s[best], noise_at
 
     return jax.jit(propose)
 
@@ -311,10 +367,13 @@ def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState) -> Pre
 class Decision:
     """The outcome of one BO step (0-based ``step``): the proposal (x, one float per axis, and
     t), how to measure it, and what the models said. ``noise_at_t`` is the noise model's
-    single-shot sd at the proposed t. Arrays: ``acq_map`` (n_x, n_t) float32 for one axis, for
-    d > 1 its maximum over t at each of the m reference points, (m,); ``f_mean``, ``f_var`` (m,)
-    on the reference points (the x grid for one axis);
-    ``noise_mean``, ``noise_var`` (n_t,) on the t grid. ``latency_s``: the decision's time (s).
+    single-shot sd at the proposed t (and x, for a noise field). ``t_opt``: the predicted
+    optimal t; for a noise field the one t that maximises the reward averaged over x, with
+    ``t_opt_map`` (m,) t*(x) on the reference points (empty (0,) without a field). Arrays:
+    ``acq_map`` (n_x, n_t) float32 for one axis, for d > 1 its maximum over t at each of the m
+    reference points, (m,); ``f_mean``, ``f_var`` (m,) on the reference points (the x grid for
+    one axis); ``noise_mean``, ``noise_var`` (n_t,) on the t grid (for a noise field, their
+    averages over the reference points). ``latency_s``: the decision's time (s).
     ``primary_inputs``, ``noise_inputs``: the distinct inputs (or bins) each GP was fitted on;
     ``binned``: True when they were bins, an approximation (see ``noisebo.inputs``)."""
 
@@ -337,6 +396,7 @@ class Decision:
     primary_inputs: int = 0
     noise_inputs: int = 0
     binned: bool = False
+    t_opt_map: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:  # one number is one axis; a list (from a record) a tuple
         object.__setattr__(self, "x", as_position(self.x))
@@ -347,6 +407,10 @@ def hyperparameters(fitted: Fitted) -> dict[str, float]:
     A0/A1 in value units."""
     out = {}
     for prefix, samples in (("primary", fitted.primary), ("noise", fitted.noise)):
+        if prefix == "noise" and isinstance(fitted.noise_data, noise_field.FieldData):
+            field_summary = decision_field.hyperparameters(samples, fitted.noise_data, fitted.noise_scale)
+            out |= {f"noise.{name}": value for name, value in field_summary.items()}
+            continue
         weights = None if samples.weights is None else np.asarray(samples.weights)
         for name, values in samples.params.items():
             v = np.asarray(values)
@@ -365,23 +429,32 @@ def acquire(
 
     Returns the decision and the state with this step's predicted optimal t recorded."""
     prediction = predict(config, fitted, state)
-    t_opt = float(prediction.posterior.t_opt)
-    history = state.t_opt_history + (t_opt,)
-    now_converged = state.is_converged or converged(history, config.schedule.window, config.schedule.threshold)
-    new_state = state.with_t_opt(t_opt, now_converged)
-    shots = shots_for(now_converged, config.schedule)
-    g, s = grids(config), config.space
-    if s.dimensions == 1:
-        values, i, j = _propose_program(config)(prediction.posterior, float(shots))
-        i, j = int(i), int(j)
-        x, acq_value, acq_map = (float(g.x[i]),), float(values[i, j]), values
+    post = prediction.posterior
+    t_opt = float(post.t_opt)
+    sched = config.schedule
+    if post.t_opt_map is None:
+        t_map = np.zeros(0)
+        fresh = converged(state.t_opt_history + (t_opt,), sched.window, sched.threshold)
     else:
-        program = _propose_nd_compiled(config.acquisition, config.reward, s, fitted.primary.map_first)
-        acq_map, x_scaled, j, acq_value = program(prediction.posterior, float(shots), fitted,
-                                                  propose_key(0, step) if key is None else key)
+        t_map = np.asarray(post.t_opt_map, dtype=np.float64)
+        fresh = converged_map(state.t_opt_maps + (t_map,), sched.window, sched.threshold)
+    now_converged = state.is_converged or fresh
+    new_state = state.with_t_opt(t_opt, now_converged, t_map if t_map.size else None)
+    shots = shots_for(now_converged, sched)
+    g, s = grids(config), config.space
+    noise_grid = np.asarray(post.noise_mean)
+    if s.dimensions == 1:
+        values, i, j = _propose_program(config)(post, float(shots))
+        i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
+        x, acq_value = (float(g.x[i]),), float(acq_map[i, j])
+        noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
+    else:
+        program = _propose_nd_program(config, fitted)
+        acq_map, x_scaled, j, acq_value, noise_at = program(post, float(shots), fitted,
+                                                            propose_key(0, step) if key is None else key)
         lows, highs = np.asarray(s.lows), np.asarray(s.highs)
         x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
-        j, acq_value = int(j), float(acq_value)
+        j, acq_value, noise_at_t = int(j), float(acq_value), float(noise_at)
     decision = Decision(
         step=step,
         x=x,
@@ -389,20 +462,33 @@ def acquire(
         acq_value=acq_value,
         shots=shots,
         measure_noise=not now_converged,
-        noise_at_t=float(prediction.posterior.noise_mean[j]),
+        noise_at_t=noise_at_t,
         t_opt=t_opt,
         converged=now_converged,
         hyperparameters=hyperparameters(fitted),
         acq_map=np.asarray(acq_map, dtype=np.float32),
-        f_mean=np.asarray(prediction.posterior.f_mean, dtype=np.float64),
-        f_var=np.asarray(prediction.posterior.f_var, dtype=np.float64),
-        noise_mean=np.asarray(prediction.posterior.noise_mean, dtype=np.float64),
-        noise_var=np.asarray(prediction.posterior.noise_var, dtype=np.float64),
+        f_mean=np.asarray(post.f_mean, dtype=np.float64),
+        f_var=np.asarray(post.f_var, dtype=np.float64),
+        noise_mean=_over_x(post.noise_mean),
+        noise_var=_over_x(post.noise_var),
         primary_inputs=int(fitted.primary_inputs),
         noise_inputs=int(fitted.noise_inputs),
         binned=bool(fitted.binned),
+        t_opt_map=t_map,
     )
     return decision, new_state
+
+
+def _over_x(curves) -> np.ndarray:
+    """A noise curve (n_t,) as it is; curves per position (m, n_t) averaged over the positions."""
+    curves = np.asarray(curves, dtype=np.float64)
+    return curves if curves.ndim == 1 else curves.mean(axis=0)
+
+
+def _propose_nd_program(config: CampaignConfig, fitted: Fitted):
+    nm = config.noise_model
+    return _propose_nd_compiled(config.acquisition, config.reward, config.space, fitted.primary.map_first,
+                                None if nm.field is None else nm.mean)
 
 
 def fit_key(seed: int, step: int) -> jax.Array:
@@ -452,11 +538,13 @@ def _primary_x(state: CampaignState, s: SpaceConfig) -> np.ndarray:
 def capacities_needed(config: CampaignConfig, state: CampaignState) -> tuple[int, int]:
     """The (primary, noise) capacities a decision on ``state`` pads to (see ``fit_models``)."""
     s, limit = config.space, config.inference.max_inputs
-    train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
-    counts = [int(group_ids(c, lo, hi, limit)[0].max(initial=-1)) + 1
-              for c, lo, hi in ((scaled(s, _primary_x(state, s)), 0.0, 1.0),
-                                (state.column("t")[train], s.t_min, s.t_max))]
-    return capacity_for(counts[0]), capacity_for(counts[1])
+    primary_count = int(group_ids(scaled(s, _primary_x(state, s)), 0.0, 1.0, limit)[0].max(initial=-1)) + 1
+    if config.noise_model.field is not None:
+        noise_count = decision_field.groups_needed(config, state, scaled(s, state.positions(s.dimensions)))
+    else:
+        train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
+        noise_count = int(group_ids(state.column("t")[train], s.t_min, s.t_max, limit)[0].max(initial=-1)) + 1
+    return capacity_for(primary_count), capacity_for(noise_count)
 
 
 # Compilations under way in other threads, by programs and capacities: a decision that needs one
@@ -483,7 +571,11 @@ def compile_ahead(config: CampaignConfig, state: CampaignState, previous: dict |
         _COMPILING.setdefault(key, done)
     try:
         fitted = fit_models(config, state, fit_key(0, 0), previous, False, capacities)
-        jax.block_until_ready(predict(config, fitted, state).posterior)
+        posterior = predict(config, fitted, state).posterior
+        if config.space.dimensions > 1:  # the refinement's program depends on the capacity too
+            posterior = _propose_nd_program(config, fitted)(posterior, float(config.schedule.shots_before), fitted,
+                                                            propose_key(0, 0))
+        jax.block_until_ready(posterior)
     finally:
         done.set()
         with _COMPILING_LOCK:

@@ -122,7 +122,8 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
         d = event.decision
         if d.step != len(state.decisions) or _pending_decision(state) is not None:
             raise EngineError(f"decision for step {d.step} out of order")
-        return replace(state, decisions=state.decisions + (d,), data=state.data.with_t_opt(d.t_opt, d.converged))
+        t_map = d.t_opt_map if d.t_opt_map.size else None
+        return replace(state, decisions=state.decisions + (d,), data=state.data.with_t_opt(d.t_opt, d.converged, t_map))
     if isinstance(event, Summarised):
         return replace(state, summary=event.summary)
     if isinstance(event, StatusChanged):

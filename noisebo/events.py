@@ -108,13 +108,18 @@ class Decided:
 class Summary:
     """Final models after the last measurement: f mean and variance on the x grid (n_x,), the
     noise sd on the fine t grid (N_FINE,), the final predicted optimal t (s) and the
-    hyperparameters."""
+    hyperparameters. With a noise field, ``noise_fine`` is averaged over the reference points,
+    ``t_opt`` is the t that maximises the x-averaged reward, and ``t_opt_map`` and
+    ``noise_map`` (m,) hold t*(x) and Noise(x, t*(x)) on the reference points (empty (0,)
+    without a field)."""
 
     f_mean: np.ndarray
     f_var: np.ndarray
     noise_fine: np.ndarray
     t_opt: float
     hyperparameters: dict
+    t_opt_map: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    noise_map: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass(frozen=True)

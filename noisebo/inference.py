@@ -85,6 +85,30 @@ def _eigen_curvature(objective, best, data):
     return jnp.maximum(jnp.where(jnp.isfinite(evals), evals, MIN_CURVATURE), MIN_CURVATURE), evecs
 
 
+def projected_hessian(objective, best, data, basis: jnp.ndarray) -> jnp.ndarray:
+    """basis^T H basis (k, k), symmetrised, for the objective's Hessian H at ``best`` and
+    ``basis`` (D, k): k Hessian-vector products (forward over reverse)."""
+    grad = jax.grad(objective)
+    hq = jax.vmap(lambda v: jax.jvp(lambda f: grad(f, data), (best,), (v,))[1], in_axes=1, out_axes=1)(basis)
+    reduced = basis.T @ hq
+    return 0.5 * (reduced + reduced.T)
+
+
+def _subspace_draws(objective, best, data, key, samples: int, basis: jnp.ndarray):
+    """Laplace draws (samples, D) around ``best`` when the objective's Hessian is the identity
+    outside the span of ``basis`` (D, k) orthonormal columns (whitened latent weights the data
+    see only through k directions): the Hessian projected on the span from k Hessian-vector
+    products instead of D, its eigenvalues floored at MIN_CURVATURE, and unit draws in the
+    complement."""
+    reduced = projected_hessian(objective, best, data, basis)
+    evals, evecs = jnp.linalg.eigh(reduced)
+    evals = jnp.maximum(jnp.where(jnp.isfinite(evals), evals, MIN_CURVATURE), MIN_CURVATURE)
+    k_span, k_rest = jax.random.split(key)
+    inside = (jax.random.normal(k_span, (samples, basis.shape[1])) / jnp.sqrt(evals)) @ evecs.T @ basis.T
+    rest = jax.random.normal(k_rest, (samples, best.shape[0]))
+    return inside + rest - (rest @ basis) @ basis.T
+
+
 def _hermite_grid(nodes: int, dims: int) -> tuple[np.ndarray, np.ndarray]:
     """Probabilists' Gauss-Hermite nodes (nodes^dims, dims) and log weights (nodes^dims,)."""
     u, w = np.polynomial.hermite_e.hermegauss(nodes)
@@ -93,18 +117,35 @@ def _hermite_grid(nodes: int, dims: int) -> tuple[np.ndarray, np.ndarray]:
     return grid, log_w
 
 
-@lru_cache(maxsize=None)
-def _map_program(model: Callable, restarts: int, laplace_samples: int, quadrature_nodes: int = 0) -> _MapProgram:
-    """Jitted pieces of a MAP fit; compiled once per model and padded data shape."""
+def _unravel(model: Callable) -> Callable:
+    """data -> the function from a flat unconstrained vector to the model's unconstrained sites."""
 
     def unravel_for(data):
         template = unconstrain_fn(model, (data,), {}, _latent_prior_draw(model, jax.random.PRNGKey(0), data))
         return ravel_pytree(template)[1]
 
+    return unravel_for
+
+
+def negative_log_posterior(model: Callable) -> Callable:
+    """(flat, data) -> the MAP objective: -log p(params, data) at the constrained values of the
+    flat unconstrained vector (no Jacobian: a mode in constrained space); 1e10 where not finite."""
+    unravel_for = _unravel(model)
+
     def objective(flat, data):
         params = constrain_fn(model, (data,), {}, unravel_for(data)(flat))
         value = -log_density(model, (data,), {}, params)[0]
         return jnp.where(jnp.isfinite(value), value, 1e10)
+
+    return objective
+
+
+@lru_cache(maxsize=None)
+def _map_program(model: Callable, restarts: int, laplace_samples: int, quadrature_nodes: int = 0,
+                 laplace_basis: Callable | None = None) -> _MapProgram:
+    """Jitted pieces of a MAP fit; compiled once per model and padded data shape.
+    ``laplace_basis``: see ``fit_map``."""
+    unravel_for, objective = _unravel(model), negative_log_posterior(model)
 
     def starts(key, data):
         def start(k):
@@ -115,7 +156,12 @@ def _map_program(model: Callable, restarts: int, laplace_samples: int, quadratur
     def laplace(best, key, data):
         unravel = unravel_for(data)
         flats = best[None, :]
-        if laplace_samples:
+        if laplace_samples and laplace_basis is not None:
+            template = unconstrain_fn(model, (data,), {}, _latent_prior_draw(model, jax.random.PRNGKey(0), data))
+            draws = _subspace_draws(objective, best, data, key, laplace_samples,
+                                    _block_basis(template, laplace_basis(data)))
+            flats = jnp.concatenate([flats, best + draws], axis=0)
+        elif laplace_samples:
             evals, evecs = _eigen_curvature(objective, best, data)
             z = jax.random.normal(key, (laplace_samples, best.shape[0]))
             flats = jnp.concatenate([flats, best + (z / jnp.sqrt(evals)) @ evecs.T], axis=0)
@@ -146,6 +192,22 @@ def _map_program(model: Callable, restarts: int, laplace_samples: int, quadratur
     )
 
 
+def _block_basis(template: dict, bases: dict) -> jnp.ndarray:
+    """The (D, k) block-diagonal basis over the flattened sites of ``template`` (unconstrained
+    values, flattened in ``ravel_pytree``'s order): a site named in ``bases`` contributes its
+    (size, k_site) orthonormal columns, every other site all its own directions."""
+    blocks = []
+    for name in sorted(template):
+        size = int(np.prod(jnp.shape(template[name]), dtype=np.int64))
+        blocks.append(bases[name] if name in bases else jnp.eye(size))
+    rows = sum(b.shape[0] for b in blocks)
+    out, r, c = jnp.zeros((rows, sum(b.shape[1] for b in blocks))), 0, 0
+    for b in blocks:
+        out = out.at[r:r + b.shape[0], c:c + b.shape[1]].set(b)
+        r, c = r + b.shape[0], c + b.shape[1]
+    return out
+
+
 def _minimise(value_and_grad, x0: np.ndarray, data) -> tuple[np.ndarray, float]:
     def fun(flat):
         value, grad = value_and_grad(flat, data)
@@ -167,17 +229,23 @@ def nuts_runner(model: Callable, warmup: int, samples: int, thread: int) -> MCMC
 
 def fit_map(
     model, data, key, restarts: int, laplace_samples: int = 0, guess: dict | Sequence[dict] | None = None,
-    quadrature_nodes: int = 0, draws: bool = True,
+    quadrature_nodes: int = 0, draws: bool = True, laplace_basis: Callable | None = None,
 ) -> Samples:
     """MAP of ``model(data)``: L-BFGS-B from each ``guess`` (a dict of constrained values of every
     latent site, or a sequence of them, tried first) and, with ``draws``, from ``restarts``
     prior draws (without: the guesses alone, a warm start). Then, if ``quadrature_nodes`` > 0, a weighted quadrature of the posterior
     around the mode (nodes per dimension); else the MAP point with ``laplace_samples`` Laplace
-    draws."""
+    draws.
+
+    ``laplace_basis``: for a model with whitened latent weights (standard normal sites the data
+    see only through a few linear combinations), ``laplace_basis(data)`` gives {site: (size, k)
+    orthonormal columns spanning those combinations}; the Hessian is then computed on that span
+    alone (the prior's identity elsewhere), k + the other sites' sizes Hessian-vector products
+    instead of a full Hessian. A fixed (hashable) function: it keys the compiled programs."""
     guesses = [] if guess is None else [guess] if isinstance(guess, dict) else list(guess)
     if not guesses and not draws:
         raise ValueError("a MAP fit needs a guess or the prior draws")
-    program = _map_program(model, restarts, laplace_samples, quadrature_nodes)
+    program = _map_program(model, restarts, laplace_samples, quadrature_nodes, laplace_basis)
     k_start, k_laplace = jax.random.split(key)
     starts = [np.asarray(program.flatten({k: jnp.asarray(v) for k, v in g.items()}, data)) for g in guesses]
     if draws:

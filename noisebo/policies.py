@@ -1,9 +1,16 @@
 """The two policies that fold the reward into the acquisition (section 2.2).
 
 Shapes: x grid (n_x,) (or m reference points in d > 1), t grid (n_t,); the acquisition map is
-(n_x, n_t). Variances are in the
-squared units of f; noise is the single-shot standard deviation; ``shots`` is how many shots the
-next point will get, so the measurement variance at t is Noise(t)^2 / shots (Eq. 4).
+(n_x, n_t). Variances are in the squared units of f; noise is the single-shot standard
+deviation; ``shots`` is how many shots the next point will get, so the measurement variance at
+t is Noise(t)^2 / shots (Eq. 4).
+
+Noise that depends on x (``noise_model.field``): the posterior's noise is then a curve per
+position, (n_x, n_t), and its optimal time t*(x) one per position. Each policy uses the noise at
+the x it scores: the reward is normalised over t at each position (so the weight is 1 at that
+position's t*(x)), the double policy's acq_x uses Noise(x, t*(x)), and its acq_t is normalised
+over the whole (x, t) map, so it still prefers positions where the reward is uncertain. With
+the same curve at every position each reduces to the paper's policy.
 """
 
 from __future__ import annotations
@@ -18,9 +25,12 @@ from noisebo.reward import normalise, reward
 
 
 class Posterior(NamedTuple):
-    """What the policies see. f_mean, f_var: (n_x,) latent f; noise_mean, noise_var: (n_t,)
-    single-shot noise sd and its variance; t: (n_t,) seconds; t_opt: predicted optimal t;
-    noise_at_t_opt: Noise(t_opt); f_best: incumbent f; reward_best: incumbent normalised reward."""
+    """What the policies see. f_mean, f_var: (n_x,) latent f; noise_mean, noise_var: single-shot
+    noise sd and its variance, (n_t,) for noise that does not depend on x, (n_x, n_t) for a
+    noise field; t: (n_t,) seconds; t_opt: the predicted optimal t (for a field, the one t that
+    maximises the reward averaged over x); noise_at_t_opt: Noise(t_opt) (for a field (n_x,),
+    Noise(x, t*(x)) at each x); f_best: incumbent f; reward_best: incumbent normalised reward;
+    t_opt_map: (n_x,) t*(x) for a field, None otherwise."""
 
     f_mean: jnp.ndarray
     f_var: jnp.ndarray
@@ -31,10 +41,27 @@ class Posterior(NamedTuple):
     noise_at_t_opt: jnp.ndarray
     f_best: jnp.ndarray
     reward_best: jnp.ndarray
+    t_opt_map: jnp.ndarray | None = None
+
+
+class NoiseRows(NamedTuple):
+    """A noise field at positions off the grid (any leading shape ...): ``mean``, ``var``
+    (..., n_t) on the t grid and ``at_t_opt`` (...) Noise at each position's t*(x)."""
+
+    mean: jnp.ndarray
+    var: jnp.ndarray
+    at_t_opt: jnp.ndarray
 
 
 def _nonnegative(a: jnp.ndarray) -> jnp.ndarray:
     return a - jnp.minimum(jnp.min(a), 0.0)
+
+
+def normalise_rows(values: jnp.ndarray) -> jnp.ndarray:
+    """Min-max normalisation of each row (last axis) to [0, 1]; a constant row maps to zeros."""
+    lo, hi = jnp.min(values, axis=-1, keepdims=True), jnp.max(values, axis=-1, keepdims=True)
+    span = hi - lo
+    return jnp.where(span > 0, (values - lo) / jnp.where(span > 0, span, 1.0), 0.0)
 
 
 def _acq_x(post: Posterior, total_var: jnp.ndarray, mean: jnp.ndarray, acq: AcquisitionConfig) -> jnp.ndarray:
@@ -43,19 +70,43 @@ def _acq_x(post: Posterior, total_var: jnp.ndarray, mean: jnp.ndarray, acq: Acqu
     )
 
 
+def _field(post: Posterior) -> bool:
+    return post.noise_mean.ndim == 2
+
+
+def reward_weight(t: jnp.ndarray, noise: jnp.ndarray, rew: RewardConfig) -> jnp.ndarray:
+    """Norm(R)^gamma over the t grid: (n_t,) for one curve, or per row of curves (..., n_t)."""
+    r = reward(t, noise, rew.alpha, rew.beta)
+    return (normalise(r) if noise.ndim == 1 else normalise_rows(r)) ** rew.gamma
+
+
 def reward_driven(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
     """Eq. 6: acq_x(x, t, V[f(x), t]) * Norm(R)^gamma, with V[f(x), t] = V[f(x)] + Noise(t)^2/shots.
 
     An acquisition that can be negative (UCB) is shifted to be non-negative first, so the reward
     weight can only lower a score."""
-    total_var = post.f_var[:, None] + (post.noise_mean**2)[None, :] / shots
+    noise = post.noise_mean if _field(post) else post.noise_mean[None, :]
+    total_var = post.f_var[:, None] + noise**2 / shots
     acq_x = _nonnegative(_acq_x(post, total_var, post.f_mean[:, None], acq))
-    weight = normalise(reward(post.t, post.noise_mean, rew.alpha, rew.beta)) ** rew.gamma
-    return acq_x * weight[None, :]
+    weight = reward_weight(post.t, post.noise_mean, rew)
+    return acq_x * (weight if _field(post) else weight[None, :])
+
+
+def _time_acquisition(post: Posterior, noise: jnp.ndarray, noise_var: jnp.ndarray, rew: RewardConfig,
+                      acq: AcquisitionConfig) -> jnp.ndarray:
+    """EI on the reward normalised over the t grid, per row of noise curves (..., n_t)."""
+    raw = reward(post.t, noise, rew.alpha, rew.beta)
+    span = jnp.max(raw, axis=-1, keepdims=True) - jnp.min(raw, axis=-1, keepdims=True)
+    span = jnp.where(span > 0, span, 1.0)
+    var = rew.beta**2 * noise_var / span**2
+    return expected_improvement(normalise_rows(raw), var, post.reward_best, acq.ei_xi, maximize=True)
 
 
 def time_acquisition(post: Posterior, acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
-    """acq_t(t): EI on the normalised reward; Var[R] = beta^2 Var[Noise], rescaled like R. (n_t,)"""
+    """acq_t(t): EI on the normalised reward; Var[R] = beta^2 Var[Noise], rescaled like R.
+    (n_t,), or (n_x, n_t) for a noise field (the reward normalised at each x)."""
+    if _field(post):
+        return _time_acquisition(post, post.noise_mean, post.noise_var, rew, acq)
     raw = reward(post.t, post.noise_mean, rew.alpha, rew.beta)
     span = jnp.max(raw) - jnp.min(raw)
     span = jnp.where(span > 0, span, 1.0)
@@ -64,11 +115,12 @@ def time_acquisition(post: Posterior, acq: AcquisitionConfig, rew: RewardConfig)
 
 
 def double_acquisition(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
-    """Section 2.2.4: (Norm(acq_t) + Norm(acq_x)) / 2, acq_x from V[f(x), t_opt] across all t."""
+    """Section 2.2.4: (Norm(acq_t) + Norm(acq_x)) / 2, acq_x from V[f(x), t_opt] across all t
+    (for a noise field, V[f(x)] + Noise(x, t*(x))^2 / shots)."""
     total_var = post.f_var + post.noise_at_t_opt**2 / shots
     acq_x = normalise(_acq_x(post, total_var, post.f_mean, acq))
     acq_t = normalise(time_acquisition(post, acq, rew))
-    return 0.5 * (acq_x[:, None] + acq_t[None, :])
+    return 0.5 * (acq_x[:, None] + (acq_t if _field(post) else acq_t[None, :]))
 
 
 def acquisition_map(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
@@ -78,22 +130,40 @@ def acquisition_map(post: Posterior, shots: int, acq: AcquisitionConfig, rew: Re
     return double_acquisition(post, shots, acq, rew)
 
 
+def _at(rows: jnp.ndarray, j: jnp.ndarray) -> jnp.ndarray:
+    """rows (..., n_t) at the t index j (...): (...)."""
+    return jnp.take_along_axis(rows, j[..., None], axis=-1)[..., 0]
+
+
 def point_scores(post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.ndarray, shots,
-                 acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
+                 acq: AcquisitionConfig, rew: RewardConfig, noise: NoiseRows | None = None) -> jnp.ndarray:
     """The configured policy's score at points off the x grid: latent f ``mean`` and ``var``
-    (any shape) at each point, paired with the t-grid index ``j`` (same shape). Shifts and
-    normalisers are the ones ``acquisition_map`` takes from the grid in ``post``, so at a grid
-    point the score equals its map entry."""
+    (any shape) at each point, paired with the t-grid index ``j`` (same shape); for a noise
+    field, ``noise`` at the points. Shifts and normalisers are the ones ``acquisition_map`` takes
+    from the grid in ``post``, so at a grid point the score equals its map entry."""
+    if _field(post) and noise is None:
+        raise ValueError("a noise field's scores need the noise at the points")
     if acq.policy == "reward":
-        grid_var = post.f_var[:, None] + (post.noise_mean**2)[None, :] / shots
+        grid_noise = post.noise_mean if _field(post) else post.noise_mean[None, :]
+        grid_var = post.f_var[:, None] + grid_noise**2 / shots
         shift = jnp.minimum(jnp.min(_acq_x(post, grid_var, post.f_mean[:, None], acq)), 0.0)
-        weight = normalise(reward(post.t, post.noise_mean, rew.alpha, rew.beta)) ** rew.gamma
-        return (_acq_x(post, var + post.noise_mean[j] ** 2 / shots, mean, acq) - shift) * weight[j]
+        if _field(post):
+            here_noise, weight = _at(noise.mean, j), _at(reward_weight(post.t, noise.mean, rew), j)
+        else:
+            here_noise, weight = post.noise_mean[j], reward_weight(post.t, post.noise_mean, rew)[j]
+        return (_acq_x(post, var + here_noise**2 / shots, mean, acq) - shift) * weight
     grid = _acq_x(post, post.f_var + post.noise_at_t_opt**2 / shots, post.f_mean, acq)
     lo, span = jnp.min(grid), jnp.max(grid) - jnp.min(grid)
-    here = _acq_x(post, var + post.noise_at_t_opt**2 / shots, mean, acq)
+    at_t_opt = noise.at_t_opt if _field(post) else post.noise_at_t_opt
+    here = _acq_x(post, var + at_t_opt**2 / shots, mean, acq)
     x_part = jnp.where(span > 0, (here - lo) / jnp.where(span > 0, span, 1.0), 0.0)
-    return 0.5 * (x_part + normalise(time_acquisition(post, acq, rew))[j])
+    if not _field(post):
+        return 0.5 * (x_part + normalise(time_acquisition(post, acq, rew))[j])
+    grid_t = time_acquisition(post, acq, rew)
+    t_lo, t_span = jnp.min(grid_t), jnp.max(grid_t) - jnp.min(grid_t)
+    here_t = _at(_time_acquisition(post, noise.mean, noise.var, rew, acq), j)
+    t_part = jnp.where(t_span > 0, (here_t - t_lo) / jnp.where(t_span > 0, t_span, 1.0), 0.0)
+    return 0.5 * (x_part + t_part)
 
 
 def argmax_2d(values: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:

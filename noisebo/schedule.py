@@ -36,6 +36,17 @@ def converged(t_opt_history: Sequence[float], window: int, threshold: float) -> 
     return float(np.var(np.asarray(t_opt_history[-window:], dtype=np.float64))) < threshold
 
 
+def converged_map(t_opt_maps: Sequence[np.ndarray], window: int, threshold: float) -> bool:
+    """The rule for an optimal time per position t*(x) (maps (m,) per step): True when the
+    population variance over the last ``window`` maps, averaged over the positions, is below
+    ``threshold``; never before ``window`` maps exist. Maps that are constant over x give the
+    paper's rule (``converged``) on that constant."""
+    if len(t_opt_maps) < window:
+        return False
+    recent = np.stack([np.asarray(m, dtype=np.float64) for m in t_opt_maps[-window:]])
+    return float(np.mean(np.var(recent, axis=0))) < threshold
+
+
 def first_converged_step(t_opt_history: Sequence[float], window: int, threshold: float) -> int | None:
     """The first 0-based BO step at which the rule holds, or None."""
     for step in range(len(t_opt_history)):

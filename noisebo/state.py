@@ -39,22 +39,26 @@ class Point:
 
 @dataclass(frozen=True)
 class CampaignState:
-    """Points in measurement order (seed points first), the predicted optimal t of each BO step,
-    and the first BO step at which the noise model converged (None until it does)."""
+    """Points in measurement order (seed points first), the predicted optimal t of each BO step
+    (with a noise field, also its t*(x) on the reference points, (m,) per step), and the first
+    BO step at which the noise model converged (None until it does)."""
 
     points: tuple[Point, ...] = ()
     t_opt_history: tuple[float, ...] = ()
     converged_step: int | None = None
+    t_opt_maps: tuple[np.ndarray, ...] = ()
 
     def with_point(self, point: Point) -> CampaignState:
         return replace(self, points=self.points + (point,))
 
-    def with_t_opt(self, t_opt: float, is_converged: bool) -> CampaignState:
+    def with_t_opt(self, t_opt: float, is_converged: bool, t_opt_map: np.ndarray | None = None) -> CampaignState:
         step = len(self.t_opt_history)
         converged_step = self.converged_step
         if converged_step is None and is_converged:
             converged_step = step
-        return replace(self, t_opt_history=self.t_opt_history + (float(t_opt),), converged_step=converged_step)
+        maps = self.t_opt_maps if t_opt_map is None else self.t_opt_maps + (t_opt_map,)
+        return replace(self, t_opt_history=self.t_opt_history + (float(t_opt),), converged_step=converged_step,
+                       t_opt_maps=maps)
 
     @property
     def is_converged(self) -> bool:

@@ -78,6 +78,7 @@ ARRAY_COLUMNS = {
     "f_var": ("f units^2", "variance of predicted f on the x grid"),
     "noise_mean": ("f units", "predicted single-shot noise sd on the t grid"),
     "noise_var": ("f units^2", "variance of the predicted noise sd on the t grid"),
+    "t_opt_map": ("s", "predicted optimal t at each x of grid/x (a noise field's campaigns only)"),
 }
 
 
@@ -90,11 +91,13 @@ def column_dtype(name: str, units: str) -> np.dtype:
 
 def array_shapes(state: EngineState) -> dict[str, tuple[int, ...]]:
     """The per-step array shapes (without the step axis): acq_map (n_x, n_t), f_* (n_x,),
-    noise_* (n_t,); for d > 1 axes, acq_map and f_* are (m,) on the m reference points."""
+    noise_* (n_t,); for d > 1 axes, acq_map and f_* are (m,) on the m reference points. With a
+    noise field, also t_opt_map (m,)."""
     s = state.config.space
     m, n_t = grids(state.config).x.shape[0], s.n_t
     acq = (m, n_t) if s.dimensions == 1 else (m,)
-    return {"acq_map": acq, "f_mean": (m,), "f_var": (m,), "noise_mean": (n_t,), "noise_var": (n_t,)}
+    shapes = {"acq_map": acq, "f_mean": (m,), "f_var": (m,), "noise_mean": (n_t,), "noise_var": (n_t,)}
+    return shapes | ({} if state.config.noise_model.field is None else {"t_opt_map": (m,)})
 
 
 def x_tail(dimensions: int) -> tuple[int, ...]:
@@ -155,6 +158,7 @@ def campaign_tables(state: EngineState) -> dict:
         s = state.summary
         summary = {"f_mean": s.f_mean, "f_var": s.f_var, "noise_fine": s.noise_fine, "t_opt": float(s.t_opt),
                    "hyperparameters": dict(s.hyperparameters)}
+        summary |= {name: getattr(s, name) for name in SUMMARY_MAPS if getattr(s, name).size}
     return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points, d), "steps": steps,
             "shots": shot_columns(state), "summary": summary}
 
@@ -192,6 +196,12 @@ def fill_grid(f: h5py.File, state: EngineState) -> None:
     _put(grid, "t_fine", g.t_fine, "s", "t grid of the predicted optimal t")
 
 
+SUMMARY_MAPS = {  # a noise field's, on grid/x
+    "t_opt_map": ("s", "final predicted optimal t at each x"),
+    "noise_map": ("f units", "final predicted single-shot noise sd at each x at its optimal t"),
+}
+
+
 def fill_summary(f: h5py.File, state: EngineState) -> None:
     """/summary, once the campaign has one."""
     if state.summary is None:
@@ -202,7 +212,10 @@ def fill_summary(f: h5py.File, state: EngineState) -> None:
     summary.attrs["hyperparameters_json"] = json.dumps(dict(s.hyperparameters))
     _put(summary, "f_mean", s.f_mean, "f units", "final predicted f on grid/x")
     _put(summary, "f_var", s.f_var, "f units^2", "its variance")
-    _put(summary, "noise_fine", s.noise_fine, "f units", "final noise sd on grid/t_fine")
+    _put(summary, "noise_fine", s.noise_fine, "f units", "final noise sd on grid/t_fine (averaged over grid/x for a noise field)")
+    for name, (units, description) in SUMMARY_MAPS.items():
+        if getattr(s, name).size:
+            _put(summary, name, getattr(s, name), units, description)
 
 
 def _fill(f: h5py.File, state: EngineState) -> None:
@@ -225,7 +238,8 @@ def _fill(f: h5py.File, state: EngineState) -> None:
     for name, values in tables["steps"]["hyperparameters"].items():
         _put(hyper, name, values, "model units", f"fitted {name} per step (MAP or posterior mean)")
     for name, (units, description) in ARRAY_COLUMNS.items():
-        _put(steps, name, tables["steps"][name], units, description)
+        if name in tables["steps"]:
+            _put(steps, name, tables["steps"][name], units, description)
     fill_summary(f, state)
 
 

@@ -235,7 +235,8 @@ class LiveFile:
             self._add(_column(hyper, name, np.float64, "model units",
                               f"fitted {name} per step (MAP or posterior mean)"))
         for name, (units, description) in ARRAY_COLUMNS.items():
-            self._add(_column(steps, name, array_dtype(name), units, description, self._shapes[name], chunk=1))
+            if name in self._shapes:
+                self._add(_column(steps, name, array_dtype(name), units, description, self._shapes[name], chunk=1))
 
     def _layout_shots_and_failures(self) -> None:
         shots = self._f.create_group("shots")

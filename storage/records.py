@@ -25,8 +25,9 @@ from noisebo.state import Point
 from storage.journal import Record
 
 FIT_NUMBERS = ("amplitude", "amplitude_se", "resonance_hz", "resonance_se", "q", "q_se", "phase_deg", "sign")
-DECISION_ARRAYS = ("acq_map", "f_mean", "f_var", "noise_mean", "noise_var")
-SUMMARY_ARRAYS = ("f_mean", "f_var", "noise_fine")
+DECISION_ARRAYS = ("acq_map", "f_mean", "f_var", "noise_mean", "noise_var", "t_opt_map")
+SUMMARY_ARRAYS = ("f_mean", "f_var", "noise_fine", "t_opt_map", "noise_map")
+FIELD_ARRAYS = ("t_opt_map", "noise_map")  # a noise field's, empty without one (and in older journals)
 POINT_FIELDS = tuple(f.name for f in fields(Point))
 
 
@@ -97,6 +98,11 @@ def _decode_point(f: dict, arrays: dict) -> PointCommitted:
     return PointCommitted(f["index"], f["step"], point, tuple(values))
 
 
+def _arrays(arrays: dict, names: tuple[str, ...]) -> dict:
+    """The named arrays of a record; a noise field's (FIELD_ARRAYS) empty where it has none."""
+    return {k: arrays[k] if k in arrays or k not in FIELD_ARRAYS else np.zeros(0) for k in names}
+
+
 def decode(record: Record) -> Event:
     """The event of one journal record; ``CorruptJournal`` for a record that is not one."""
     f, a = record.fields, record.arrays
@@ -114,10 +120,10 @@ def decode(record: Record) -> Event:
         if record.type == "point":
             return _decode_point(f, a)
         if record.type == "decision":
-            return Decided(Decision(**f, **{k: a[k] for k in DECISION_ARRAYS}))
+            return Decided(Decision(**f, **_arrays(a, DECISION_ARRAYS)))
         if record.type == "summary":
             return Summarised(Summary(t_opt=f["t_opt"], hyperparameters=f["hyperparameters"],
-                                      **{k: a[k] for k in SUMMARY_ARRAYS}))
+                                      **_arrays(a, SUMMARY_ARRAYS)))
         if record.type == "status":
             return StatusChanged(Status(f["status"]), f["reason"])
     except (KeyError, TypeError, ValueError) as error:

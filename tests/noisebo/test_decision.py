@@ -87,3 +87,21 @@ def test_compiled_ahead_the_crossing_compiles_nothing():
     crossed, _ = decision.decide(config, after, 0, 1, first.hyperparameters)
     assert (capacity_for(crossed.primary_inputs), capacity_for(crossed.noise_inputs)) == capacities
     assert compile_count() == before_count
+
+
+def test_two_axes_compiled_ahead_the_first_decision_compiles_nothing():
+    """The refinement over the area is compiled ahead too (with the fits and the prediction)."""
+    config = CampaignConfig(space={"axes": [{"name": "u", "low": 0, "high": 1, "n": 10},
+                                            {"name": "v", "low": -1, "high": 1, "n": 8}], "n_t": 12},
+                            primary_model={"length_scale": 0.55})
+    rng = np.random.default_rng(2)
+    state = CampaignState()
+    for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(decision.grids(config).t, 5)):
+        sd = 2.0 / np.sqrt(t) + 0.1
+        shots = np.sin(3 * x[0]) * x[1] + sd * rng.standard_normal(10)
+        std = float(shots.std(ddof=1))
+        state = state.with_point(Point(tuple(x), float(t), float(shots.mean()), std, 10, std, True))
+    decision.compile_ahead(config, state, None, decision.capacities_needed(config, state))
+    before_count = compile_count()
+    made, _ = decision.decide(config, state, 0, 0)
+    assert compile_count() == before_count and len(made.x) == 2

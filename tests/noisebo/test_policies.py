@@ -71,3 +71,61 @@ def test_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
     if f_acquisition == "ue":
         assert np.all(np.asarray(point_scores(post, jnp.zeros(3), jnp.full(3, 5.0), jnp.arange(3), 3, acq, REWARD))
                       >= values[1] - 1e-12)
+
+
+# --- a noise field: a noise curve per position ------------------------------------------------
+
+FIELD_POST = POST._replace(noise_mean=jnp.array([[3.0, 1.0, 2.0], [1.0, 1.0, 1.0]]),
+                           noise_var=jnp.array([[0.0, 0.0, 4.0], [1.0, 1.0, 1.0]]),
+                           noise_at_t_opt=jnp.array([1.0, 1.0]), t_opt_map=jnp.array([1.0, 0.5]))
+
+
+@pytest.mark.parametrize("policy", ["reward", "double"])
+@pytest.mark.parametrize("f_acq", ["ue", "ei", "ucb"])
+def test_the_same_curve_at_every_position_gives_the_papers_map(policy, f_acq):
+    acq = AcquisitionConfig(policy=policy, f_acquisition=f_acq)
+    rows = POST._replace(noise_mean=jnp.stack([POST.noise_mean] * 2), noise_var=jnp.stack([POST.noise_var] * 2),
+                         noise_at_t_opt=jnp.full(2, POST.noise_at_t_opt), t_opt_map=jnp.full(2, 1.0))
+    np.testing.assert_allclose(np.asarray(acquisition_map(rows, 3, acq, REWARD)),
+                               np.asarray(acquisition_map(POST, 3, acq, REWARD)), rtol=1e-12)
+
+
+def test_reward_driven_field_by_hand():
+    # Row 0 is POST's curve (weights 0, 1, 0.32468); row 1 has Noise = 1 at every t, so
+    # R = -0.1 t^2 - 1 = (-1.025, -1.1, -1.4): Norm = (1, 0.8, 0): its best t is the shortest.
+    values = np.asarray(reward_driven(FIELD_POST, 1, AcquisitionConfig(policy="reward"), REWARD))
+    w = np.array([[0.0, 1.0, 0.625 / 1.925], [1.0, 0.3 / 0.375, 0.0]])
+    expected = np.array([[10.0, 2.0, 5.0], [3.0, 3.0, 3.0]]) * w
+    np.testing.assert_allclose(values, expected, rtol=1e-10)
+    assert tuple(int(v) for v in argmax_2d(jnp.asarray(values))) == (1, 0)
+
+
+def test_double_field_by_hand():
+    values = np.asarray(double_acquisition(FIELD_POST, 1, AcquisitionConfig(policy="double", ei_xi=0.0), REWARD))
+    # acq_x from V[f(x)] + Noise(x, t*(x))^2 = (2, 3): Norm (0, 1). acq_t per row: EI of the row's
+    # normalised reward over the incumbent 0.9, with var = Noise var / span^2 (span 1.925, 0.375):
+    # row 0 as test_double_acquisition_by_hand (0, 0.1, 0.1887965); row 1: Norm R = (1, 0.8, 0),
+    # sd = 1 / 0.375 = 2.6667 at every t.
+    from scipy.stats import norm
+
+    sd = 1 / 0.375
+    row1 = [(m - 0.9) * norm.cdf((m - 0.9) / sd) + sd * norm.pdf((m - 0.9) / sd) for m in (1.0, 0.8, 0.0)]
+    acq_t = np.array([[0.0, 0.1, 0.1887965], row1])
+    acq_t = (acq_t - acq_t.min()) / (acq_t.max() - acq_t.min())  # normalised over the whole map
+    np.testing.assert_allclose(values, 0.5 * (np.array([0.0, 1.0])[:, None] + acq_t), atol=1e-6)
+
+
+@pytest.mark.parametrize("policy, f_acquisition", [("reward", "ue"), ("reward", "ucb"), ("double", "ue"),
+                                                   ("double", "ei")])
+def test_field_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
+    from noisebo.policies import NoiseRows, point_scores
+
+    acq = AcquisitionConfig(policy=policy, f_acquisition=f_acquisition)
+    post = FIELD_POST._replace(f_mean=jnp.array([-1.0, 0.5]))
+    values = np.asarray(acquisition_map(post, 3, acq, REWARD))
+    i, j = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
+    rows = NoiseRows(post.noise_mean[i], post.noise_var[i], post.noise_at_t_opt[i])
+    scores = point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD, rows)
+    np.testing.assert_allclose(np.asarray(scores), values, rtol=1e-12, atol=1e-15)
+    with pytest.raises(ValueError, match="need the noise at the points"):
+        point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD)
