@@ -3,7 +3,7 @@
 
     python3 dev.py run [ARGS...]   # a default Forrester campaign through the Prefect flow, into
                                    # data/runs/<time>/ (extra ARGS go to `noisebo run`)
-    python3 dev.py test [ARGS...]  # the test suite (extra ARGS go to pytest)
+    python3 dev.py test [ARGS...]  # the test suite, on up to 4 cores (extra ARGS go to pytest; -n 0: one process)
     python3 dev.py bench [ARGS...] # the Forrester benchmark (extra ARGS go to benchmarks/forrester.py)
 
 The first call creates .venv/ beside this file and installs the package with its pinned
@@ -53,6 +53,13 @@ def environment() -> dict[str, str]:
     return env
 
 
+def parallel(pytest_args: list[str]) -> list[str]:
+    """pytest-xdist options: one worker per core up to 4 (each test file stays on one worker, so
+    module fixtures run once), unless the arguments choose (-n, --numprocesses, -p no:xdist)."""
+    chosen = any(a == "-n" or a.startswith(("-n", "--numprocesses")) or a == "no:xdist" for a in pytest_args)
+    return [] if chosen else ["-n", str(max(1, min(4, os.cpu_count() or 1))), "--dist", "loadfile"]
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0] not in {"run", "test", "bench"}:
         print(__doc__, file=sys.stderr)
@@ -66,7 +73,7 @@ def main(argv: list[str]) -> int:
             stamp = time.strftime("%Y%m%d-%H%M%S")
             args += ["--out", str(ROOT / "data" / "runs" / stamp)]
     elif command == "test":
-        args = [python, "-m", "pytest", *rest]
+        args = [python, "-m", "pytest", *parallel(rest), *rest]
     else:
         args = [python, str(ROOT / "benchmarks" / "forrester.py"), *rest]
     return subprocess.run(args, cwd=ROOT, env=environment()).returncode

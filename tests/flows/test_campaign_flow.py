@@ -54,7 +54,8 @@ def test_file_layout_is_readable_with_plain_h5py(finished):
     with h5py.File(finished, "r") as f:
         assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 2
         assert json.loads(f.attrs["driver_json"]) == {"name": "forrester", "version": "0.1.0",
-                                                      "settings": {"a0": 0.1, "a1": 2.0, "seed": 0}}
+                                                      "settings": {"a0": 0.1, "a1": 2.0, "law": "inv_sqrt", "patch_a0": 0.0,
+                                                                   "patch_x": 0.5, "patch_width": 0.05, "seed": 0}}
         assert f["steps/acq_map"].shape == (4, 40, 30)
         assert f["steps/t_opt"].attrs["units"] == "s"
         assert set(json.loads(f.attrs["versions_json"])) >= {"python", "jax", "numpyro", "h5py", "prefect"}
