@@ -302,6 +302,14 @@ def inspect_summary(path: Path) -> dict:
             "t_opt": t_opt.get(step),
         })
     converged = int(attrs["converged_step"])
+    summary = data["summary"] or {}
+    field = None
+    if np.size(summary.get("t_opt_map", ())):
+        t_map, noise_map = np.asarray(summary["t_opt_map"]), np.asarray(summary["noise_map"])
+        field = {"t_opt_min": float(t_map.min()), "t_opt_median": float(np.median(t_map)),
+                 "t_opt_max": float(t_map.max()), "noise_at_t_opt_min": float(noise_map.min()),
+                 "noise_at_t_opt_max": float(noise_map.max()),
+                 "x_at_shortest_t_opt": as_position(data["grid"]["x"][int(np.argmin(t_map))])}
     return {
         "file": str(path),
         "status": attrs["status"],
@@ -313,6 +321,7 @@ def inspect_summary(path: Path) -> dict:
         "config": attrs["config"],
         "first_converged_step": None if converged < 0 else converged,
         "final_t_opt": None if data["summary"] is None else data["summary"]["t_opt"],
+        "noise_field": field,
         "n_shots": int(attrs["n_shots"]),
         "measurement_time_s": float(sum(data["shots"]["t"])),
         "points": rows,
@@ -336,6 +345,12 @@ def _inspect(args) -> int:
     print(f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
           f"noise model {'not converged' if conv is None else f'converged at step {conv + 1}'}; "
           f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s")
+    field = summary["noise_field"]
+    if field is not None:
+        print(f"  noise field: optimal t per position from {field['t_opt_min']:.4g} s (at x = "
+              f"{format_position(field['x_at_shortest_t_opt'])}) to {field['t_opt_max']:.4g} s, median "
+              f"{field['t_opt_median']:.4g} s; single-shot noise there from {field['noise_at_t_opt_min']:.3g} to "
+              f"{field['noise_at_t_opt_max']:.3g}")
     print(f"  {'step':>5} {'x':>{x_width}} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
     for row in summary["points"]:
         step = "seed" if row["step"] is None else str(row["step"] + 1)

@@ -316,9 +316,9 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
         i, j = flat // n_t, flat % n_t
         std = fitted.standardisation
 
-        def noise_rows(flat):  # (n, d) scaled -> NoiseRows (n, ...)
+        def noise_rows(flat):  # (n, d) scaled -> NoiseRows (n, n_t)
             rows = field_rows(field_kind, space, rew, fitted, flat)
-            return NoiseRows(rows.mean, rows.var, rows.at_t_opt)
+            return NoiseRows(rows.mean, rows.var)
 
         def score(candidates):  # (K, P, d) scaled -> (K, P)
             k, p, d = candidates.shape
@@ -331,8 +331,7 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
             noise = None
             if field_kind is not None:
                 rows = noise_rows(flat)
-                noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t),
-                                  rows.at_t_opt.reshape(k, p))
+                noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t))
             return point_scores(post, raw_mean.reshape(k, p), raw_var.reshape(k, p),
                                 jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew, noise)
 

@@ -6,11 +6,16 @@ deviation; ``shots`` is how many shots the next point will get, so the measureme
 t is Noise(t)^2 / shots (Eq. 4).
 
 Noise that depends on x (``noise_model.field``): the posterior's noise is then a curve per
-position, (n_x, n_t), and its optimal time t*(x) one per position. Each policy uses the noise at
-the x it scores: the reward is normalised over t at each position (so the weight is 1 at that
-position's t*(x)), the double policy's acq_x uses Noise(x, t*(x)), and its acq_t is normalised
-over the whole (x, t) map, so it still prefers positions where the reward is uncertain. With
-the same curve at every position each reduces to the paper's policy.
+position, (n_x, n_t), and its optimal time t*(x) one per position. Each policy chooses t with
+the noise at the x it scores: the reward is normalised over t at each position, so its weight is
+1 at that position's t*(x), and the double policy's acq_t is EI on that per-position reward,
+normalised over the whole (x, t) map (it still prefers positions where the reward is uncertain).
+Where to measure stays a matter of f: the measurement-noise term of acq_x's variance is the noise
+averaged over the positions (at t; for the double policy at t_opt), not the position's own. With
+the position's own, UE and EI score a noisy position high for its noise alone, and a campaign
+returns to a noisy patch long after f is known there (seen on a Forrester patch 5x noisier than
+the rest: the last 5 of 20 points at the patch). With the same curve at every position each
+policy is the paper's.
 """
 
 from __future__ import annotations
@@ -46,11 +51,10 @@ class Posterior(NamedTuple):
 
 class NoiseRows(NamedTuple):
     """A noise field at positions off the grid (any leading shape ...): ``mean``, ``var``
-    (..., n_t) on the t grid and ``at_t_opt`` (...) Noise at each position's t*(x)."""
+    (..., n_t) on the t grid."""
 
     mean: jnp.ndarray
     var: jnp.ndarray
-    at_t_opt: jnp.ndarray
 
 
 def _nonnegative(a: jnp.ndarray) -> jnp.ndarray:
@@ -80,12 +84,24 @@ def reward_weight(t: jnp.ndarray, noise: jnp.ndarray, rew: RewardConfig) -> jnp.
     return (normalise(r) if noise.ndim == 1 else normalise_rows(r)) ** rew.gamma
 
 
+def typical_noise(post: Posterior) -> jnp.ndarray:
+    """The measurement noise acq_x's variance uses over the t grid, (n_t,): the noise curve, or
+    for a noise field its average over the positions."""
+    return jnp.mean(post.noise_mean, axis=0) if _field(post) else post.noise_mean
+
+
+def typical_noise_at_t_opt(post: Posterior) -> jnp.ndarray:
+    """The double policy's counterpart: Noise(t_opt), or for a field the average over the
+    positions of Noise(x, t*(x))."""
+    return jnp.mean(post.noise_at_t_opt) if _field(post) else post.noise_at_t_opt
+
+
 def reward_driven(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
     """Eq. 6: acq_x(x, t, V[f(x), t]) * Norm(R)^gamma, with V[f(x), t] = V[f(x)] + Noise(t)^2/shots.
 
     An acquisition that can be negative (UCB) is shifted to be non-negative first, so the reward
     weight can only lower a score."""
-    noise = post.noise_mean if _field(post) else post.noise_mean[None, :]
+    noise = typical_noise(post)[None, :]
     total_var = post.f_var[:, None] + noise**2 / shots
     acq_x = _nonnegative(_acq_x(post, total_var, post.f_mean[:, None], acq))
     weight = reward_weight(post.t, post.noise_mean, rew)
@@ -115,9 +131,8 @@ def time_acquisition(post: Posterior, acq: AcquisitionConfig, rew: RewardConfig)
 
 
 def double_acquisition(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
-    """Section 2.2.4: (Norm(acq_t) + Norm(acq_x)) / 2, acq_x from V[f(x), t_opt] across all t
-    (for a noise field, V[f(x)] + Noise(x, t*(x))^2 / shots)."""
-    total_var = post.f_var + post.noise_at_t_opt**2 / shots
+    """Section 2.2.4: (Norm(acq_t) + Norm(acq_x)) / 2, acq_x from V[f(x), t_opt] across all t."""
+    total_var = post.f_var + typical_noise_at_t_opt(post) ** 2 / shots
     acq_x = normalise(_acq_x(post, total_var, post.f_mean, acq))
     acq_t = normalise(time_acquisition(post, acq, rew))
     return 0.5 * (acq_x[:, None] + (acq_t if _field(post) else acq_t[None, :]))
@@ -144,17 +159,17 @@ def point_scores(post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.nd
     if _field(post) and noise is None:
         raise ValueError("a noise field's scores need the noise at the points")
     if acq.policy == "reward":
-        grid_noise = post.noise_mean if _field(post) else post.noise_mean[None, :]
-        grid_var = post.f_var[:, None] + grid_noise**2 / shots
+        grid_noise = typical_noise(post)
+        grid_var = post.f_var[:, None] + (grid_noise**2)[None, :] / shots
         shift = jnp.minimum(jnp.min(_acq_x(post, grid_var, post.f_mean[:, None], acq)), 0.0)
         if _field(post):
-            here_noise, weight = _at(noise.mean, j), _at(reward_weight(post.t, noise.mean, rew), j)
+            weight = _at(reward_weight(post.t, noise.mean, rew), j)
         else:
-            here_noise, weight = post.noise_mean[j], reward_weight(post.t, post.noise_mean, rew)[j]
-        return (_acq_x(post, var + here_noise**2 / shots, mean, acq) - shift) * weight
-    grid = _acq_x(post, post.f_var + post.noise_at_t_opt**2 / shots, post.f_mean, acq)
+            weight = reward_weight(post.t, post.noise_mean, rew)[j]
+        return (_acq_x(post, var + grid_noise[j] ** 2 / shots, mean, acq) - shift) * weight
+    at_t_opt = typical_noise_at_t_opt(post)
+    grid = _acq_x(post, post.f_var + at_t_opt**2 / shots, post.f_mean, acq)
     lo, span = jnp.min(grid), jnp.max(grid) - jnp.min(grid)
-    at_t_opt = noise.at_t_opt if _field(post) else post.noise_at_t_opt
     here = _acq_x(post, var + at_t_opt**2 / shots, mean, acq)
     x_part = jnp.where(span > 0, (here - lo) / jnp.where(span > 0, span, 1.0), 0.0)
     if not _field(post):

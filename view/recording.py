@@ -57,6 +57,27 @@ def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[s
         return None, None
 
 
+def true_optimal_map(config: CampaignConfig, instrument=None) -> tuple[np.ndarray, np.ndarray] | None:
+    """A simulator's optimal t at each x of the grid (m,) and its noise there (m,), from its
+    noise at each position (``noise_law_at``) and the configured reward; None for an instrument
+    that does not know it."""
+    try:
+        if instrument is None:
+            from instruments import build
+
+            instrument = build(config.instrument)
+        if not hasattr(instrument, "noise_law_at"):
+            return None
+        s, rew = config.space, config.reward
+        x = grids(config).x
+        t = grids(config).t_fine
+        noise = np.asarray(instrument.noise_law_at(x.reshape(len(x), -1), t), dtype=np.float64)
+        best = np.argmax(-rew.alpha * t[None, :] ** 2 - rew.beta * noise, axis=1)
+        return t[best], noise[np.arange(len(best)), best]
+    except Exception:  # noqa: BLE001 - as instrument_curves: no truth where the instrument cannot give it
+        return None
+
+
 class _PerStep:
     """One per-step array column (acq_map, f_mean, ...) of a running campaign, read a step at a
     time (as ``frame_at`` does) without stacking every step's array anew for each frame."""

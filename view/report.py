@@ -21,7 +21,7 @@ from noisebo.reward import true_optimal_t
 from noisebo.state import format_position
 from storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits
 from view.area import axis_labels, draw_image
-from view.recording import instrument_curves, last_sweep
+from view.recording import instrument_curves, last_sweep, true_optimal_map
 from view.style import step_colours
 
 DPI = 130
@@ -57,20 +57,26 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     steps = np.asarray(data["points"]["step"]) + 1  # 0 = seed point
     colours = step_colours(steps, config.schedule.n_steps)
+    field = _t_map(data) is not None
     if config.space.dimensions == 1:
-        fig = Figure(figsize=(12, 8.5), layout="constrained")
-        (ax_map, ax_t), (ax_f, ax_noise) = fig.subplots(2, 2)
-        _trajectory(ax_map, data, config, colours)
-        _t_opt(ax_t, data, config, law)
-        _f(ax_f, data, config, truth, colours)
-        _noise(ax_noise, data, config, law, colours)
+        fig = Figure(figsize=(12, 12.5 if field else 8.5), layout="constrained")
+        axes = fig.subplots(3 if field else 2, 2)
+        _trajectory(axes[0, 0], data, config, colours)
+        _t_opt(axes[0, 1], data, config, law)
+        _f(axes[1, 0], data, config, truth, colours)
+        _noise(axes[1, 1], data, config, law, colours)
+        if field:
+            _field_lines(axes[2], data, config, true_optimal_map(config) if truth is not None else None)
     else:
         fig = Figure(figsize=(16, 9), layout="constrained")
         axes = fig.subplots(2, 3)
         _area_panels(axes[0], data, config, truth)
         _t_opt(axes[1, 0], data, config, law)
         _noise(axes[1, 1], data, config, law, colours)
-        _points_by_value(axes[1, 2], data, config)
+        if field and config.space.dimensions == 2:
+            _t_map_image(axes[1, 2], data, config)
+        else:
+            _points_by_value(axes[1, 2], data, config)
     a = data["attrs"]
     fig.suptitle(f"{a['name']}: seed {a['seed']}, {a['policy']} policy, {a['n_points']} points "
                  f"({a['status']})", fontsize=13)
@@ -111,6 +117,47 @@ def _area_panels(axes, data: dict, config: CampaignConfig, truth) -> None:
     elif len(data["steps"]["acq_map"]):
         draw_image(axes[2], data["steps"]["acq_map"][-1], config, "last acquisition (best over t)", "1",
                    cmap="Greys", points=xy, point_colours="tab:red")
+
+
+def _t_map(data: dict) -> np.ndarray | None:
+    """A noise field's t*(x) on the grid: the final model's, else the last decision's; None
+    for an x-independent noise model."""
+    summary = data["summary"]
+    if summary is not None and np.size(summary.get("t_opt_map", ())):
+        return np.asarray(summary["t_opt_map"], dtype=np.float64)
+    maps = data["steps"].get("t_opt_map")
+    return np.asarray(maps[-1], dtype=np.float64) if maps is not None and len(maps) else None
+
+
+def _field_lines(axes, data: dict, config: CampaignConfig, truth) -> None:
+    """One axis, a noise field: t*(x), and the single-shot noise at it, against the simulator's."""
+    x_label, f_label = _units(config)
+    x, p = data["grid"]["x"], data["points"]
+    t_map = _t_map(data)
+    axes[0].plot(x, t_map, color="tab:blue", label="predicted t*(x)")
+    if truth is not None:
+        axes[0].plot(x, truth[0], color="k", lw=1.2, ls="--", label="the simulator's t*(x)")
+    axes[0].scatter(p["x"], p["t"], s=14, color="0.4", zorder=3, label="measured (x, t)")
+    axes[0].set(xlabel=x_label, ylabel="optimal t (s)", title="optimal time per position (noise field)")
+    axes[0].legend(fontsize=8)
+    summary = data["summary"]
+    if summary is not None and np.size(summary.get("noise_map", ())):
+        axes[1].plot(x, summary["noise_map"], color="tab:red", label="predicted Noise(x, t*(x))")
+    if truth is not None:
+        axes[1].plot(x, truth[1], color="k", lw=1.2, ls="--", label="the simulator's, at its t*(x)")
+    measured = np.asarray(p["noise_measured"], dtype=bool) & np.isfinite(p["shot_std"])
+    axes[1].scatter(p["x"][measured], p["shot_std"][measured], s=16, color="0.3", zorder=3,
+                    label="measured single-shot sd (at the point's t)")
+    axes[1].set(xlabel=x_label, ylabel=f"single-shot noise sd ({f_label})", title="noise per position",
+                ylim=(0, None))
+    axes[1].legend(fontsize=8)
+
+
+def _t_map_image(ax, data: dict, config: CampaignConfig) -> None:
+    p = data["points"]
+    xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), -1)
+    draw_image(ax, _t_map(data), config, "optimal t per position (noise field); points", "t*(x) (s)",
+               cmap="cividis", points=xy, point_colours="w")
 
 
 def _points_by_value(ax, data: dict, config: CampaignConfig) -> None:

@@ -77,7 +77,7 @@ def test_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
 
 FIELD_POST = POST._replace(noise_mean=jnp.array([[3.0, 1.0, 2.0], [1.0, 1.0, 1.0]]),
                            noise_var=jnp.array([[0.0, 0.0, 4.0], [1.0, 1.0, 1.0]]),
-                           noise_at_t_opt=jnp.array([1.0, 1.0]), t_opt_map=jnp.array([1.0, 0.5]))
+                           noise_at_t_opt=jnp.array([1.5, 0.5]), t_opt_map=jnp.array([1.0, 0.5]))
 
 
 @pytest.mark.parametrize("policy", ["reward", "double"])
@@ -93,16 +93,17 @@ def test_the_same_curve_at_every_position_gives_the_papers_map(policy, f_acq):
 def test_reward_driven_field_by_hand():
     # Row 0 is POST's curve (weights 0, 1, 0.32468); row 1 has Noise = 1 at every t, so
     # R = -0.1 t^2 - 1 = (-1.025, -1.1, -1.4): Norm = (1, 0.8, 0): its best t is the shortest.
+    # acq_x's noise term is the rows' average, (2, 1, 1.5): V = f_var + (4, 1, 2.25).
     values = np.asarray(reward_driven(FIELD_POST, 1, AcquisitionConfig(policy="reward"), REWARD))
     w = np.array([[0.0, 1.0, 0.625 / 1.925], [1.0, 0.3 / 0.375, 0.0]])
-    expected = np.array([[10.0, 2.0, 5.0], [3.0, 3.0, 3.0]]) * w
+    expected = np.array([[5.0, 2.0, 3.25], [6.0, 3.0, 4.25]]) * w
     np.testing.assert_allclose(values, expected, rtol=1e-10)
     assert tuple(int(v) for v in argmax_2d(jnp.asarray(values))) == (1, 0)
 
 
 def test_double_field_by_hand():
     values = np.asarray(double_acquisition(FIELD_POST, 1, AcquisitionConfig(policy="double", ei_xi=0.0), REWARD))
-    # acq_x from V[f(x)] + Noise(x, t*(x))^2 = (2, 3): Norm (0, 1). acq_t per row: EI of the row's
+    # acq_x from V[f(x)] + the rows' mean Noise(x, t*(x))^2 = (2, 3): Norm (0, 1). acq_t per row: EI of the row's
     # normalised reward over the incumbent 0.9, with var = Noise var / span^2 (span 1.925, 0.375):
     # row 0 as test_double_acquisition_by_hand (0, 0.1, 0.1887965); row 1: Norm R = (1, 0.8, 0),
     # sd = 1 / 0.375 = 2.6667 at every t.
@@ -124,8 +125,19 @@ def test_field_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
     post = FIELD_POST._replace(f_mean=jnp.array([-1.0, 0.5]))
     values = np.asarray(acquisition_map(post, 3, acq, REWARD))
     i, j = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
-    rows = NoiseRows(post.noise_mean[i], post.noise_var[i], post.noise_at_t_opt[i])
+    rows = NoiseRows(post.noise_mean[i], post.noise_var[i])
     scores = point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD, rows)
     np.testing.assert_allclose(np.asarray(scores), values, rtol=1e-12, atol=1e-15)
     with pytest.raises(ValueError, match="need the noise at the points"):
         point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD)
+
+
+@pytest.mark.parametrize("policy", ["reward", "double"])
+def test_a_noisy_position_is_not_chosen_for_its_noise_alone(policy):
+    # Position 0 is ten times noisier, position 1 has the larger f variance: UE on the position's
+    # own measurement variance would pick 0 (100 / 3 + 1 against 1 / 3 + 2); where to measure is
+    # chosen by f, so 1.
+    post = FIELD_POST._replace(noise_mean=jnp.array([[10.0, 10.0, 10.0], [1.0, 1.2, 1.5]]),
+                               noise_var=jnp.zeros((2, 3)), noise_at_t_opt=jnp.array([10.0, 1.0]))
+    values = acquisition_map(post, 3, AcquisitionConfig(policy=policy), REWARD)
+    assert int(argmax_2d(values)[0]) == 1
