@@ -3,6 +3,7 @@ configuration: unknown kind, settings the driver refuses, a driver that cannot l
 campaign whose driver is not installed."""
 
 import textwrap
+from pathlib import Path
 
 import numpy as np
 
@@ -10,7 +11,8 @@ import pytest
 
 from flows.campaign import InstrumentUnavailable, campaign, opened
 from instruments import registry
-from noisebo.config import CampaignConfig, ConfigError
+from instruments.registry import validated
+from noisebo.config import CampaignConfig, ConfigError, load_config
 
 DRIVERS = {
     "lamp": '''
@@ -193,3 +195,10 @@ def test_a_space_the_simulator_cannot_measure_is_a_config_error(overrides, messa
     with pytest.raises(ConfigError) as info:
         registry.validated(CampaignConfig().with_overrides(**overrides))
     assert message in str(info.value)
+
+
+@pytest.mark.parametrize("path", sorted(Path("data/configs").glob("*.yaml")), ids=lambda p: p.name)
+def test_every_shipped_config_is_valid_for_its_driver(path):
+    config = validated(load_config(path), str(path))
+    if config.noise_model.field is not None:  # a field's configs pair their seeds: at least two pairs
+        assert config.schedule.n_seed >= 4
