@@ -1,14 +1,16 @@
 """The paper's Forrester protocol over many seeds: convergence, accuracy, cost and latency.
 
     python benchmarks/forrester.py [--config PATH] [--policy reward|double|both] [--seeds N]
-                                   [--first-seed S] [--json PATH]
+                                   [--first-seed S] [--set SECTION.KEY=VALUE ...] [--json PATH]
 
 Prints one table row per policy. Convergence is the paper's rule (variance of the predicted
 optimal t over the last `window` BO steps below `threshold`); "within 10" counts campaigns whose
 first converged BO step (0-based) is at most 9. t* is computed numerically from the instrument's
 true noise law and the configured reward. Latency is the decision time per BO step (both fits,
 prediction and acquisition). "recompiles" counts XLA compilations after each campaign's first BO
-step: with fixed-capacity padding it must be 0.
+step: with fixed-capacity padding it must be 0. ``--set`` overrides config keys (values read as
+YAML), e.g. the paper's other protocols: ``--set acquisition.f_acquisition=ei`` (its Fig. S2) and
+``--set schedule.shots_after=5`` (Fig. S3).
 """
 
 from __future__ import annotations
@@ -32,6 +34,30 @@ from noisebo.diagnostics import compile_count  # noqa: E402
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table  # noqa: E402
 from noisebo.reward import true_optimal_t  # noqa: E402
 
+def with_overrides(config, assignments: list[str]):
+    """The config with SECTION.KEY=VALUE overrides (values read as YAML)."""
+    import yaml
+
+    for item in assignments:
+        key, sep, text = item.partition("=")
+        section, dot, name = key.partition(".")
+        if not sep or not dot or not name:
+            raise SystemExit(f"--set {item!r}: expected SECTION.KEY=VALUE")
+        config = config.with_overrides(**{section: {name: yaml.safe_load(text)}})
+    return config
+
+
+def regret(config, instrument, f_mean) -> float:
+    """How far the final model's best point is from the best of f (EI and UCB look for it):
+    |f(x_hat) - f*|, x_hat the grid point with the best predicted mean, f* the best of the truth
+    on the grid."""
+    x = grids(config).x
+    x = x[:, None] if x.ndim == 1 else x
+    truth = np.asarray(instrument.truth(x), dtype=np.float64)
+    pick = np.argmax if config.acquisition.maximize else np.argmin
+    return float(abs(truth[int(pick(f_mean))] - truth[int(pick(truth))]))
+
+
 def run_one(config, instrument, seed: int) -> dict:
     compiles = {"after_first": None}
     before = compile_count()
@@ -49,6 +75,7 @@ def run_one(config, instrument, seed: int) -> dict:
         result.summary.f_mean, [p.t for p in points for _ in range(p.n_shots)], result.latencies_s,
     )
     after_first = compiles["after_first"]
+    record["regret"] = regret(config, instrument, result.summary.f_mean)
     record.update(
         seed=seed,
         recompiles_after_first_step=None if after_first is None else compile_count() - after_first,
@@ -68,10 +95,11 @@ def main(argv=None) -> int:
     parser.add_argument("--inference", choices=["map", "nuts"], default=None, help="override the config's mode")
     parser.add_argument("--quadrature", type=int, default=None,
                         help="override inference.primary_quadrature (nodes per dimension, 0 = MAP)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
 
-    base = load_config(args.config)
+    base = with_overrides(load_config(args.config), args.set)
     if args.inference:
         base = base.with_overrides(inference={"mode": args.inference})
     if args.quadrature is not None:
@@ -97,10 +125,15 @@ def main(argv=None) -> int:
             )
         records += mine
         rows[policy] = summarise_campaigns(mine)
+        rows[policy]["regret"] = float(np.median([r["regret"] for r in mine]))
         rows[policy]["recompiles_after_first"] = sum(r["recompiles_after_first_step"] or 0 for r in mine)
     print(f"\nt* = {t_star:.4f} s   inference = {base.inference.mode}   "
-          f"primary quadrature = {base.inference.primary_quadrature}   (median [IQR])")
+          f"primary quadrature = {base.inference.primary_quadrature}   f acquisition = {base.acquisition.f_acquisition}   "
+          f"shots {base.schedule.shots_before} / {base.schedule.shots_after}   (median [IQR])")
     print(summary_table(rows))
+    best = "maximum" if base.acquisition.maximize else "minimum"
+    print(f"regret of the final model's {best} (|f(x_hat) - f*| on the grid), median: "
+          + ", ".join(f"{p} {r['regret']:.3g}" for p, r in rows.items()))
     print("XLA recompilations after the first BO step, all campaigns: "
           + ", ".join(f"{p} {r['recompiles_after_first']}" for p, r in rows.items()))
     if args.json:

@@ -115,7 +115,14 @@ def _resume(args) -> int:
         JournalWriter.open(path.with_suffix(".journal")).close()
     except JournalError as error:
         raise CampaignFileError(f"cannot resume {path}: {error}") from None
-    if _journal_status(path) == "completed":
+    state = _journal_state(path)
+    if args.budget_s is not None and args.budget_s <= state.spent_s:
+        raise CampaignFileError(f"cannot resume {path} with --budget-s {args.budget_s:g}: it has spent "
+                                f"{state.spent_s:.4g} s already")
+    if state.status.value == "budget_spent" and args.budget_s is None:
+        raise CampaignFileError(f"{path}: {state.reason}; continue it with a larger budget: "
+                                f"`noisebo resume {path} --budget-s SECONDS` (in all)")
+    if state.status.value == "completed":
         # A kill during the finished file's write leaves the running file in place: write the
         # finished file from the journal (the same file again when it was not cut short).
         from storage.recorder import Recorder
@@ -129,18 +136,18 @@ def _resume(args) -> int:
     campaign_flows.driver_of(path)  # the driver it was made with is installed, or one line says which is missing
     print(f"resuming {path}", flush=True)
     with flow_settings(), _abortable(path):
-        done = campaign_flows.resume(str(path), record_rrd=not args.no_rrd, live=args.live)
+        done = campaign_flows.resume(str(path), record_rrd=not args.no_rrd, live=args.live, budget_s=args.budget_s)
     print(outcome_line(Path(done)))
     print(done)
     return 0
 
 
-def _journal_status(path: Path) -> str:
-    """The status the campaign's journal (its source of truth) ends with."""
+def _journal_state(path: Path):
+    """The campaign as its journal (its source of truth) has it."""
     from storage import journal, records
 
     try:
-        return records.rebuild(journal.read(path.with_suffix(".journal"))[0]).status.value
+        return records.rebuild(journal.read(path.with_suffix(".journal"))[0])
     except (records.CorruptJournal, OSError) as error:
         raise CampaignFileError(f"cannot resume {path}: {error}") from None
 
@@ -282,7 +289,7 @@ def inspect_summary(path: Path) -> dict:
     import numpy as np
 
     from noisebo.state import as_position
-    from storage.hdf5 import read_campaign
+    from storage.hdf5 import read_campaign, read_failures
 
     data = read_campaign(path)
     attrs, points, steps = data["attrs"], data["points"], data["steps"]
@@ -324,8 +331,18 @@ def inspect_summary(path: Path) -> dict:
         "noise_field": field,
         "n_shots": int(attrs["n_shots"]),
         "measurement_time_s": float(sum(data["shots"]["t"])),
+        "budget_s": None if float(attrs.get("budget_s", -1.0)) < 0 else float(attrs["budget_s"]),
+        "spent_s": _spent_s(data, read_failures(path)),
         "points": rows,
     }
+
+
+def _spent_s(data: dict, failures: dict) -> float:
+    """Instrument time spent as a budget counts it: every shot and failed attempt at its t, and
+    the point overhead for every point begun."""
+    shots, overhead = data["shots"], data["attrs"]["config"]["schedule"].get("point_overhead_s", 0.0)
+    begun = len(set(int(p) for p in shots["point"]) | set(int(p) for p in failures["point"]))
+    return float(sum(shots["t"]) + sum(failures["t"]) + overhead * begun)
 
 
 def _inspect(args) -> int:
@@ -345,6 +362,9 @@ def _inspect(args) -> int:
     print(f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
           f"noise model {'not converged' if conv is None else f'converged at step {conv + 1}'}; "
           f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s")
+    if summary["budget_s"] is not None:
+        print(f"  instrument-time budget {summary['budget_s']:.4g} s, {summary['spent_s']:.4g} s spent "
+              f"(shots and {summary['config']['schedule']['point_overhead_s']:g} s per point)")
     field = summary["noise_field"]
     if field is not None:
         print(f"  noise field: optimal t per position from {field['t_opt_min']:.4g} s (at x = "
@@ -453,6 +473,18 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"noisebo: error: {message} (see `{self.prog} --help`)\n")
 
 
+def _positive_seconds(text: str) -> float:
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: a budget is a positive number of seconds")
+    return value
+
+
 def _view_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--live", nargs="?", const="spawn", default=None, metavar="URL",
                         help="stream to a Rerun viewer: spawn one (no URL) or connect to URL, "
@@ -474,6 +506,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     resume = commands.add_parser("resume", help="continue an interrupted campaign")
     resume.add_argument("file", help="the campaign's .h5 file")
+    resume.add_argument("--budget-s", type=_positive_seconds, default=None,
+                        help="a new instrument-time budget in all (s), e.g. for a campaign whose budget is spent")
     _view_options(resume)
     resume.set_defaults(handler=_resume)
 

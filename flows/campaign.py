@@ -18,8 +18,8 @@ from flows import abort
 from instruments import build, registry
 from noisebo.config import CampaignConfig, load_config
 from noisebo.driver import drive, now_utc
-from noisebo.engine import EngineState, ask, new_campaign
-from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status
+from noisebo.engine import KEEP_BUDGET, EngineState, ask, new_campaign
+from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status, StatusChanged
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
 from noisebo.state import format_position
 from storage.recorder import Recorder, campaign_path, package_versions, read_started
@@ -45,11 +45,15 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
         if isinstance(event, PointCommitted):
             p = event.point
             label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
-            lines.append(f"{label}: x={format_position(p.x)} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} noise={p.noise:.3g}")
+            budget = "" if state.budget_s is None else f" ({state.spent_s:.4g} of {state.budget_s:.4g} s spent)"
+            lines.append(f"{label}: x={format_position(p.x)} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} "
+                         f"noise={p.noise:.3g}{budget}")
         elif isinstance(event, MoreShots):
             lines.append(f"point {event.point}: {event.reason}; taking more shots ({event.wanted} in all)")
         elif isinstance(event, Decided) and event.decision.converged and not state.data.is_converged:
             lines.append(f"noise model converged at step {event.decision.step + 1}: t_opt = {event.decision.t_opt:.4g} s")
+        elif isinstance(event, StatusChanged) and event.status is Status.BUDGET_SPENT:
+            lines.append(event.reason)
     return lines
 
 
@@ -173,11 +177,14 @@ def campaign(
 
 
 @flow(name="resume")
-def resume(path: str, show_progress: bool = True, record_rrd: bool = True, live: str | None = None) -> str:
-    """Continue a campaign from its file (after a crash, a kill or an abort) with the driver it
-    was made with; its recording is rebuilt from the journal first, then continues."""
+def resume(path: str, show_progress: bool = True, record_rrd: bool = True, live: str | None = None,
+           budget_s: float | None = None) -> str:
+    """Continue a campaign from its file (after a crash, a kill, an abort or a spent budget)
+    with the driver it was made with; ``budget_s``: its new instrument-time budget in all (s;
+    None: keep it). Its recording is rebuilt from the journal first, then continues."""
     with opened(driver_of(Path(path))) as instrument:
-        with Recorder.resume(Path(path)) as recorder:
+        budget = KEEP_BUDGET if budget_s is None else float(budget_s)
+        with Recorder.resume(Path(path), budget) as recorder:
             with _viewed(recorder, instrument, record_rrd, live, print) as observe, abort.reclaimed():
                 return str(run(recorder, print if show_progress else _silent, observe, instrument))
 

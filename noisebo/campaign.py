@@ -86,8 +86,9 @@ def make_point(
 
 
 def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summary:
-    """Fit both models on every point (key for step ``n_steps``) and summarise them."""
-    fitted = fit_models(config, state, fit_key(seed, config.schedule.n_steps))
+    """Fit both models on every point (key for the step after the last decision: ``n_steps``
+    unless the instrument-time budget ended the campaign sooner) and summarise them."""
+    fitted = fit_models(config, state, fit_key(seed, len(state.t_opt_history)))
     pred = predict(config, fitted, state)
     return Summary(
         f_mean=np.asarray(pred.posterior.f_mean, dtype=np.float64),

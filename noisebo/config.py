@@ -371,6 +371,13 @@ class ScheduleConfig(FrozenModel):
     Failure budget: once at least ``min_failed`` shots have failed (instrument errors, timeouts,
     rejected readings), a campaign whose failed fraction of all attempts exceeds
     ``tolerated_rate`` stops with ``FailureBudgetExceeded`` and the status "failed".
+
+    Instrument-time budget: ``budget_s`` (None: none) is the instrument time the campaign may
+    spend, each shot's t plus ``point_overhead_s`` per point (moving the tip or stage,
+    settling). Each point is planned to fit what is left (a decision chooses only times, and
+    if need be fewer shots, that fit); a point that cannot fit ends the campaign with the status
+    "budget_spent" and its final models (``noisebo resume --budget-s`` continues it with more).
+    ``n_steps`` still ends it first if it is reached first.
     """
 
     n_seed: int = Field(3, ge=1)
@@ -384,6 +391,8 @@ class ScheduleConfig(FrozenModel):
     clip_sd: PositiveFloat | None = None
     min_failed: int = Field(5, ge=1)
     tolerated_rate: Rate = 0.5
+    budget_s: PositiveFloat | None = None
+    point_overhead_s: NonNegativeFloat = 0.0
 
 
 class CampaignConfig(FrozenModel):

@@ -285,12 +285,9 @@ def _propose_program(config: CampaignConfig):
 
 @lru_cache(maxsize=None)
 def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig):
-    g = space_grids(space)
-    allowed = _allowed_t(acq, g.t)
-
-    def propose(post: Posterior, shots):
+    def propose(post: Posterior, shots, allowed):
         values = acquisition_map(post, shots, acq, rew)
-        i, j = argmax_2d(jnp.where(jnp.asarray(allowed)[None, :], values, -jnp.inf))
+        i, j = argmax_2d(jnp.where(allowed[None, :], values, -jnp.inf))
         return values, i, j
 
     return jax.jit(propose)
@@ -306,11 +303,10 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
     noise there at that t."""
     g = space_grids(space)
     xs = jnp.asarray(scaled(space, g.x))
-    allowed = jnp.asarray(_allowed_t(acq, g.t))
     spacing = reference_spacing(space)
     n_t = g.t.size
 
-    def propose(post: Posterior, shots, fitted: Fitted, key):
+    def propose(post: Posterior, shots, fitted: Fitted, key, allowed):
         values = jnp.where(allowed[None, :], acquisition_map(post, shots, acq, rew), -jnp.inf)
         _, flat = jax.lax.top_k(values.ravel(), STARTS)
         i, j = flat // n_t, flat % n_t
@@ -351,6 +347,31 @@ def _allowed_t(acq: AcquisitionConfig, t_grid: np.ndarray) -> np.ndarray:
     if acq.fixed_t is None:
         return np.ones(t_grid.size, dtype=bool)
     return np.arange(t_grid.size) == int(np.argmin(np.abs(t_grid - acq.fixed_t)))
+
+
+def cheapest_point_s(config: CampaignConfig) -> float:
+    """The instrument time (s) of the cheapest point a decision can propose: the overhead and
+    ``shots_after`` shots at the shortest t it may use."""
+    g, sched = grids(config), config.schedule
+    return sched.point_overhead_s + sched.shots_after * float(g.t[_allowed_t(config.acquisition, g.t)].min())
+
+
+def affordable(config: CampaignConfig, shots: int, left: float | None) -> tuple[np.ndarray, int]:
+    """The t-grid entries (n_t,) bool a proposal may use and its shots, within ``left`` seconds
+    of budget (None: no budget): the times at which ``shots`` shots and the point's overhead fit;
+    if none does, as many shots as fit at the shortest time (at least ``shots_after``, which
+    the engine checked fits: ``cheapest_point_s``)."""
+    g, sched = grids(config), config.schedule
+    allowed = _allowed_t(config.acquisition, g.t)
+    if left is None:
+        return allowed, shots
+    room = left - sched.point_overhead_s + 1e-9
+    fits = allowed & (shots * g.t <= room)
+    if fits.any():
+        return fits, shots
+    shortest = float(g.t[allowed].min())
+    fewer = int(max(sched.shots_after, min(shots, np.floor(room / shortest))))
+    return allowed & (fewer * g.t <= room), fewer
 
 
 def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState) -> Prediction:
@@ -421,10 +442,12 @@ def hyperparameters(fitted: Fitted) -> dict[str, float]:
 
 
 def acquire(
-    config: CampaignConfig, fitted: Fitted, state: CampaignState, step: int, key: jax.Array | None = None
+    config: CampaignConfig, fitted: Fitted, state: CampaignState, step: int, key: jax.Array | None = None,
+    budget_left: float | None = None,
 ) -> tuple[Decision, CampaignState]:
     """From fitted models: predict, update the convergence record, and propose the next point
-    (with d > 1 axes the local refinement draws from ``key``, default ``propose_key(0, step)``).
+    (with d > 1 axes the local refinement draws from ``key``, default ``propose_key(0, step)``)
+    among the times (and shot counts) that fit ``budget_left`` seconds (``affordable``).
 
     Returns the decision and the state with this step's predicted optimal t recorded."""
     prediction = predict(config, fitted, state)
@@ -439,18 +462,19 @@ def acquire(
         fresh = converged_map(state.t_opt_maps + (t_map,), sched.window, sched.threshold)
     now_converged = state.is_converged or fresh
     new_state = state.with_t_opt(t_opt, now_converged, t_map if t_map.size else None)
-    shots = shots_for(now_converged, sched)
+    allowed, shots = affordable(config, shots_for(now_converged, sched), budget_left)
+    allowed = jnp.asarray(allowed)
     g, s = grids(config), config.space
     noise_grid = np.asarray(post.noise_mean)
     if s.dimensions == 1:
-        values, i, j = _propose_program(config)(post, float(shots))
+        values, i, j = _propose_program(config)(post, float(shots), allowed)
         i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
         x, acq_value = (float(g.x[i]),), float(acq_map[i, j])
         noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
     else:
         program = _propose_nd_program(config, fitted)
         acq_map, x_scaled, j, acq_value, noise_at = program(post, float(shots), fitted,
-                                                            propose_key(0, step) if key is None else key)
+                                                            propose_key(0, step) if key is None else key, allowed)
         lows, highs = np.asarray(s.lows), np.asarray(s.highs)
         x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
         j, acq_value, noise_at_t = int(j), float(acq_value), float(noise_at)
@@ -460,7 +484,7 @@ def acquire(
         t=float(g.t[j]),
         acq_value=acq_value,
         shots=shots,
-        measure_noise=not now_converged,
+        measure_noise=not now_converged and shots >= 2,
         noise_at_t=noise_at_t,
         t_opt=t_opt,
         converged=now_converged,
@@ -501,14 +525,16 @@ def propose_key(seed: int, step: int) -> jax.Array:
 
 
 def decide(
-    config: CampaignConfig, state: CampaignState, seed: int, step: int, previous: dict | None = None
+    config: CampaignConfig, state: CampaignState, seed: int, step: int, previous: dict | None = None,
+    budget_left: float | None = None,
 ) -> tuple[Decision, CampaignState]:
     """One whole BO decision: fit both models (key (seed, step); from ``previous``, the previous
-    step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then ``acquire``."""
+    step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then ``acquire``
+    within ``budget_left`` seconds of instrument time (None: no budget)."""
     _wait_for_compilation(config, state)
     warm = warm_step(config, step, previous, state.is_converged)
     fitted = fit_models(config, state, fit_key(seed, step), previous, warm)
-    return acquire(config, fitted, state, step, propose_key(seed, step))
+    return acquire(config, fitted, state, step, propose_key(seed, step), budget_left)
 
 
 AHEAD_FILL = 0.75  # compile the next capacity once a training set fills this much of its own
@@ -573,7 +599,7 @@ def compile_ahead(config: CampaignConfig, state: CampaignState, previous: dict |
         posterior = predict(config, fitted, state).posterior
         if config.space.dimensions > 1:  # the refinement's program depends on the capacity too
             posterior = _propose_nd_program(config, fitted)(posterior, float(config.schedule.shots_before), fitted,
-                                                            propose_key(0, 0))
+                                                            propose_key(0, 0), jnp.asarray(affordable(config, 1, None)[0]))
         jax.block_until_ready(posterior)
     finally:
         done.set()

@@ -20,10 +20,10 @@ from typing import Mapping, NamedTuple, Sequence
 
 from noisebo.campaign import make_point, seed_points, summarize
 from noisebo.config import CampaignConfig
-from noisebo.decision import Decision, decide
+from noisebo.decision import Decision, cheapest_point_s, decide
 from noisebo.events import (
-    DecisionDue, Decided, Done, DriverInfo, Event, MoreShots, Outcome, PointCommitted, Request, ShotError,
-    ShotFailed, ShotTaken, Started, Status, StatusChanged, Summarised, Summary,
+    BudgetChanged, DecisionDue, Decided, Done, DriverInfo, Event, MoreShots, Outcome, PointCommitted, Request,
+    ShotError, ShotFailed, ShotTaken, Started, Status, StatusChanged, Summarised, Summary,
 )
 from noisebo.failures import budget_message
 from noisebo.reduction import NoUsableShots, Reading
@@ -49,8 +49,11 @@ class EngineState:
     ``data``: what the models see (points, t_opt history, convergence); ``points``: committed
     points with their shots; ``taken``: shots of the point under way; ``wanted``: that point's
     shot count once raised by ``MoreShots``; ``decisions``: every BO decision; ``budget_base``:
-    (failed, attempts) when the campaign was started or last resumed (the budget counts from
-    there)."""
+    (failed, attempts) when the campaign was started or last resumed (the failure budget counts
+    from there). ``budget_s``: the instrument-time budget (s; None: none), the config's until a
+    ``BudgetChanged``; ``spent_s``: instrument time spent, every shot taken and every failed
+    attempt at its t plus ``point_overhead_s`` for every point begun; ``point_begun``: whether
+    the point under way has had a shot or an attempt."""
 
     config: CampaignConfig
     seed: int
@@ -70,6 +73,9 @@ class EngineState:
     n_shots: int = 0
     n_rejected: int = 0
     budget_base: tuple[int, int] = (0, 0)
+    budget_s: float | None = None
+    spent_s: float = 0.0
+    point_begun: bool = False
 
     def failure_counts(self) -> tuple[int, int]:
         """(failed, attempted) shots of the whole campaign: failed attempts plus rejected shots,
@@ -88,7 +94,15 @@ class Transition(NamedTuple):
 
 
 def start(started: Started) -> EngineState:
-    return EngineState(started.config, started.seed, started.driver, dict(started.versions), started.created_utc)
+    return EngineState(started.config, started.seed, started.driver, dict(started.versions), started.created_utc,
+                       budget_s=started.config.schedule.budget_s)
+
+
+def _spend(state: EngineState, t: float) -> EngineState:
+    """``state`` after a shot or an attempt of t seconds at the point under way (its first also
+    pays the point's overhead)."""
+    overhead = 0.0 if state.point_begun else state.config.schedule.point_overhead_s
+    return replace(state, spent_s=state.spent_s + overhead + t, point_begun=True)
 
 
 def apply(state: EngineState | None, event: Event) -> EngineState:
@@ -103,11 +117,11 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
     if isinstance(event, ShotTaken):
         if event.point != index or event.shot != len(state.taken):
             raise EngineError(f"shot {event.shot} of point {event.point} out of order")
-        return replace(state, taken=state.taken + (event,), n_shots=state.n_shots + 1)
+        return replace(_spend(state, event.t), taken=state.taken + (event,), n_shots=state.n_shots + 1)
     if isinstance(event, ShotFailed):
         if event.point != index or event.shot != len(state.taken):
             raise EngineError(f"failure at shot {event.shot} of point {event.point} out of order")
-        return replace(state, failures=state.failures + (event,))
+        return replace(_spend(state, event.t), failures=state.failures + (event,))
     if isinstance(event, MoreShots):
         if event.point != index or event.wanted <= len(state.taken):
             raise EngineError(f"more shots for point {event.point} out of order")
@@ -117,7 +131,8 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
             raise EngineError(f"point {event.index} out of order")
         rejected = sum(1 for v in event.values if not v.ok)
         return replace(state, data=state.data.with_point(event.point), points=state.points + (PointEntry(event, state.taken),),
-                       taken=(), wanted=None, pending_rejected=0, n_rejected=state.n_rejected + rejected)
+                       taken=(), wanted=None, pending_rejected=0, n_rejected=state.n_rejected + rejected,
+                       point_begun=False)
     if isinstance(event, Decided):
         d = event.decision
         if d.step != len(state.decisions) or _pending_decision(state) is not None:
@@ -129,6 +144,8 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
     if isinstance(event, StatusChanged):
         base = state.failure_counts() if event.status is Status.RUNNING else state.budget_base
         return replace(state, status=event.status, reason=event.reason, budget_base=base)
+    if isinstance(event, BudgetChanged):
+        return replace(state, budget_s=event.budget_s)
     raise EngineError(f"unknown event {type(event).__name__}")
 
 
@@ -159,11 +176,35 @@ def ask(state: EngineState) -> Request | DecisionDue | Done:
         return Done(state.status, state.reason)
     request = _point_under_way(state)
     if request is not None:
-        return request if request.taken < request.wanted else DecisionDue(len(state.decisions), reduce=True)
+        if request.taken >= request.wanted:
+            return DecisionDue(len(state.decisions), reduce=True)
+        cost = (0.0 if state.point_begun else state.config.schedule.point_overhead_s) + request.t * (
+            request.wanted - request.taken)
+        short = _unaffordable(state, cost, f"point {request.point} needs {cost:.4g} s more")
+        return DecisionDue(len(state.decisions), final=True, budget=short) if short else request
     sched = state.config.schedule
     if len(state.decisions) < sched.n_steps:
-        return DecisionDue(len(state.decisions))
+        cheapest = cheapest_point_s(state.config)
+        short = _unaffordable(state, cheapest, f"the cheapest point costs {cheapest:.4g} s")
+        return DecisionDue(len(state.decisions), final=True, budget=short) if short else DecisionDue(len(state.decisions))
     return DecisionDue(sched.n_steps, final=True)
+
+
+BUDGET_SLACK_S = 1e-9  # sums of sweep times round
+MIN_POINTS_TO_SUMMARISE = 2
+
+
+def budget_left(state: EngineState) -> float | None:
+    """Instrument time (s) the budget has left; None without a budget."""
+    return None if state.budget_s is None else state.budget_s - state.spent_s
+
+
+def _unaffordable(state: EngineState, cost: float, what: str) -> str:
+    """Why ``cost`` seconds more do not fit the budget ("" when they do, or without one)."""
+    left = budget_left(state)
+    if left is None or cost <= left + BUDGET_SLACK_S:
+        return ""
+    return f"budget spent: {state.spent_s:.4g} s of {state.budget_s:.4g} s; {what}"
 
 
 def _point_under_way(state: EngineState) -> Request | None:
@@ -250,10 +291,13 @@ def advance(state: EngineState) -> tuple[Event, ...]:
     if due.reduce:
         return tuple(_reduce(state, _point_under_way(state)))
     if due.final:
-        return Summarised(summarize(state.config, state.data, state.seed)), StatusChanged(Status.COMPLETED)
+        status = StatusChanged(Status.BUDGET_SPENT if due.budget else Status.COMPLETED, due.budget)
+        if len(state.points) < MIN_POINTS_TO_SUMMARISE:  # a budget that paid for less has no models to give
+            return (status,)
+        return Summarised(summarize(state.config, state.data, state.seed)), status
     started = time.perf_counter()
     previous = state.decisions[-1].hyperparameters if state.decisions else None
-    decision, _ = decide(state.config, state.data, state.seed, due.step, previous)
+    decision, _ = decide(state.config, state.data, state.seed, due.step, previous, budget_left(state))
     return (Decided(replace(decision, latency_s=time.perf_counter() - started)),)
 
 
@@ -264,12 +308,17 @@ def stop(state: EngineState, status: Status, reason: str) -> tuple[Event, ...]:
     return (StatusChanged(status, reason),)
 
 
-def resumed(state: EngineState) -> tuple[Event, ...]:
-    """The event that restarts an unfinished campaign: status running with a fresh failure
-    budget; nothing for a completed one."""
+KEEP_BUDGET = object()
+
+
+def resumed(state: EngineState, budget_s: float | None = KEEP_BUDGET) -> tuple[Event, ...]:
+    """The events that restart an unfinished campaign: its new instrument-time budget (when
+    ``budget_s`` is given: seconds in all, or None for none), then status running with a fresh
+    failure budget; nothing for a completed one."""
     if state.status is Status.COMPLETED:
         return ()
-    return (StatusChanged(Status.RUNNING, "resumed"),)
+    budget = () if budget_s is KEEP_BUDGET or budget_s == state.budget_s else (BudgetChanged(budget_s),)
+    return (*budget, StatusChanged(Status.RUNNING, "resumed"))
 
 
 def new_campaign(config: CampaignConfig, seed: int, driver: DriverInfo, versions: dict, created_utc: str) -> Started:

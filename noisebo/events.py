@@ -28,12 +28,14 @@ from noisebo.state import Point
 
 
 class Status(str, Enum):
-    """A campaign's status; only these four exist."""
+    """A campaign's status; only these exist. "budget_spent": ended because its instrument-time
+    budget could not pay for the next point (resumable with a larger one)."""
 
     RUNNING = "running"
     COMPLETED = "completed"
     ABORTED = "aborted"
     FAILED = "failed"
+    BUDGET_SPENT = "budget_spent"
 
 
 @dataclass(frozen=True)
@@ -133,7 +135,16 @@ class StatusChanged:
     reason: str = ""
 
 
-Event = Union[Started, ShotTaken, ShotFailed, MoreShots, PointCommitted, Decided, Summarised, StatusChanged]
+@dataclass(frozen=True)
+class BudgetChanged:
+    """The campaign's instrument-time budget from here on (s; None: none), set when it is resumed
+    with another budget."""
+
+    budget_s: float | None
+
+
+Event = Union[Started, ShotTaken, ShotFailed, MoreShots, PointCommitted, Decided, Summarised, StatusChanged,
+              BudgetChanged]
 
 
 @dataclass(frozen=True)
@@ -170,11 +181,13 @@ class Request:
 class DecisionDue:
     """Nothing to measure until the engine decides BO step ``step`` (``final``: the summary;
     ``reduce``: first the point whose shots are all in, as a journal cut off between its last
-    shot and its commit leaves it)."""
+    shot and its commit leaves it). ``budget``: why the instrument-time budget ends the campaign
+    here (then ``final``), empty otherwise."""
 
     step: int
     final: bool = False
     reduce: bool = False
+    budget: str = ""
 
 
 @dataclass(frozen=True)

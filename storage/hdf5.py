@@ -183,6 +183,7 @@ def root_attrs(state: EngineState) -> dict:
         n_steps=len(state.decisions),
         n_shots=state.n_shots,
         n_failed_attempts=len(state.failures),
+        budget_s=-1.0 if state.budget_s is None else float(state.budget_s),
         config_json=json.dumps(config.model_dump(mode="json")),
         versions_json=json.dumps(state.versions),
     )

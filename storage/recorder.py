@@ -94,11 +94,12 @@ class Recorder:
         return recorder
 
     @classmethod
-    def resume(cls, h5_path: Path) -> Recorder:
+    def resume(cls, h5_path: Path, budget_s=engine.KEEP_BUDGET) -> Recorder:
         """The campaign of ``h5_path`` from its journal, its status set back to running (unless
-        it completed): a torn tail is cut off and stray half-written snapshots removed."""
+        it completed), with a new instrument-time budget when ``budget_s`` is given: a torn tail
+        is cut off and stray half-written snapshots removed."""
         recorder = cls.attach(h5_path)
-        events = engine.resumed(recorder.state)
+        events = engine.resumed(recorder.state, budget_s)
         recorder.commit(recorder.state, events)
         if not events:
             recorder.snapshot()

@@ -1,8 +1,8 @@
 """Typed campaign events (``noisebo.events``) to journal records and back, losslessly.
 
 Record types, one per event: campaign (Started), decision (Decided), shot (ShotTaken), failure
-(ShotFailed), more_shots (MoreShots), point (PointCommitted), summary (Summarised) and status
-(StatusChanged). Scalars travel in the record's JSON fields, arrays (spectra, model outputs) as
+(ShotFailed), more_shots (MoreShots), point (PointCommitted), summary (Summarised), status
+(StatusChanged) and budget (BudgetChanged). Scalars travel in the record's JSON fields, arrays (spectra, model outputs) as
 raw arrays.
 """
 
@@ -16,8 +16,8 @@ from noisebo.config import parse_config
 from noisebo.decision import Decision
 from noisebo.engine import EngineError, EngineState, replay
 from noisebo.events import (
-    Decided, DriverInfo, Event, MoreShots, PointCommitted, ShotFailed, ShotTaken, Started, Status, StatusChanged,
-    Summarised, Summary,
+    BudgetChanged, Decided, DriverInfo, Event, MoreShots, PointCommitted, ShotFailed, ShotTaken, Started, Status,
+    StatusChanged, Summarised, Summary,
 )
 from noisebo.reduction import Reading, ShotValue
 from noisebo.sho import SHOFit
@@ -65,6 +65,8 @@ def encode(event: Event) -> Record:
                       {k: np.asarray(getattr(s, k)) for k in SUMMARY_ARRAYS})
     if isinstance(event, StatusChanged):
         return Record("status", {"status": event.status.value, "reason": event.reason})
+    if isinstance(event, BudgetChanged):
+        return Record("budget", {"budget_s": event.budget_s})
     raise TypeError(f"not a campaign event: {type(event).__name__}")
 
 
@@ -126,6 +128,8 @@ def decode(record: Record) -> Event:
                                       **_arrays(a, SUMMARY_ARRAYS)))
         if record.type == "status":
             return StatusChanged(Status(f["status"]), f["reason"])
+        if record.type == "budget":
+            return BudgetChanged(None if f["budget_s"] is None else float(f["budget_s"]))
     except (KeyError, TypeError, ValueError) as error:
         raise CorruptJournal(f"a {record.type!r} record that is not one ({type(error).__name__}: {error})") from None
     raise CorruptJournal(f"unknown record type {record.type!r}")

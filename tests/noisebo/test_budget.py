@@ -1,0 +1,111 @@
+"""Instrument-time budgets: a campaign plans each point within what is left, never overspends,
+ends as "budget_spent" with its final models, and continues with a larger budget; the steps
+limit still ends it first when it comes first."""
+
+import numpy as np
+import pytest
+
+from instruments.forrester import ForresterInstrument
+from noisebo import engine
+from noisebo.config import CampaignConfig, ConfigError, parse_config
+from noisebo.decision import affordable, cheapest_point_s, grids
+from noisebo.driver import drive, in_memory, run_campaign
+from noisebo.events import BudgetChanged, DriverInfo, Status
+from storage.records import decode, encode, rebuild
+
+
+def budgeted(tiny_config, budget_s, overhead_s=2.0, n_steps=100):
+    return tiny_config.with_overrides(schedule={"budget_s": budget_s, "point_overhead_s": overhead_s,
+                                                "n_steps": n_steps})
+
+
+def spent_by_hand(final) -> float:
+    shots = sum(s.t for p in final.points for s in p.shots) + sum(s.t for s in final.taken)
+    begun = len(final.points) + (1 if final.taken else 0)
+    return shots + sum(f.t for f in final.failures) + final.config.schedule.point_overhead_s * begun
+
+
+@pytest.fixture(scope="module")
+def spent(tiny_config):
+    config = budgeted(tiny_config, 120.0)
+    return config, run_campaign(config, ForresterInstrument(), 3).final
+
+
+def test_a_budget_is_never_overspent_and_ends_the_campaign(spent):
+    config, final = spent
+    assert final.status is Status.BUDGET_SPENT and final.reason.startswith("budget spent: ")
+    assert final.spent_s == pytest.approx(spent_by_hand(final), rel=1e-12)
+    assert final.spent_s <= 120.0
+    assert 120.0 - final.spent_s < cheapest_point_s(config)  # it stopped because nothing more fits
+    assert final.summary is not None and len(final.decisions) < 100
+
+
+def test_every_decision_fits_what_was_left(spent):
+    config, final = spent
+    n_seed = config.schedule.n_seed
+    for k, decision in enumerate(final.decisions):
+        cost = config.schedule.point_overhead_s + decision.shots * decision.t
+        before = sum(p.committed.point.t * len(p.shots) for p in final.points[: n_seed + k])
+        before += config.schedule.point_overhead_s * (n_seed + k)
+        assert cost <= 120.0 - before + 1e-9
+
+
+def test_more_budget_continues_the_campaign(spent):
+    config, final = spent
+    events = [*engine.resumed(final, 180.0)]
+    assert isinstance(events[0], BudgetChanged) and events[1].status is Status.RUNNING
+    state = engine.apply_all(final, events)
+    more = drive(state, ForresterInstrument(), in_memory)
+    assert more.status is Status.BUDGET_SPENT and 120.0 < more.spent_s <= 180.0
+    assert len(more.points) > len(final.points) and more.points[: len(final.points)] == final.points
+
+
+def test_the_steps_limit_still_ends_a_campaign_first(tiny_config):
+    final = run_campaign(budgeted(tiny_config, 10_000.0, n_steps=2), ForresterInstrument(), 3).final
+    assert final.status is Status.COMPLETED and len(final.decisions) == 2 and final.spent_s < 10_000.0
+
+
+def test_a_budget_below_the_seed_points_stops_before_the_first_that_does_not_fit(tiny_config):
+    final = run_campaign(budgeted(tiny_config, 15.0, overhead_s=5.0), ForresterInstrument(), 3).final
+    assert final.status is Status.BUDGET_SPENT and final.decisions == ()
+    assert final.spent_s <= 15.0 and "point" in final.reason
+
+
+def test_the_budget_travels_through_the_journal(spent, tiny_config):
+    config, final = spent
+    assert decode(encode(BudgetChanged(250.0))) == BudgetChanged(250.0)
+    assert decode(encode(BudgetChanged(None))) == BudgetChanged(None)
+    started = engine.new_campaign(config, 3, DriverInfo("forrester", "", {}), {}, "2026-11-24T00:00:00+00:00")
+    events = [started]
+    run_campaign(config, ForresterInstrument(), 3, on_commit=lambda state, new: events.extend(new))
+    again = rebuild([encode(e) for e in [*events, *engine.resumed(final, 300.0)]])
+    assert again.budget_s == 300.0 and again.spent_s == pytest.approx(final.spent_s, rel=1e-12)
+
+
+# (shots wanted, seconds left) -> (allowed t, shots) on a grid of t = 1, 2, ..., 5 s, overhead 1 s
+@pytest.mark.parametrize("shots, left, allowed, used", [
+    (3, None, [1, 2, 3, 4, 5], 3),
+    (3, 100.0, [1, 2, 3, 4, 5], 3),
+    (3, 10.0, [1, 2, 3], 3),  # 1 + 3 t <= 10
+    (3, 4.0, [1], 3),
+    (30, 10.0, [1], 9),  # 30 shots fit at no t: as many as fit at 1 s
+    (30, 5.5, [1], 4),
+])
+def test_affordable_by_hand(shots, left, allowed, used):
+    config = CampaignConfig(space={"t_min": 1.0, "t_max": 5.0, "n_t": 5},
+                            schedule={"point_overhead_s": 1.0, "shots_after": 2})
+    mask, got = affordable(config, shots, left)
+    assert grids(config).t[mask].tolist() == allowed and got == used
+
+
+def test_bad_budgets_name_the_field():
+    for schedule, field in (({"budget_s": 0}, "schedule.budget_s"), ({"budget_s": float("inf")}, "schedule.budget_s"),
+                            ({"point_overhead_s": -1}, "schedule.point_overhead_s")):
+        with pytest.raises(ConfigError, match=field):
+            parse_config({"schedule": schedule})
+
+
+def test_an_unbudgeted_campaign_spends_what_it_measures(tiny_config):
+    final = run_campaign(tiny_config.with_overrides(schedule={"n_steps": 1}), ForresterInstrument(), 0).final
+    assert final.budget_s is None and final.spent_s == pytest.approx(spent_by_hand(final), rel=1e-12)
+    assert np.isfinite(final.spent_s) and final.status is Status.COMPLETED
