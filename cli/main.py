@@ -499,7 +499,7 @@ def build_parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run one campaign through the Prefect flow")
     run.add_argument("config", help="campaign YAML, e.g. data/configs/forrester.yaml")
     run.add_argument("--seed", type=int, default=0)
-    run.add_argument("--policy", choices=["reward", "double"], default=None)
+    run.add_argument("--policy", choices=["reward", "double", "info_rate"], default=None)
     run.add_argument("--out", type=Path, default=Path("data/runs"))
     _view_options(run)
     run.set_defaults(handler=_run)
@@ -553,7 +553,7 @@ def build_parser() -> argparse.ArgumentParser:
     start = commands.add_parser("start", help="create a campaign's file without running it (to measure by hand)")
     start.add_argument("config", help="campaign YAML, e.g. data/configs/forrester_manual.yaml")
     start.add_argument("--seed", type=int, default=0)
-    start.add_argument("--policy", choices=["reward", "double"], default=None)
+    start.add_argument("--policy", choices=["reward", "double", "info_rate"], default=None)
     start.add_argument("--out", type=Path, default=Path("data/runs"))
     start.set_defaults(handler=_start)
 

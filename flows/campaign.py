@@ -160,7 +160,7 @@ def _viewed(recorder: Recorder, instrument, record_rrd: bool, live: str | None, 
 def campaign(
     config: str | CampaignConfig = "data/configs/forrester.yaml",
     seed: int = 0,
-    policy: Literal["reward", "double"] | None = None,
+    policy: Literal["reward", "double", "info_rate"] | None = None,
     out_dir: str = "data/runs",
     show_progress: bool = True,
     record_rrd: bool = True,

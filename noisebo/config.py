@@ -247,11 +247,14 @@ class RewardConfig(FrozenModel):
 class AcquisitionConfig(FrozenModel):
     """Policy and acquisition functions.
 
-    ``policy``: "reward" (acq_x * Norm(R)^gamma) or "double" ((Norm(acq_t) + Norm(acq_x)) / 2).
+    ``policy``: "reward" (acq_x * Norm(R)^gamma), "double" ((Norm(acq_t) + Norm(acq_x)) / 2), or
+    "info_rate": the point (x, t and, once the noise model has converged, its number of shots)
+    that lowers the integrated posterior variance of f most per second of instrument time
+    (``noisebo.information``); it needs no reward and ignores ``f_acquisition``.
     ``f_acquisition``: UE, EI or UCB on f; ``maximize`` sets EI/UCB's direction.
     """
 
-    policy: Literal["reward", "double"] = "reward"
+    policy: Literal["reward", "double", "info_rate"] = "reward"
     f_acquisition: Literal["ue", "ei", "ucb"] = "ue"
     t_acquisition: Literal["ei"] = "ei"
     maximize: bool = True

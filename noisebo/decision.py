@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from noisebo import decision_field, inference, noise_field, noise_model, primary
+from noisebo import decision_field, inference, information, noise_field, noise_model, primary
 from noisebo.config import (
     AcquisitionConfig, CampaignConfig, NoiseModelConfig, PrimaryModelConfig, RewardConfig, SpaceConfig,
 )
@@ -48,6 +48,36 @@ def grids(config: CampaignConfig) -> Grids:
 
 def space_grids(s: SpaceConfig) -> Grids:
     return Grids(reference_points(s), np.linspace(s.t_min, s.t_max, s.n_t), np.linspace(s.t_min, s.t_max, N_FINE))
+
+
+INTEGRATION_POINTS = 256  # at most, where the info_rate policy integrates the variance of f
+
+
+def integration_points(space: SpaceConfig) -> np.ndarray:
+    """Where the info_rate policy averages the posterior variance of f, in scaled units: the
+    reference points ((m,) for one axis), thinned to at most ``INTEGRATION_POINTS`` (for two
+    axes every k-th row and column of the display grid)."""
+    x = scaled(space, reference_points(space))
+    if x.shape[0] <= INTEGRATION_POINTS:
+        return x
+    if space.dimensions == 2:
+        n0, n1 = space.points_per_axis
+        k = int(np.ceil(max(n0, n1) / np.sqrt(INTEGRATION_POINTS)))
+        return x.reshape(n0, n1, 2)[::k, ::k].reshape(-1, 2)
+    return x[:INTEGRATION_POINTS]
+
+
+def spread(fitted: "Fitted", xs: jnp.ndarray, xi: jnp.ndarray, primary_first: bool) -> jnp.ndarray:
+    """q (m,) at scaled positions xs: the mean over the integration points xi of the squared
+    posterior covariance of f (f units^4; ``noisebo.information``), from the MAP point, or the
+    average over posterior draws."""
+    params, data, scale = fitted.primary.params, fitted.primary_data, fitted.standardisation.scale
+    if primary_first:
+        first = {name: value[0] for name, value in params.items()}
+        return information.spread_weights(primary.cross_covariance(first, data, xs, xi) * scale**2)
+    each = jax.vmap(lambda p: information.spread_weights(primary.cross_covariance(p, data, xs, xi)))(params)
+    weights = fitted.primary.weights
+    return (jnp.mean(each, axis=0) if weights is None else weights @ each) * scale**4
 
 
 def scaled(space: SpaceConfig, x: np.ndarray) -> np.ndarray:
@@ -209,7 +239,8 @@ def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first:
 
 
 def _predict_program(config: CampaignConfig):
-    return _predict_compiled(config.space, config.reward, config.noise_model.mean, config.noise_model.field is not None)
+    return _predict_compiled(config.space, config.reward, config.noise_model.mean, config.noise_model.field is not None,
+                             config.acquisition.policy == "info_rate")
 
 
 def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray) -> decision_field.FieldRows:
@@ -239,12 +270,20 @@ def _field_prediction(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitt
 
 
 @lru_cache(maxsize=None)
-def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: bool = False):
+def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: bool = False, info: bool = False):
     g = space_grids(s)
     xs = jnp.asarray(scaled(s, g.x))
+    xi = jnp.asarray(integration_points(s))
     n_t = g.t.shape[0]
 
     def predict(fitted: Fitted, primary_first: bool, noise_first: bool, f_best) -> Prediction:
+        prediction = _predict(fitted, primary_first, noise_first, f_best)
+        if not info:
+            return prediction
+        post = prediction.posterior._replace(f_spread=spread(fitted, xs, xi, primary_first))
+        return prediction._replace(posterior=post)
+
+    def _predict(fitted: Fitted, primary_first: bool, noise_first: bool, f_best) -> Prediction:
         std = fitted.standardisation
         f_mean, f_var = inference.combine(
             *primary.predict_samples(fitted.primary.params, fitted.primary_data, xs), primary_first,
@@ -280,13 +319,13 @@ def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: b
 
 
 def _propose_program(config: CampaignConfig):
-    return _propose_compiled(config.acquisition, config.reward, config.space)
+    return _propose_compiled(config.acquisition, config.reward, config.space, config.schedule.point_overhead_s)
 
 
 @lru_cache(maxsize=None)
-def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig):
+def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, overhead_s: float = 0.0):
     def propose(post: Posterior, shots, allowed):
-        values = acquisition_map(post, shots, acq, rew)
+        values = acquisition_map(post, shots, acq, rew, overhead_s)
         i, j = argmax_2d(jnp.where(allowed[None, :], values, -jnp.inf))
         return values, i, j
 
@@ -295,7 +334,7 @@ def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceCon
 
 @lru_cache(maxsize=None)
 def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, primary_first: bool,
-                         field_kind: str | None = None):
+                         field_kind: str | None = None, overhead_s: float = 0.0):
     """For d > 1: the policy's map on the reference points, then ``search.refine`` from its best
     ``STARTS`` entries (each keeps its t); with a noise field (its law ``field_kind``) each
     candidate is scored with the noise predicted where it lies. Returns the map's maximum over t
@@ -303,11 +342,12 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
     noise there at that t."""
     g = space_grids(space)
     xs = jnp.asarray(scaled(space, g.x))
+    xi = jnp.asarray(integration_points(space))
     spacing = reference_spacing(space)
     n_t = g.t.size
 
     def propose(post: Posterior, shots, fitted: Fitted, key, allowed):
-        values = jnp.where(allowed[None, :], acquisition_map(post, shots, acq, rew), -jnp.inf)
+        values = jnp.where(allowed[None, :], acquisition_map(post, shots, acq, rew, overhead_s), -jnp.inf)
         _, flat = jax.lax.top_k(values.ravel(), STARTS)
         i, j = flat // n_t, flat % n_t
         std = fitted.standardisation
@@ -328,8 +368,9 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
             if field_kind is not None:
                 rows = noise_rows(flat)
                 noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t))
+            q = None if acq.policy != "info_rate" else spread(fitted, flat, xi, primary_first).reshape(k, p)
             return point_scores(post, raw_mean.reshape(k, p), raw_var.reshape(k, p),
-                                jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew, noise)
+                                jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew, noise, q, overhead_s)
 
         best_x, best_s = refine(score, xs[i], key, spacing)
         best = jnp.argmax(best_s)
@@ -462,22 +503,20 @@ def acquire(
         fresh = converged_map(state.t_opt_maps + (t_map,), sched.window, sched.threshold)
     now_converged = state.is_converged or fresh
     new_state = state.with_t_opt(t_opt, now_converged, t_map if t_map.size else None)
-    allowed, shots = affordable(config, shots_for(now_converged, sched), budget_left)
-    allowed = jnp.asarray(allowed)
-    g, s = grids(config), config.space
-    noise_grid = np.asarray(post.noise_mean)
-    if s.dimensions == 1:
-        values, i, j = _propose_program(config)(post, float(shots), allowed)
-        i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
-        x, acq_value = (float(g.x[i]),), float(acq_map[i, j])
-        noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
-    else:
-        program = _propose_nd_program(config, fitted)
-        acq_map, x_scaled, j, acq_value, noise_at = program(post, float(shots), fitted,
-                                                            propose_key(0, step) if key is None else key, allowed)
-        lows, highs = np.asarray(s.lows), np.asarray(s.highs)
-        x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
-        j, acq_value, noise_at_t = int(j), float(acq_value), float(noise_at)
+    key = propose_key(0, step) if key is None else key
+    options = [shots_for(now_converged, sched)]
+    if config.acquisition.policy == "info_rate" and now_converged:
+        options = list(information.shot_options(sched.shots_before, sched.shots_after))
+    best = None
+    for wanted in options:
+        allowed, shots = affordable(config, wanted, budget_left)
+        if shots != wanted and len(options) > 1 and shots in options:
+            continue  # the budget's cut to this count is tried as itself
+        found = _propose(config, fitted, post, key, shots, jnp.asarray(allowed))
+        if best is None or found[2] > best[2]:
+            best = found + (shots,)
+    x, j, acq_value, acq_map, noise_at_t, shots = best
+    g = grids(config)
     decision = Decision(
         step=step,
         x=x,
@@ -502,6 +541,23 @@ def acquire(
     return decision, new_state
 
 
+def _propose(config: CampaignConfig, fitted: Fitted, post: Posterior, key, shots: int, allowed) -> tuple:
+    """The policy's proposal for points of ``shots`` shots at the allowed t: x (a tuple), its t
+    index, acquisition value, the acquisition map, and the noise model's sd there."""
+    g, s = grids(config), config.space
+    noise_grid = np.asarray(post.noise_mean)
+    if s.dimensions == 1:
+        values, i, j = _propose_program(config)(post, float(shots), allowed)
+        i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
+        noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
+        return (float(g.x[i]),), j, float(acq_map[i, j]), acq_map, noise_at_t
+    acq_map, x_scaled, j, acq_value, noise_at = _propose_nd_program(config, fitted)(post, float(shots), fitted, key,
+                                                                                  allowed)
+    lows, highs = np.asarray(s.lows), np.asarray(s.highs)
+    x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
+    return x, int(j), float(acq_value), acq_map, float(noise_at)
+
+
 def _over_x(curves) -> np.ndarray:
     """A noise curve (n_t,) as it is; curves per position (m, n_t) averaged over the positions."""
     curves = np.asarray(curves, dtype=np.float64)
@@ -511,7 +567,7 @@ def _over_x(curves) -> np.ndarray:
 def _propose_nd_program(config: CampaignConfig, fitted: Fitted):
     nm = config.noise_model
     return _propose_nd_compiled(config.acquisition, config.reward, config.space, fitted.primary.map_first,
-                                None if nm.field is None else nm.mean)
+                                None if nm.field is None else nm.mean, config.schedule.point_overhead_s)
 
 
 def fit_key(seed: int, step: int) -> jax.Array:

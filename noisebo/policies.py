@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
+from noisebo import information
 from noisebo.acquisition import expected_improvement, f_acquisition
 from noisebo.config import AcquisitionConfig, RewardConfig
 from noisebo.reward import normalise, reward
@@ -35,7 +36,9 @@ class Posterior(NamedTuple):
     noise field; t: (n_t,) seconds; t_opt: the predicted optimal t (for a field, the one t that
     maximises the reward averaged over x); noise_at_t_opt: Noise(t_opt) (for a field (n_x,),
     Noise(x, t*(x)) at each x); f_best: incumbent f; reward_best: incumbent normalised reward;
-    t_opt_map: (n_x,) t*(x) for a field, None otherwise."""
+    t_opt_map: (n_x,) t*(x) for a field, None otherwise; f_spread: (n_x,) for the info_rate
+    policy, the mean squared posterior covariance of f between each x and the integration
+    points (``noisebo.information``), None otherwise."""
 
     f_mean: jnp.ndarray
     f_var: jnp.ndarray
@@ -47,6 +50,7 @@ class Posterior(NamedTuple):
     f_best: jnp.ndarray
     reward_best: jnp.ndarray
     t_opt_map: jnp.ndarray | None = None
+    f_spread: jnp.ndarray | None = None
 
 
 class NoiseRows(NamedTuple):
@@ -138,10 +142,14 @@ def double_acquisition(post: Posterior, shots: int, acq: AcquisitionConfig, rew:
     return 0.5 * (acq_x[:, None] + (acq_t if _field(post) else acq_t[None, :]))
 
 
-def acquisition_map(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig) -> jnp.ndarray:
-    """The configured policy's acquisition over the (x, t) grid, (n_x, n_t)."""
+def acquisition_map(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig,
+                    overhead_s: float = 0.0) -> jnp.ndarray:
+    """The configured policy's acquisition over the (x, t) grid, (n_x, n_t); for info_rate, the
+    rate at ``shots`` shots with ``overhead_s`` per point (f units^2 per s)."""
     if acq.policy == "reward":
         return reward_driven(post, shots, acq, rew)
+    if acq.policy == "info_rate":
+        return information.rate_map(post.f_spread, post.f_var, post.noise_mean, post.t, shots, overhead_s)
     return double_acquisition(post, shots, acq, rew)
 
 
@@ -151,13 +159,18 @@ def _at(rows: jnp.ndarray, j: jnp.ndarray) -> jnp.ndarray:
 
 
 def point_scores(post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.ndarray, shots,
-                 acq: AcquisitionConfig, rew: RewardConfig, noise: NoiseRows | None = None) -> jnp.ndarray:
+                 acq: AcquisitionConfig, rew: RewardConfig, noise: NoiseRows | None = None,
+                 spread: jnp.ndarray | None = None, overhead_s: float = 0.0) -> jnp.ndarray:
     """The configured policy's score at points off the x grid: latent f ``mean`` and ``var``
     (any shape) at each point, paired with the t-grid index ``j`` (same shape); for a noise
-    field, ``noise`` at the points. Shifts and normalisers are the ones ``acquisition_map`` takes
-    from the grid in ``post``, so at a grid point the score equals its map entry."""
+    field, ``noise`` at the points; for info_rate, ``spread`` (q, same shape) there. Shifts and
+    normalisers are the ones ``acquisition_map`` takes from the grid in ``post``, so at a grid
+    point the score equals its map entry."""
     if _field(post) and noise is None:
         raise ValueError("a noise field's scores need the noise at the points")
+    if acq.policy == "info_rate":
+        sd = _at(noise.mean, j) if _field(post) else post.noise_mean[j]
+        return spread / (var + sd**2 / shots) / (overhead_s + shots * post.t[j])
     if acq.policy == "reward":
         grid_noise = typical_noise(post)
         grid_var = post.f_var[:, None] + (grid_noise**2)[None, :] / shots

@@ -134,3 +134,13 @@ def predict_one(params: dict, data: PrimaryData, xs: jnp.ndarray) -> tuple[jnp.n
 
 
 predict_samples = jax.vmap(predict_one, in_axes=(0, None, None))
+
+
+def cross_covariance(params: dict, data: PrimaryData, xa: jnp.ndarray, xb: jnp.ndarray) -> jnp.ndarray:
+    """Posterior covariance (na, nb) of latent f (standardised) between scaled inputs xa and xb
+    (like ``data.x``), one parameter set: k(xa, xb) - k(xa, X) (K + diag(var))^-1 k(X, xb)."""
+    cov = masked_covariance(kernel(data.x, data.x, params), data.var, data.mask)
+    chol = jnp.linalg.cholesky(cov)
+    va = jsl.solve_triangular(chol, jnp.where(data.mask[None, :], kernel(xa, data.x, params), 0.0).T, lower=True)
+    vb = jsl.solve_triangular(chol, jnp.where(data.mask[None, :], kernel(xb, data.x, params), 0.0).T, lower=True)
+    return kernel(xa, xb, params) - va.T @ vb

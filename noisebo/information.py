@@ -1,0 +1,53 @@
+"""Information per second: how much a point at (x, t) of n shots lowers the integrated posterior
+variance of f, per second of instrument time (``acquisition.policy: info_rate``).
+
+One more observation y = f(x) + e, e ~ N(0, s^2), lowers the latent posterior variance at every
+x' by k(x', x)^2 / (k(x, x) + s^2), k the current posterior covariance. Averaged over integration
+points x' spread over the domain, that is the integrated variance reduction (IVR: what BoTorch's
+qNegIntegratedPosteriorVariance integrates). A point of n shots at t is the mean of n shots, so
+s^2 = Noise(x, t)^2 / n, and it costs overhead + n t seconds. The policy maximises
+
+    rate(x, t, n) = q(x) / (V[f(x)] + Noise(x, t)^2 / n) / (overhead + n t),  q(x) = mean_x' k(x', x)^2
+
+over the grid of x and t and a few shot counts: a cost-aware utility in the sense of BoTorch's
+InverseCostWeightedUtility (value per unit cost), with the fidelity (t and n) priced by the noise
+model instead of by alpha and beta. Like multi-fidelity knowledge gradient (MF-KG) it values a
+cheap, noisy measurement by what it teaches about f per unit cost; unlike KG it looks one step
+ahead at the variance of f everywhere, not at the value of the optimum, which is what a
+reconstruction (a map of f over the sample) needs.
+
+Units: variances in f units^2, t and costs in s, rates in f units^2 per s.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+# Shot counts a point may get once the noise model has converged (capped by shots_before).
+SHOT_OPTIONS = (1, 2, 3, 5, 8, 13, 20, 30, 50)
+
+
+def spread_weights(cross: jnp.ndarray) -> jnp.ndarray:
+    """q(x) (m,): the mean over the r integration points of the squared posterior covariance
+    ``cross`` (m, r) between m candidates and them."""
+    return jnp.mean(cross**2, axis=1)
+
+
+def variance_reduction(q: jnp.ndarray, f_var: jnp.ndarray, noise_var: jnp.ndarray) -> jnp.ndarray:
+    """IVR (..., m, k) of a point at each candidate: q (m,) and f_var (m,) at the candidates,
+    noise_var (m, k) or (k,) the variance of the point's value (Noise^2 / n) at k times."""
+    return q[:, None] / (f_var[:, None] + noise_var)
+
+
+def rate_map(q: jnp.ndarray, f_var: jnp.ndarray, noise_sd: jnp.ndarray, t: jnp.ndarray, shots,
+             overhead_s: float) -> jnp.ndarray:
+    """rate(x, t, n) (m, n_t) for n = ``shots``: q, f_var (m,); noise_sd (n_t,) or (m, n_t) the
+    single-shot noise; t (n_t,) s; per-point overhead (s)."""
+    noise_sd = noise_sd if noise_sd.ndim == 2 else noise_sd[None, :]
+    return variance_reduction(q, f_var, noise_sd**2 / shots) / (overhead_s + shots * t[None, :])
+
+
+def shot_options(shots_before: int, shots_after: int) -> tuple[int, ...]:
+    """The shot counts a converged campaign chooses from: ``SHOT_OPTIONS`` up to
+    ``shots_before``, and ``shots_after`` itself."""
+    return tuple(sorted({n for n in SHOT_OPTIONS if n <= shots_before} | {shots_after}))

@@ -1,0 +1,91 @@
+"""The info_rate policy: the integrated variance reduction per second by hand, its choice of
+time and shots where the answer is known, and a campaign that spends a budget with it."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from instruments.forrester import ForresterInstrument
+from noisebo import information, primary
+from noisebo.config import AcquisitionConfig, CampaignConfig, RewardConfig
+from noisebo.decision import integration_points
+from noisebo.driver import run_campaign
+from noisebo.events import Status
+from noisebo.policies import Posterior, acquisition_map, point_scores
+
+
+def test_rate_by_hand():
+    # q = mean of squared covariances; IVR = q / (V + s^2 / n); rate = IVR / (overhead + n t)
+    q = information.spread_weights(jnp.array([[1.0, 3.0], [2.0, 0.0]]))
+    np.testing.assert_allclose(np.asarray(q), [5.0, 2.0])
+    rate = information.rate_map(q, jnp.array([1.0, 2.0]), jnp.array([2.0, 1.0]), jnp.array([0.5, 2.0]), 4, 1.0)
+    # position 0: 5 / (1 + 4/4) / (1 + 2) and 5 / (1 + 1/4) / (1 + 8); position 1 likewise with 2 and V = 2
+    expected = [[5 / 2 / 3, 5 / 1.25 / 9], [2 / 3 / 3, 2 / 2.25 / 9]]
+    np.testing.assert_allclose(np.asarray(rate), expected, rtol=1e-12)
+
+
+def test_the_variance_reduction_is_the_gps_own():
+    # Adding the observation to the GP and recomputing its variance gives the same reduction.
+    params = {"amplitude": jnp.asarray(1.3), "length": jnp.asarray(0.2)}
+
+    def data_of(x, var):
+        return primary.PrimaryData(jnp.asarray(x), jnp.zeros(len(x)), jnp.asarray(var), jnp.ones(len(x), dtype=bool))
+
+    x, var = [0.1, 0.4, 0.8], [0.05, 0.05, 0.05]
+    grid = jnp.linspace(0.0, 1.0, 21)
+    new_x, s2 = 0.6, 0.1
+    data = data_of(x, var)
+    cross = primary.cross_covariance(params, data, grid, jnp.asarray([new_x]))[:, 0]
+    var_new = primary.cross_covariance(params, data, jnp.asarray([new_x]), jnp.asarray([new_x]))[0, 0]
+    predicted = np.asarray(cross**2 / (var_new + s2))
+    before = np.asarray(primary.predict_one(params, data, grid)[1])
+    after = np.asarray(primary.predict_one(params, data_of(x + [new_x], var + [s2]), grid)[1])
+    np.testing.assert_allclose(before - after, predicted, rtol=1e-6, atol=1e-9)
+
+
+def test_shot_options():
+    assert information.shot_options(30, 3) == (1, 2, 3, 5, 8, 13, 20, 30)
+    assert information.shot_options(4, 4) == (1, 2, 3, 4)
+
+
+def post_of(noise):
+    return Posterior(f_mean=jnp.zeros(2), f_var=jnp.array([1.0, 0.5]), noise_mean=noise, noise_var=jnp.zeros(3),
+                     t=jnp.array([0.5, 1.0, 2.0]), t_opt=jnp.asarray(1.0), noise_at_t_opt=jnp.asarray(1.0),
+                     f_best=jnp.asarray(0.0), reward_best=jnp.asarray(0.5), f_spread=jnp.array([2.0, 1.0]))
+
+
+def test_pure_shot_noise_prefers_no_time_over_another_but_overhead_prefers_long_points():
+    # Noise = 1/sqrt(t): s^2 = 1/(n t), so without overhead the rate depends on n t alone, and
+    # q / (V + 1/c) / c grows as the cost c falls: the shortest point wins. With an overhead
+    # a longer point spreads it.
+    acq = AcquisitionConfig(policy="info_rate")
+    post = post_of(1.0 / jnp.sqrt(jnp.array([0.5, 1.0, 2.0])))
+    free = np.asarray(acquisition_map(post, 1, acq, RewardConfig(), 0.0))
+    costly = np.asarray(acquisition_map(post, 1, acq, RewardConfig(), 10.0))
+    assert np.argmax(free[0]) == 0 and np.argmax(costly[0]) == 2
+
+
+def test_info_rate_point_scores_at_grid_points_equal_the_map():
+    acq = AcquisitionConfig(policy="info_rate")
+    post = post_of(jnp.array([2.0, 1.5, 1.2]))
+    values = np.asarray(acquisition_map(post, 3, acq, RewardConfig(), 0.5))
+    i, j = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
+    scores = point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, RewardConfig(),
+                          spread=post.f_spread[i], overhead_s=0.5)
+    np.testing.assert_allclose(np.asarray(scores), values, rtol=1e-12)
+
+
+def test_integration_points():
+    assert integration_points(CampaignConfig().space).shape == (200,)
+    two = CampaignConfig(space={"axes": [{"name": "u", "low": 0, "high": 2}, {"name": "v", "low": 0, "high": 1}]})
+    assert integration_points(two.space).shape == (256, 2)
+
+
+def test_a_budgeted_info_rate_campaign_spends_its_budget_on_its_own_shot_counts(tiny_config):
+    config = tiny_config.with_overrides(acquisition={"policy": "info_rate"},
+                                        schedule={"budget_s": 150.0, "point_overhead_s": 1.0, "n_steps": 400})
+    final = run_campaign(config, ForresterInstrument(), 2).final
+    assert final.status is Status.BUDGET_SPENT and final.spent_s <= 150.0
+    after = [d for d in final.decisions if d.converged]
+    assert after and all(d.shots in information.shot_options(10, 3) for d in after)
+    assert all(d.shots == 10 for d in final.decisions if not d.converged)
