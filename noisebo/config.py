@@ -15,6 +15,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 SCHEMA_VERSION = 2
+MIN_T_DRAWS = 16  # posterior draws of the optimal t for its 95 % interval
 
 
 class ConfigError(ValueError):
@@ -363,8 +364,11 @@ class ScheduleConfig(FrozenModel):
 
     Seed points are random: a Latin hypercube (or uniform draws) with t on a log or linear scale.
 
-    Converged when the population variance of the predicted optimal t over the last ``window``
-    BO steps is below ``threshold`` (s^2).
+    ``convergence``: "variance" (the paper's): converged when the population variance of the
+    predicted optimal t over the last ``window`` BO steps is below ``threshold`` (s^2);
+    "posterior": converged when the 95 % interval of the optimal t over the noise model's
+    posterior draws (Laplace or NUTS) reaches at most ``t_interval_rel`` of its median either
+    side: a statement about how well t* is known rather than about how much it moved.
 
     ``clip_sd``: outlier-robust reduction of a point's shots. A shot farther than ``clip_sd``
     robust standard deviations (1.4826 x the median absolute deviation) from the median of the
@@ -387,6 +391,8 @@ class ScheduleConfig(FrozenModel):
     seed_design: Literal["latin_hypercube", "uniform"] = "latin_hypercube"
     seed_t_scale: Literal["log", "linear", "log_span"] = "log"
     n_steps: int = Field(15, ge=0)
+    convergence: Literal["variance", "posterior"] = "variance"
+    t_interval_rel: PositiveFloat = 0.1
     shots_before: int = Field(30, ge=2)
     shots_after: int = Field(3, ge=1)
     window: int = Field(3, ge=2)
@@ -418,6 +424,14 @@ class CampaignConfig(FrozenModel):
         fixed, s = self.acquisition.fixed_t, self.space
         if fixed is not None and not s.t_min <= fixed <= s.t_max:
             raise ValueError(f"acquisition.fixed_t ({fixed}) must lie in [t_min, t_max] = [{s.t_min}, {s.t_max}]")
+        return self
+
+    @model_validator(mode="after")
+    def _posterior_rule_has_draws(self) -> CampaignConfig:
+        inf = self.inference
+        if self.schedule.convergence == "posterior" and inf.mode == "map" and inf.laplace_samples < MIN_T_DRAWS:
+            raise ValueError(f"schedule.convergence: the posterior rule needs the noise model's draws; set "
+                             f"inference.laplace_samples to at least {MIN_T_DRAWS}")
         return self
 
     @model_validator(mode="after")

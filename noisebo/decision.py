@@ -26,7 +26,7 @@ from noisebo.inputs import capacity_for, group_ids
 from noisebo.keys import FIT, PROPOSE, jax_key
 from noisebo.policies import NoiseRows, Posterior, acquisition_map, argmax_2d, point_scores
 from noisebo.reward import optimal_index, reward
-from noisebo.schedule import converged, converged_map, shots_for
+from noisebo.schedule import converged, converged_map, shots_for, t_interval
 from noisebo.search import STARTS, reference_points, reference_spacing, refine
 from noisebo.state import CampaignState, as_position
 
@@ -214,10 +214,13 @@ def fit_models(
 
 
 class Prediction(NamedTuple):
-    """Model predictions in raw units: the policies' Posterior plus the fine-grid noise curve."""
+    """Model predictions in raw units: the policies' Posterior plus the fine-grid noise curve;
+    ``t_draws`` (S,), for the posterior convergence rule: the optimal t on the t grid of each of
+    the noise model's posterior draws (for a noise field, of the x-averaged reward)."""
 
     posterior: Posterior
     noise_fine: jnp.ndarray
+    t_draws: jnp.ndarray | None = None
 
 
 def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first: bool):
@@ -238,9 +241,15 @@ def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first:
     return mean, var
 
 
+def _t_draws(kind: str, fitted: Fitted, t: jnp.ndarray, ts: jnp.ndarray, rew: RewardConfig) -> jnp.ndarray:
+    """The optimal t on the t grid t (n_t,) of each of the noise model's draws (S,)."""
+    means, _ = noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t, ts, 0)
+    return t[jnp.argmax(reward(t[None, :], means * fitted.noise_scale, rew.alpha, rew.beta), axis=1)]
+
+
 def _predict_program(config: CampaignConfig):
     return _predict_compiled(config.space, config.reward, config.noise_model.mean, config.noise_model.field is not None,
-                             config.acquisition.policy == "info_rate")
+                             config.acquisition.policy == "info_rate", config.schedule.convergence == "posterior")
 
 
 def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray) -> decision_field.FieldRows:
@@ -266,11 +275,13 @@ def _field_prediction(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitt
     post = Posterior(f_mean=f_mean, f_var=f_var, noise_mean=rows.mean, noise_var=rows.var, t=t,
                      t_opt=t_fine[best_i], noise_at_t_opt=rows.at_t_opt, f_best=f_best, reward_best=best_reward,
                      t_opt_map=rows.t_opt)
-    return Prediction(post, noise_fine)
+    t_draws = t[jnp.argmax(reward(t[None, :], rows.draws, rew.alpha, rew.beta), axis=1)]
+    return Prediction(post, noise_fine, t_draws)
 
 
 @lru_cache(maxsize=None)
-def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: bool = False, info: bool = False):
+def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: bool = False, info: bool = False,
+                      draws: bool = False):
     g = space_grids(s)
     xs = jnp.asarray(scaled(s, g.x))
     xi = jnp.asarray(integration_points(s))
@@ -278,10 +289,13 @@ def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: b
 
     def predict(fitted: Fitted, primary_first: bool, noise_first: bool, f_best) -> Prediction:
         prediction = _predict(fitted, primary_first, noise_first, f_best)
-        if not info:
-            return prediction
-        post = prediction.posterior._replace(f_spread=spread(fitted, xs, xi, primary_first))
-        return prediction._replace(posterior=post)
+        if info:
+            post = prediction.posterior._replace(f_spread=spread(fitted, xs, xi, primary_first))
+            prediction = prediction._replace(posterior=post)
+        if draws and not has_field:
+            t = jnp.asarray(g.t)
+            prediction = prediction._replace(t_draws=_t_draws(kind, fitted, t, (t - s.t_min) / (s.t_max - s.t_min), rew))
+        return prediction
 
     def _predict(fitted: Fitted, primary_first: bool, noise_first: bool, f_best) -> Prediction:
         std = fitted.standardisation
@@ -430,7 +444,9 @@ class Decision:
     t), how to measure it, and what the models said. ``noise_at_t`` is the noise model's
     single-shot sd at the proposed t (and x, for a noise field). ``t_opt``: the predicted
     optimal t; for a noise field the one t that maximises the reward averaged over x, with
-    ``t_opt_map`` (m,) t*(x) on the reference points (empty (0,) without a field). Arrays:
+    ``t_opt_map`` (m,) t*(x) on the reference points (empty (0,) without a field);
+    ``t_opt_interval``: for the posterior convergence rule, half the width of the 95 % interval
+    of the optimal t over the noise model's draws relative to its median (NaN otherwise). Arrays:
     ``acq_map`` (n_x, n_t) float32 for one axis, for d > 1 its maximum over t at each of the m
     reference points, (m,); ``f_mean``, ``f_var`` (m,) on the reference points (the x grid for
     one axis); ``noise_mean``, ``noise_var`` (n_t,) on the t grid (for a noise field, their
@@ -458,6 +474,7 @@ class Decision:
     noise_inputs: int = 0
     binned: bool = False
     t_opt_map: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    t_opt_interval: float = float("nan")
 
     def __post_init__(self) -> None:  # one number is one axis; a list (from a record) a tuple
         object.__setattr__(self, "x", as_position(self.x))
@@ -495,11 +512,13 @@ def acquire(
     post = prediction.posterior
     t_opt = float(post.t_opt)
     sched = config.schedule
-    if post.t_opt_map is None:
-        t_map = np.zeros(0)
+    t_map = np.zeros(0) if post.t_opt_map is None else np.asarray(post.t_opt_map, dtype=np.float64)
+    spread_t = float("nan") if prediction.t_draws is None else t_interval(np.asarray(prediction.t_draws))
+    if sched.convergence == "posterior":
+        fresh = spread_t <= sched.t_interval_rel
+    elif post.t_opt_map is None:
         fresh = converged(state.t_opt_history + (t_opt,), sched.window, sched.threshold)
     else:
-        t_map = np.asarray(post.t_opt_map, dtype=np.float64)
         fresh = converged_map(state.t_opt_maps + (t_map,), sched.window, sched.threshold)
     now_converged = state.is_converged or fresh
     new_state = state.with_t_opt(t_opt, now_converged, t_map if t_map.size else None)
@@ -537,6 +556,7 @@ def acquire(
         noise_inputs=int(fitted.noise_inputs),
         binned=bool(fitted.binned),
         t_opt_map=t_map,
+        t_opt_interval=spread_t,
     )
     return decision, new_state
 

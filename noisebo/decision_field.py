@@ -30,13 +30,15 @@ class FieldRows(NamedTuple):
     """The noise at m positions, value units: ``mean``, ``var`` (m, n_t) on the t grid (the
     Laplace draws' spread in the variance); ``t_opt`` (m,) the fine-grid t maximising the reward
     R(t, Noise(x, t)) at each position (s); ``at_t_opt`` (m,) Noise there; ``fine`` (m, N_FINE)
-    the MAP curve on the fine grid."""
+    the MAP curve on the fine grid; ``draws`` (S, n_t) each posterior draw's curve on the t grid
+    averaged over the positions."""
 
     mean: jnp.ndarray
     var: jnp.ndarray
     t_opt: jnp.ndarray
     at_t_opt: jnp.ndarray
     fine: jnp.ndarray
+    draws: jnp.ndarray
 
 
 def t_capacity(distinct: int) -> int:
@@ -135,7 +137,7 @@ def rows(
     fine = noise_field.predict_samples(kind, first, data, xs, t_fine, ts_fine)[0][0] * scale
     best = jnp.argmax(reward(t_fine[None, :], fine, alpha, beta), axis=-1)
     at = jnp.take_along_axis(fine, best[:, None], axis=-1)[:, 0]
-    return FieldRows(mean * scale, var * scale**2, t_fine[best], at, fine)
+    return FieldRows(mean * scale, var * scale**2, t_fine[best], at, fine, jnp.mean(means, axis=1) * scale)
 
 
 def best_training_reward(

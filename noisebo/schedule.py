@@ -47,6 +47,13 @@ def converged_map(t_opt_maps: Sequence[np.ndarray], window: int, threshold: floa
     return float(np.mean(np.var(recent, axis=0))) < threshold
 
 
+def t_interval(t_draws: Sequence[float]) -> float:
+    """Half the width of the central 95 % interval of the optimal t over posterior draws,
+    relative to their median."""
+    lo, mid, hi = np.percentile(np.asarray(t_draws, dtype=np.float64), [2.5, 50.0, 97.5])
+    return float((hi - lo) / (2.0 * mid))
+
+
 def first_converged_step(t_opt_history: Sequence[float], window: int, threshold: float) -> int | None:
     """The first 0-based BO step at which the rule holds, or None."""
     for step in range(len(t_opt_history)):

@@ -43,6 +43,7 @@ STEP_COLUMNS = {
     "noise_at_t": ("f units", "noise model's single-shot sd at the proposed t"),
     "t_opt": ("s", "predicted optimal t at this step"),
     "converged": ("bool", "noise model converged at or before this step"),
+    "t_opt_interval": ("1", "posterior convergence rule: half the 95 % interval of the optimal t over the noise model's draws, over its median (NaN: the variance rule)"),
     "latency_s": ("s", "decision time: fits, prediction and acquisition"),
     "primary_inputs": ("1", "distinct x (or bins, if binned) the GP for f was fitted on"),
     "noise_inputs": ("1", "distinct t (or bins, if binned) the noise model was fitted on"),

@@ -109,3 +109,18 @@ def test_an_unbudgeted_campaign_spends_what_it_measures(tiny_config):
     final = run_campaign(tiny_config.with_overrides(schedule={"n_steps": 1}), ForresterInstrument(), 0).final
     assert final.budget_s is None and final.spent_s == pytest.approx(spent_by_hand(final), rel=1e-12)
     assert np.isfinite(final.spent_s) and final.status is Status.COMPLETED
+
+
+def test_the_posterior_rule_converges_when_the_interval_is_narrow_enough(tiny_config):
+    config = tiny_config.with_overrides(schedule={"convergence": "posterior", "t_interval_rel": 0.2, "n_steps": 3})
+    run = run_campaign(config, ForresterInstrument(), 0)
+    intervals = [d.t_opt_interval for d in run.decisions]
+    assert all(np.isfinite(intervals))
+    first = next((k for k, v in enumerate(intervals) if v <= 0.2), None)
+    assert run.state.converged_step == first
+    assert [d.converged for d in run.decisions] == [first is not None and k >= first for k in range(3)]
+
+
+def test_the_posterior_rule_needs_draws():
+    with pytest.raises(ConfigError, match="the posterior rule needs the noise model's draws"):
+        parse_config({"schedule": {"convergence": "posterior"}, "inference": {"laplace_samples": 4}})

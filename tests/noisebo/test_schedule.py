@@ -1,5 +1,7 @@
 import math
 
+import numpy as np
+
 import pytest
 
 from noisebo.config import ScheduleConfig
@@ -42,3 +44,11 @@ def test_reduce_shots_rejects_bad_input(bad):
 def test_shots_follow_convergence():
     s = ScheduleConfig(shots_before=30, shots_after=3)
     assert shots_for(False, s) == 30 and shots_for(True, s) == 3
+
+
+def test_t_interval_by_hand():
+    from noisebo.schedule import t_interval
+
+    draws = np.linspace(1.0, 3.0, 401)  # percentiles 2.5 / 50 / 97.5: 1.05, 2.0, 2.95
+    assert t_interval(draws) == pytest.approx(0.95 / 2.0, rel=1e-12)
+    assert t_interval(np.full(20, 2.5)) == 0.0

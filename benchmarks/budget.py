@@ -1,0 +1,190 @@
+"""Spending a fixed instrument-time budget: the reconstruction error of f against cumulative time.
+
+    python benchmarks/budget.py [--config PATH] [--budget S] [--overhead S] [--seeds 20]
+                                [--designs NAMES] [--json PATH] [--figure PATH]
+
+Every design runs the configuration with ``schedule.budget_s`` = --budget, ``point_overhead_s``
+= --overhead and no step limit, for each seed:
+
+- "reward", "double": the paper's two policies (and shot schedule);
+- "fixed t_min", "fixed t*", "fixed t_max": the reward-driven policy with every point at one t
+  (t* from the simulator's own noise law and the configured reward) and ``shots_after`` shots
+  (at least 2) from the first point on: with no t to learn, no point needs the 30 shots;
+- "info rate": ``acquisition.policy: info_rate`` (``noisebo.information``).
+
+After every decision it scores the model that decision was made with (the GP mean on the x grid,
+interpolated to 200 evenly spaced positions for one axis) against the simulator's truth, beside
+the instrument time spent when it was made, and at the end the final model. It prints, per
+design, the median RMSE [IQR] once a given time is spent (the last model made within it), the
+median time to first reach --target (when every seed reaches it), and the final predicted t
+against t*; and plots the median curves with their IQR (--figure). Each finished design is
+appended to --json as it completes, so a long run keeps what it has measured.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from instruments import build  # noqa: E402
+from instruments.registry import validated  # noqa: E402
+from noisebo.config import load_config  # noqa: E402
+from noisebo.decision import grids  # noqa: E402
+from noisebo.driver import run_campaign  # noqa: E402
+from noisebo.metrics import median_iqr, relative_error, rmse  # noqa: E402
+from noisebo.reward import true_optimal_t  # noqa: E402
+
+DESIGNS = ("reward", "double", "fixed t_min", "fixed t*", "fixed t_max", "info rate")
+NO_STEP_LIMIT = 1_000_000
+
+
+def design_config(base, name: str, t_star: float):
+    s = base.space
+    if name in ("reward", "double"):
+        return base.with_overrides(acquisition={"policy": name})
+    if name == "info rate":
+        return base.with_overrides(acquisition={"policy": "info_rate"})
+    fixed = {"fixed t_min": s.t_min, "fixed t*": t_star, "fixed t_max": s.t_max}[name]
+    after = base.schedule.shots_after  # no t to learn: every point gets the few shots a converged campaign takes
+    return base.with_overrides(acquisition={"policy": "reward", "fixed_t": float(fixed)},
+                               schedule={"shots_before": max(after, 2), "shots_after": after})
+
+
+def scorer(config, instrument):
+    """f_mean on the x grid -> RMSE against the truth (200 positions for one axis)."""
+    g = grids(config)
+    if config.space.dimensions == 1:
+        x_eval = np.linspace(config.space.x_min, config.space.x_max, 200)
+        truth = instrument.truth(x_eval[:, None])
+        return lambda f_mean: rmse(np.interp(x_eval, g.x, f_mean), truth)
+    truth = instrument.truth(g.x)
+    return lambda f_mean: rmse(np.asarray(f_mean), truth)
+
+
+def run_one(config, instrument, seed: int, score, t_star: float) -> dict:
+    started = time.perf_counter()
+    spent_at = []  # instrument time spent when each decision was made
+
+    def on_commit(state, events):
+        if any(type(e).__name__ == "Decided" for e in events):
+            spent_at.append(state.spent_s)
+
+    result = run_campaign(config, instrument, seed, on_commit=on_commit)
+    final = result.final
+    times = list(spent_at) + [final.spent_s]
+    summary = final.summary
+    errors = [score(d.f_mean) for d in final.decisions] + [score(summary.f_mean) if summary else float("nan")]
+    return {"seed": seed, "times_s": [float(v) for v in times], "rmse": [float(v) for v in errors],
+            "points": len(final.points), "status": final.status.value, "spent_s": float(final.spent_s),
+            "t_opt": float(summary.t_opt) if summary else float("nan"),
+            "t_rel_error": relative_error(summary.t_opt, t_star) if summary else float("nan"),
+            "shots": [int(d.shots) for d in final.decisions], "t": [float(d.t) for d in final.decisions],
+            "latency_s": float(np.median(result.latencies_s[1:])) if len(result.latencies_s) > 1 else float("nan"),
+            "wall_s": time.perf_counter() - started}
+
+
+def rmse_at(record: dict, budget: float) -> float:
+    inside = [e for t, e in zip(record["times_s"], record["rmse"]) if t <= budget + 1e-9]
+    return inside[-1] if inside else float("nan")
+
+
+def time_to(record: dict, target: float) -> float:
+    return next((t for t, e in zip(record["times_s"], record["rmse"]) if e <= target), float("nan"))
+
+
+def figure(records: dict, budget: float, path: Path, title: str) -> None:
+    from matplotlib.figure import Figure
+
+    grid = np.linspace(0.0, budget, 181)[1:]
+    fig = Figure(figsize=(8, 5), layout="constrained")
+    ax = fig.subplots()
+    for name, recs in records.items():
+        curves = np.array([[rmse_at(r, b) for b in grid] for r in recs])
+        ok = np.all(np.isfinite(curves), axis=0)  # where every seed has a model
+        if not ok.any():
+            continue
+        lo, mid, hi = np.nanpercentile(curves[:, ok], [25, 50, 75], axis=0)
+        line, = ax.plot(grid[ok], mid, label=name, lw=1.6)
+        ax.fill_between(grid[ok], lo, hi, color=line.get_color(), alpha=0.15)
+    ax.set(xlabel="instrument time spent (s)", ylabel="RMSE of f (median, IQR shaded)", title=title, yscale="log")
+    ax.legend(fontsize=8)
+    fig.savefig(path, dpi=120)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
+    parser.add_argument("--budget", type=float, default=900.0)
+    parser.add_argument("--overhead", type=float, default=0.0)
+    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--designs", default=",".join(DESIGNS))
+    parser.add_argument("--at", default="100,200,300,500,860", help="times (s) to report the RMSE at")
+    parser.add_argument("--target", type=float, default=0.46)
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--figure", type=Path, default=None)
+    args = parser.parse_args(argv)
+
+    base = validated(load_config(args.config).with_overrides(
+        schedule={"budget_s": args.budget, "point_overhead_s": args.overhead, "n_steps": NO_STEP_LIMIT}))
+    instrument = build(base.instrument)
+    s, rew = base.space, base.reward
+    t_star = true_optimal_t(instrument.noise_law, s.t_min, s.t_max, rew.alpha, rew.beta)
+    score = scorer(base, instrument)
+    names = [n.strip() for n in args.designs.split(",") if n.strip()]
+    at = [float(v) for v in args.at.split(",") if v.strip()] + [args.budget]
+    records: dict[str, list] = {}
+    done = json.loads(args.json.read_text()) if args.json and args.json.exists() else {}
+    for name in names:
+        if name in done.get("records", {}):
+            records[name] = done["records"][name]
+            print(f"{name}: kept from {args.json}", file=sys.stderr, flush=True)
+            continue
+        config = design_config(base, name, t_star)
+        records[name] = []
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            rec = run_one(config, instrument, seed, score, t_star)
+            records[name].append(rec)
+            print(f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
+                  f"{rec['rmse'][-1]:.3f}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, "
+                  f"wall {rec['wall_s']:.0f} s", file=sys.stderr, flush=True)
+        if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps({"config": base.model_dump(mode="json"), "t_star": t_star,
+                                             "records": records}, default=float))
+    print(f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, {args.seeds} seeds per design; "
+          f"t* = {t_star:.4f} s\n")
+    print("RMSE of f once this much instrument time is spent, median [IQR] over seeds:\n")
+    print("| design | " + " | ".join(f"{v:g} s" for v in at) + f" | time to RMSE {args.target:g} (s) | points "
+          "| final t within 5 % of t* | final t error |")
+    print("|---" * (len(at) + 5) + "|")
+    for name, recs in records.items():
+        cells = []
+        for b in at:
+            values = [rmse_at(r, b) for r in recs]
+            m, lo, hi = median_iqr([v for v in values if np.isfinite(v)]) if any(np.isfinite(values)) else (np.nan,) * 3
+            cells.append("-" if not np.isfinite(m) else f"{m:.3f} [{lo:.3f}, {hi:.3f}]"
+                         + ("" if all(np.isfinite(values)) else f" ({sum(np.isfinite(values))} seeds)"))
+        reach = [time_to(r, args.target) for r in recs]
+        reached = [v for v in reach if np.isfinite(v)]
+        when = f"{np.median(reach):.0f}" if len(reached) == len(reach) else f"{len(reached)} of {len(reach)} reach it"
+        within = sum(r["t_rel_error"] <= 0.05 for r in recs)
+        terr = median_iqr([r["t_rel_error"] for r in recs])
+        print(f"| {name} | " + " | ".join(cells) + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
+              f"{within} of {len(recs)} | {100 * terr[0]:.1f} % |")
+    if args.figure:
+        figure(records, args.budget, args.figure, f"{base.name}: budget {args.budget:g} s, {args.seeds} seeds")
+        print(f"\nwrote {args.figure}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
