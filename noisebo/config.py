@@ -370,6 +370,12 @@ class ScheduleConfig(FrozenModel):
     posterior draws (Laplace or NUTS) reaches at most ``t_interval_rel`` of its median either
     side: a statement about how well t* is known rather than about how much it moved.
 
+    ``adaptive_shots``: a point whose noise is measured (before convergence) takes the shots
+    that make its noise estimate as precise as the noise model already is at its t (relative
+    standard error 1/sqrt(2 (n - 1)) against the model's relative sd there), between
+    max(2, shots_after) and shots_before, instead of always shots_before: cheap points while the
+    model knows little, more as it knows more.
+
     ``clip_sd``: outlier-robust reduction of a point's shots. A shot farther than ``clip_sd``
     robust standard deviations (1.4826 x the median absolute deviation) from the median of the
     point's ok shots is rejected (recorded with its reason, like any rejected shot) and the point
@@ -391,6 +397,7 @@ class ScheduleConfig(FrozenModel):
     seed_design: Literal["latin_hypercube", "uniform"] = "latin_hypercube"
     seed_t_scale: Literal["log", "linear", "log_span"] = "log"
     n_steps: int = Field(15, ge=0)
+    adaptive_shots: bool = False
     convergence: Literal["variance", "posterior"] = "variance"
     t_interval_rel: PositiveFloat = 0.1
     shots_before: int = Field(30, ge=2)

@@ -536,6 +536,8 @@ def acquire(
             best = found + (shots,)
     x, j, acq_value, acq_map, noise_at_t, shots = best
     g = grids(config)
+    if sched.adaptive_shots and not now_converged:
+        shots = min(shots, noise_point_shots(post, j, x, g, sched))
     decision = Decision(
         step=step,
         x=x,
@@ -576,6 +578,21 @@ def _propose(config: CampaignConfig, fitted: Fitted, post: Posterior, key, shots
     lows, highs = np.asarray(s.lows), np.asarray(s.highs)
     x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
     return x, int(j), float(acq_value), acq_map, float(noise_at)
+
+
+def noise_point_shots(post: Posterior, j: int, x: tuple, g: Grids, sched) -> int:
+    """``schedule.adaptive_shots``: the shots of a point whose noise is measured, as many as
+    make its noise estimate as precise as the noise model already is at its t: the sample sd
+    of n shots has a relative standard error of about 1/sqrt(2 (n - 1)), so n = 1 + 1 / (2 r^2)
+    for the model's relative sd r = sd(Noise) / Noise there (a field: at the proposal's nearest
+    reference point); at least max(2, shots_after), at most shots_before."""
+    mean, var = np.asarray(post.noise_mean), np.asarray(post.noise_var)
+    if mean.ndim == 2:
+        i = int(np.argmin(np.sum((np.asarray(g.x).reshape(len(mean), -1) - np.asarray(x)) ** 2, axis=1)))
+        mean, var = mean[i], var[i]
+    r = float(np.sqrt(max(var[j], 0.0)) / max(mean[j], 1e-300))
+    wanted = 1 + int(np.ceil(1.0 / (2.0 * max(r, 1e-6) ** 2)))
+    return int(np.clip(wanted, max(2, sched.shots_after), sched.shots_before))
 
 
 def _over_x(curves) -> np.ndarray:

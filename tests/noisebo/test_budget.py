@@ -124,3 +124,19 @@ def test_the_posterior_rule_converges_when_the_interval_is_narrow_enough(tiny_co
 def test_the_posterior_rule_needs_draws():
     with pytest.raises(ConfigError, match="the posterior rule needs the noise model's draws"):
         parse_config({"schedule": {"convergence": "posterior"}, "inference": {"laplace_samples": 4}})
+
+
+# n = 1 + ceil(1 / (2 r^2)) within [max(2, shots_after), shots_before] = [3, 20]
+@pytest.mark.parametrize("rel_sd, expected", [(0.5, 3), (0.2, 14), (0.05, 20), (1.0, 3)])
+def test_adaptive_noise_point_shots_by_hand(rel_sd, expected):
+    import jax.numpy as jnp
+
+    from noisebo.config import ScheduleConfig
+    from noisebo.decision import noise_point_shots, space_grids
+    from noisebo.policies import Posterior
+
+    sched = ScheduleConfig(shots_before=20, shots_after=3)
+    post = Posterior(f_mean=jnp.zeros(3), f_var=jnp.ones(3), noise_mean=jnp.full(4, 2.0),
+                     noise_var=jnp.full(4, (2.0 * rel_sd) ** 2), t=jnp.arange(1.0, 5.0), t_opt=jnp.asarray(2.0),
+                     noise_at_t_opt=jnp.asarray(2.0), f_best=jnp.asarray(0.0), reward_best=jnp.asarray(0.5))
+    assert noise_point_shots(post, 1, (0.5,), space_grids(CampaignConfig().space), sched) == expected
