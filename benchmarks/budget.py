@@ -1,7 +1,7 @@
 """Spending a fixed instrument-time budget: the reconstruction error of f against cumulative time.
 
     python benchmarks/budget.py [--config PATH] [--budget S] [--overhead S] [--seeds 20]
-                                [--designs NAMES] [--json PATH] [--figure PATH]
+                                [--designs NAMES] [--json PATH] [--figure PATH] [--report]
 
 Every design runs the configuration with ``schedule.budget_s`` = --budget, ``point_overhead_s``
 = --overhead and no step limit, for each seed:
@@ -18,7 +18,8 @@ the instrument time spent when it was made, and at the end the final model. It p
 design, the median RMSE [IQR] once a given time is spent (the last model made within it), the
 median time to first reach --target (when every seed reaches it), and the final predicted t
 against t*; and plots the median curves with their IQR (--figure). Each finished design is
-appended to --json as it completes, so a long run keeps what it has measured.
+written to --json after every seed, and a run given the same --json measures only the seeds it
+lacks: a long run interrupted keeps what it has measured.
 """
 
 from __future__ import annotations
@@ -131,6 +132,8 @@ def main(argv=None) -> int:
     parser.add_argument("--target", type=float, default=0.46)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--figure", type=Path, default=None)
+    parser.add_argument("--report", action="store_true",
+                        help="measure nothing: report every seed --json holds for each design")
     args = parser.parse_args(argv)
 
     base = validated(load_config(args.config).with_overrides(
@@ -143,24 +146,34 @@ def main(argv=None) -> int:
     at = [float(v) for v in args.at.split(",") if v.strip()] + [args.budget]
     records: dict[str, list] = {}
     done = json.loads(args.json.read_text()) if args.json and args.json.exists() else {}
+    wanted = list(range(args.first_seed, args.first_seed + args.seeds))
     for name in names:
-        if name in done.get("records", {}):
-            records[name] = done["records"][name]
-            print(f"{name}: kept from {args.json}", file=sys.stderr, flush=True)
+        if args.report:
+            records[name] = done.get("records", {}).get(name, [])
             continue
+        kept = {r["seed"]: r for r in done.get("records", {}).get(name, []) if r["seed"] in wanted}
+        if kept:
+            print(f"{name}: {len(kept)} seeds kept from {args.json}", file=sys.stderr, flush=True)
         config = design_config(base, name, t_star)
-        records[name] = []
-        for seed in range(args.first_seed, args.first_seed + args.seeds):
+        for seed in wanted:
+            if seed in kept:
+                continue
             rec = run_one(config, instrument, seed, score, t_star)
-            records[name].append(rec)
+            kept[seed] = rec
             print(f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
                   f"{rec['rmse'][-1]:.3f}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, "
                   f"wall {rec['wall_s']:.0f} s", file=sys.stderr, flush=True)
-        if args.json:
-            args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps({"config": base.model_dump(mode="json"), "t_star": t_star,
-                                             "records": records}, default=float))
-    print(f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, {args.seeds} seeds per design; "
+            if args.json:  # after every seed: a long run interrupted keeps what it measured
+                done.setdefault("records", {})[name] = sorted(
+                    {**{r["seed"]: r for r in done.get("records", {}).get(name, [])}, **kept}.values(),
+                    key=lambda r: r["seed"])
+                args.json.parent.mkdir(parents=True, exist_ok=True)
+                args.json.write_text(json.dumps({"config": base.model_dump(mode="json"), "t_star": t_star,
+                                                 "records": done["records"]}, default=float))
+        records[name] = [kept[seed] for seed in wanted]
+    counts = sorted({len(r) for r in records.values()})
+    print(f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, "
+          f"{'/'.join(str(c) for c in counts)} seeds per design; "
           f"t* = {t_star:.4f} s\n")
     print("RMSE of f once this much instrument time is spent, median [IQR] over seeds:\n")
     print("| design | " + " | ".join(f"{v:g} s" for v in at) + f" | time to RMSE {args.target:g} (s) | points "
@@ -178,10 +191,13 @@ def main(argv=None) -> int:
         when = f"{np.median(reach):.0f}" if len(reached) == len(reach) else f"{len(reached)} of {len(reach)} reach it"
         within = sum(r["t_rel_error"] <= 0.05 for r in recs)
         terr = median_iqr([r["t_rel_error"] for r in recs])
-        print(f"| {name} | " + " | ".join(cells) + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
+        if not recs:
+            continue
+        print(f"| {name} ({len(recs)} seeds) | " + " | ".join(cells) + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
               f"{within} of {len(recs)} | {100 * terr[0]:.1f} % |")
     if args.figure:
-        figure(records, args.budget, args.figure, f"{base.name}: budget {args.budget:g} s, {args.seeds} seeds")
+        figure({n: r for n, r in records.items() if r}, args.budget, args.figure,
+               f"{base.name}: budget {args.budget:g} s, {'/'.join(str(c) for c in counts)} seeds")
         print(f"\nwrote {args.figure}")
     return 0
 

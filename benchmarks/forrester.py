@@ -73,6 +73,7 @@ def run_one(config, instrument, seed: int) -> dict:
     record = campaign_figures(
         config, instrument, result.state.t_opt_history, result.summary.t_opt, grids(config).x,
         result.summary.f_mean, [p.t for p in points for _ in range(p.n_shots)], result.latencies_s,
+        result.state.converged_step,
     )
     after_first = compiles["after_first"]
     record["regret"] = regret(config, instrument, result.summary.f_mean)

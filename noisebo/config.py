@@ -376,6 +376,12 @@ class ScheduleConfig(FrozenModel):
     max(2, shots_after) and shots_before, instead of always shots_before: cheap points while the
     model knows little, more as it knows more.
 
+    ``noise_t``: where a noise-measuring point (before convergence) measures. "policy": at the
+    t the acquisition policy chose (the paper's). "informative" (with the posterior rule, a
+    noise model without a field): at the t whose measurement is expected to narrow the
+    posterior of the optimal t most per second of instrument time (``information.t_opt_rate``),
+    the point keeping the policy's x: the rule then converges by learning what it tests.
+
     ``clip_sd``: outlier-robust reduction of a point's shots. A shot farther than ``clip_sd``
     robust standard deviations (1.4826 x the median absolute deviation) from the median of the
     point's ok shots is rejected (recorded with its reason, like any rejected shot) and the point
@@ -400,6 +406,7 @@ class ScheduleConfig(FrozenModel):
     adaptive_shots: bool = False
     convergence: Literal["variance", "posterior"] = "variance"
     t_interval_rel: PositiveFloat = 0.1
+    noise_t: Literal["policy", "informative"] = "policy"
     shots_before: int = Field(30, ge=2)
     shots_after: int = Field(3, ge=1)
     window: int = Field(3, ge=2)
@@ -439,6 +446,19 @@ class CampaignConfig(FrozenModel):
         if self.schedule.convergence == "posterior" and inf.mode == "map" and inf.laplace_samples < MIN_T_DRAWS:
             raise ValueError(f"schedule.convergence: the posterior rule needs the noise model's draws; set "
                              f"inference.laplace_samples to at least {MIN_T_DRAWS}")
+        return self
+
+    @model_validator(mode="after")
+    def _informative_noise_t(self) -> CampaignConfig:
+        if self.schedule.noise_t != "informative":
+            return self
+        if self.schedule.convergence != "posterior":
+            raise ValueError("schedule.noise_t: informative narrows the posterior of the optimal t, which only the "
+                             "posterior rule tests; set schedule.convergence: posterior")
+        if self.noise_model.field is not None:
+            raise ValueError("schedule.noise_t: informative needs a noise model without noise_model.field")
+        if self.acquisition.fixed_t is not None:
+            raise ValueError("schedule.noise_t: informative chooses t, which acquisition.fixed_t fixes; use one of them")
         return self
 
     @model_validator(mode="after")

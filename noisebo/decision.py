@@ -215,12 +215,14 @@ def fit_models(
 
 class Prediction(NamedTuple):
     """Model predictions in raw units: the policies' Posterior plus the fine-grid noise curve;
-    ``t_draws`` (S,), for the posterior convergence rule: the optimal t on the t grid of each of
-    the noise model's posterior draws (for a noise field, of the x-averaged reward)."""
+    ``t_draws`` (S,), for the posterior convergence rule: the optimal t of each of the noise
+    model's posterior draws (for a noise field, of the x-averaged reward); ``noise_draws``
+    (S, n_t) without a field: each draw's noise curve on the t grid."""
 
     posterior: Posterior
     noise_fine: jnp.ndarray
     t_draws: jnp.ndarray | None = None
+    noise_draws: jnp.ndarray | None = None
 
 
 def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first: bool):
@@ -241,10 +243,18 @@ def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first:
     return mean, var
 
 
-def _t_draws(kind: str, fitted: Fitted, t: jnp.ndarray, ts: jnp.ndarray, rew: RewardConfig) -> jnp.ndarray:
-    """The optimal t on the t grid t (n_t,) of each of the noise model's draws (S,)."""
-    means, _ = noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t, ts, 0)
-    return t[jnp.argmax(reward(t[None, :], means * fitted.noise_scale, rew.alpha, rew.beta), axis=1)]
+def _t_draws(kind: str, fitted: Fitted, s: SpaceConfig, rew: RewardConfig) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Each of the noise model's S draws' optimal t (S,), on the fine t grid (the decision
+    grid's step, 1 % of the range, can exceed a tolerance), and its noise curve on the t grid
+    (S, n_t), raw units."""
+    g = space_grids(s)
+    t_all = jnp.asarray(np.concatenate([g.t, g.t_fine]))
+    means, _ = noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t_all,
+                                           (t_all - s.t_min) / (s.t_max - s.t_min), 0)
+    means = means * fitted.noise_scale
+    n_t, t_fine = g.t.shape[0], t_all[g.t.shape[0]:]
+    best = jnp.argmax(reward(t_fine[None, :], means[:, n_t:], rew.alpha, rew.beta), axis=1)
+    return t_fine[best], means[:, :n_t]
 
 
 def _predict_program(config: CampaignConfig):
@@ -275,8 +285,21 @@ def _field_prediction(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitt
     post = Posterior(f_mean=f_mean, f_var=f_var, noise_mean=rows.mean, noise_var=rows.var, t=t,
                      t_opt=t_fine[best_i], noise_at_t_opt=rows.at_t_opt, f_best=f_best, reward_best=best_reward,
                      t_opt_map=rows.t_opt)
-    t_draws = t[jnp.argmax(reward(t[None, :], rows.draws, rew.alpha, rew.beta), axis=1)]
-    return Prediction(post, noise_fine, t_draws)
+    return Prediction(post, noise_fine, peak_t(t, reward(t[None, :], rows.draws, rew.alpha, rew.beta)))
+
+
+def peak_t(t: jnp.ndarray, values: jnp.ndarray) -> jnp.ndarray:
+    """Where each row of values (S, n_t) on the evenly spaced grid t (n_t,) peaks, refined
+    between grid points by the parabola through the best point and its neighbours (the best
+    point itself at either end of the grid): (S,), in t's units."""
+    best = jnp.argmax(values, axis=1)
+    mid = jnp.clip(best, 1, t.shape[0] - 2)
+    rows = jnp.arange(values.shape[0])
+    y0, y1, y2 = values[rows, mid - 1], values[rows, mid], values[rows, mid + 1]
+    curvature = y0 - 2.0 * y1 + y2
+    inner = (best == mid) & (curvature < 0)
+    offset = jnp.where(inner, 0.5 * (y0 - y2) / jnp.where(inner, curvature, -1.0), 0.0)
+    return t[best] + jnp.clip(offset, -0.5, 0.5) * (t[1] - t[0])
 
 
 @lru_cache(maxsize=None)
@@ -293,8 +316,8 @@ def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: b
             post = prediction.posterior._replace(f_spread=spread(fitted, xs, xi, primary_first))
             prediction = prediction._replace(posterior=post)
         if draws and not has_field:
-            t = jnp.asarray(g.t)
-            prediction = prediction._replace(t_draws=_t_draws(kind, fitted, t, (t - s.t_min) / (s.t_max - s.t_min), rew))
+            t_draws, noise_draws = _t_draws(kind, fitted, s, rew)
+            prediction = prediction._replace(t_draws=t_draws, noise_draws=noise_draws)
         return prediction
 
     def _predict(fitted: Fitted, primary_first: bool, noise_first: bool, f_best) -> Prediction:
@@ -536,6 +559,9 @@ def acquire(
             best = found + (shots,)
     x, j, acq_value, acq_map, noise_at_t, shots = best
     g = grids(config)
+    if sched.noise_t == "informative" and not now_converged and shots >= 2:
+        j = informative_t(prediction, j, shots, config, budget_left)
+        noise_at_t = float(np.asarray(post.noise_mean)[j])
     if sched.adaptive_shots and not now_converged:
         shots = min(shots, noise_point_shots(post, j, x, g, sched))
     decision = Decision(
@@ -578,6 +604,20 @@ def _propose(config: CampaignConfig, fitted: Fitted, post: Posterior, key, shots
     lows, highs = np.asarray(s.lows), np.asarray(s.highs)
     x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
     return x, int(j), float(acq_value), acq_map, float(noise_at)
+
+
+def informative_t(prediction: Prediction, j: int, shots: int, config: CampaignConfig, budget_left) -> int:
+    """``schedule.noise_t: informative``: the index of the affordable t on the t grid whose
+    noise measurement of ``shots`` shots narrows the posterior of the optimal t most per second
+    (``information.t_opt_rate``); the policy's index j when no draw disagrees about t*."""
+    allowed, _ = affordable(config, shots, budget_left)
+    t = grids(config).t
+    rel_var = float((1.0 - noise_model.c4(shots) ** 2) / noise_model.c4(shots) ** 2)
+    rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws, jnp.asarray(t), rel_var,
+                                             shots, config.schedule.point_overhead_s))
+    rate = np.where(np.asarray(allowed), rate, -np.inf)
+    best = int(np.argmax(rate))
+    return best if rate[best] > 0 else j
 
 
 def noise_point_shots(post: Posterior, j: int, x: tuple, g: Grids, sched) -> int:

@@ -51,3 +51,24 @@ def shot_options(shots_before: int, shots_after: int) -> tuple[int, ...]:
     """The shot counts a converged campaign chooses from: ``SHOT_OPTIONS`` up to
     ``shots_before``, and ``shots_after`` itself."""
     return tuple(sorted({n for n in SHOT_OPTIONS if n <= shots_before} | {shots_after}))
+
+
+def t_opt_rate(t_draws: jnp.ndarray, noise_draws: jnp.ndarray, t: jnp.ndarray, rel_var: float,
+               shots: int, overhead_s: float) -> jnp.ndarray:
+    """How much measuring the noise at each t of the grid t (n_t,) with ``shots`` shots narrows
+    the posterior of the optimal t, per second (s^2 of t* per s; ``schedule.noise_t:
+    informative``).
+
+    Over the noise model's S posterior draws, t_draws (S,) is each draw's optimal t (s) and
+    noise_draws (S, n_t) its noise curve. Treating (t*, Noise(t)) as jointly normal across the
+    draws, a measured noise y = Noise(t) + e with Var[e] = Noise(t)^2 rel_var (rel_var the
+    relative sampling variance of the sample sd of ``shots`` shots, (1 - c4^2) / c4^2) lowers
+    Var[t*] by Cov(t*, Noise(t))^2 / (Var[Noise(t)] + Var[e]): the ensemble (Kalman) form of a
+    one-step look-ahead on t*. Each is divided by the point's cost, shots t + overhead."""
+    dt = t_draws - jnp.mean(t_draws)
+    centred = noise_draws - jnp.mean(noise_draws, axis=0)
+    cov = jnp.mean(dt[:, None] * centred, axis=0)
+    var = jnp.mean(centred**2, axis=0)
+    sampling = jnp.mean(noise_draws, axis=0) ** 2 * rel_var
+    reduction = cov**2 / jnp.maximum(var + sampling, 1e-300)
+    return reduction / (shots * t + overhead_s)

@@ -39,16 +39,17 @@ def campaign_figures(
     f_mean_final: np.ndarray,
     shot_t: np.ndarray,
     latencies_s,
+    converged_step: int | None,
 ) -> dict:
     """The benchmark figures of one finished campaign.
 
     t* comes from the instrument's true noise law and the configured reward; RMSE compares the
     final f prediction (interpolated from the x grid) with the truth at 200 evenly spaced x (for d > 1 axes, at the reference points). Either
-    is None when the instrument does not know its truth."""
+    is None when the instrument does not know its truth. ``converged_step``: the first step at
+    which the campaign's own convergence rule held (None if it never did)."""
     from noisebo.reward import true_optimal_t
-    from noisebo.schedule import first_converged_step
 
-    s, rew, sched = config.space, config.reward, config.schedule
+    s, rew = config.space, config.reward
     t_star = None
     from noisebo.driver import simulates
 
@@ -66,7 +67,7 @@ def campaign_figures(
     history = [float(v) for v in t_opt_history]
     return {
         "policy": config.acquisition.policy,
-        "converged_step": first_converged_step(history, sched.window, sched.threshold),
+        "converged_step": converged_step,
         "t_opt_pred": history + [float(t_opt_final)],
         "t_star": t_star,
         "t_opt_rel_error": None if t_star is None else relative_error(t_opt_final, t_star),

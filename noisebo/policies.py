@@ -104,10 +104,14 @@ def reward_driven(post: Posterior, shots: int, acq: AcquisitionConfig, rew: Rewa
     """Eq. 6: acq_x(x, t, V[f(x), t]) * Norm(R)^gamma, with V[f(x), t] = V[f(x)] + Noise(t)^2/shots.
 
     An acquisition that can be negative (UCB) is shifted to be non-negative first, so the reward
-    weight can only lower a score."""
+    weight can only lower a score. With ``acquisition.fixed_t`` the reward chooses no t: its
+    weight, one number at every x, would only scale the map, or zero it where t is the reward's
+    worst, so the map is acq_x alone."""
     noise = typical_noise(post)[None, :]
     total_var = post.f_var[:, None] + noise**2 / shots
     acq_x = _nonnegative(_acq_x(post, total_var, post.f_mean[:, None], acq))
+    if acq.fixed_t is not None:
+        return acq_x
     weight = reward_weight(post.t, post.noise_mean, rew)
     return acq_x * (weight if _field(post) else weight[None, :])
 
@@ -175,7 +179,9 @@ def point_scores(post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.nd
         grid_noise = typical_noise(post)
         grid_var = post.f_var[:, None] + (grid_noise**2)[None, :] / shots
         shift = jnp.minimum(jnp.min(_acq_x(post, grid_var, post.f_mean[:, None], acq)), 0.0)
-        if _field(post):
+        if acq.fixed_t is not None:  # as in reward_driven: no reward weight when t is fixed
+            weight = 1.0
+        elif _field(post):
             weight = _at(reward_weight(post.t, noise.mean, rew), j)
         else:
             weight = reward_weight(post.t, post.noise_mean, rew)[j]

@@ -280,6 +280,12 @@ def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
     return out
 
 
+def _first_converged(converged) -> int | None:
+    """The first step whose ``converged`` flag is set, or None."""
+    hits = np.flatnonzero(np.asarray(converged, dtype=bool))
+    return int(hits[0]) if hits.size else None
+
+
 def figures_from_file(path: str | Path) -> dict:
     """Benchmark figures of one finished campaign, from its HDF5 file alone."""
     from instruments import build
@@ -291,6 +297,7 @@ def figures_from_file(path: str | Path) -> dict:
     record = campaign_figures(
         config, build(config.instrument), data["steps"]["t_opt"], data["summary"]["t_opt"], data["grid"]["x"],
         data["summary"]["f_mean"], data["shots"]["t"], data["steps"]["latency_s"],
+        _first_converged(data["steps"]["converged"]),
     )
     record.update(seed=int(data["attrs"]["seed"]), file=str(path))
     return record

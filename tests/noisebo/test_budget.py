@@ -2,11 +2,12 @@
 ends as "budget_spent" with its final models, and continues with a larger budget; the steps
 limit still ends it first when it comes first."""
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from instruments.forrester import ForresterInstrument
-from noisebo import engine
+from noisebo import engine, noise_model
 from noisebo.config import CampaignConfig, ConfigError, parse_config
 from noisebo.decision import affordable, cheapest_point_s, grids
 from noisebo.driver import drive, in_memory, run_campaign
@@ -140,3 +141,38 @@ def test_adaptive_noise_point_shots_by_hand(rel_sd, expected):
                      noise_var=jnp.full(4, (2.0 * rel_sd) ** 2), t=jnp.arange(1.0, 5.0), t_opt=jnp.asarray(2.0),
                      noise_at_t_opt=jnp.asarray(2.0), f_best=jnp.asarray(0.0), reward_best=jnp.asarray(0.5))
     assert noise_point_shots(post, 1, (0.5,), space_grids(CampaignConfig().space), sched) == expected
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"schedule": {"noise_t": "informative"}}, "set schedule.convergence: posterior"),
+        ({"schedule": {"noise_t": "informative", "convergence": "posterior"}, "acquisition": {"fixed_t": 1.0}},
+         "acquisition.fixed_t fixes"),
+        ({"schedule": {"noise_t": "informative", "convergence": "posterior"},
+          "noise_model": {"field": {"length_loc": -1.0}}}, "without noise_model.field"),
+        ({"schedule": {"noise_t": "often"}}, "schedule.noise_t"),
+    ],
+)
+def test_bad_noise_t_settings_say_why(overrides, message):
+    with pytest.raises(ConfigError, match=message):
+        parse_config(overrides)
+
+
+def test_an_informative_noise_point_measures_where_the_rate_on_t_star_peaks(tiny_config):
+    from noisebo import decision, information
+
+    config = tiny_config.with_overrides(schedule={"convergence": "posterior", "t_interval_rel": 1e-6,
+                                                  "noise_t": "informative", "n_steps": 1})
+    seeds = run_campaign(config.with_overrides(schedule={"n_steps": 0}), ForresterInstrument(), 1).state
+    fitted = decision.fit_models(config, seeds, decision.fit_key(1, 0))
+    chosen, _ = decision.acquire(config, fitted, seeds, 0)
+    prediction = decision.predict(config, fitted, seeds)
+    shots = config.schedule.shots_before
+    c4 = noise_model.c4(shots)
+    rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws,
+                                             jnp.asarray(decision.grids(config).t), (1 - c4**2) / c4**2, shots, 0.0))
+    assert not chosen.converged and chosen.measure_noise and chosen.shots == shots
+    assert chosen.t == decision.grids(config).t[int(np.argmax(rate))] and rate.max() > 0
+    policy, _ = decision.acquire(config.with_overrides(schedule={"noise_t": "policy"}), fitted, seeds, 0)
+    assert policy.x == chosen.x  # the point keeps the policy's x

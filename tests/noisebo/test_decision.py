@@ -105,3 +105,25 @@ def test_two_axes_compiled_ahead_the_first_decision_compiles_nothing():
     before_count = compile_count()
     made, _ = decision.decide(config, state, 0, 0)
     assert compile_count() == before_count and len(made.x) == 2
+
+
+@pytest.mark.parametrize(
+    ("peak", "expected"),
+    [
+        (0.43, 0.43),  # between grid points: the parabola through three samples of a parabola finds it exactly
+        (0.5, 0.5),  # on a grid point
+        (0.0, 0.0),  # at the low end: the end point itself
+        (1.2, 1.0),  # beyond the high end: the end point
+    ],
+)
+def test_peak_t_refines_between_grid_points(peak, expected):
+    t = np.linspace(0.0, 1.0, 11)
+    values = -((t - peak) ** 2)[None, :]
+    assert float(decision.peak_t(t, values)[0]) == pytest.approx(expected, abs=1e-12)
+
+
+def test_peak_t_stays_within_half_a_step_of_the_best_point():
+    t = np.linspace(0.0, 1.0, 11)
+    values = np.array([[0.0, 0.0, 0.0, 1.0, 0.9, -5.0, -5.0, -5.0, -5.0, -5.0, -5.0]])  # not a parabola
+    got = float(decision.peak_t(t, values)[0])
+    assert 0.3 <= got <= 0.35

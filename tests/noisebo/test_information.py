@@ -89,3 +89,20 @@ def test_a_budgeted_info_rate_campaign_spends_its_budget_on_its_own_shot_counts(
     after = [d for d in final.decisions if d.converged]
     assert after and all(d.shots in information.shot_options(10, 3) for d in after)
     assert all(d.shots == 10 for d in final.decisions if not d.converged)
+
+
+def test_t_opt_rate_by_hand():
+    # Two draws: t* = 1 and 3 (Var 1); noise curves at two times, the first moving with t*
+    # (Cov 0.5, Var 0.25, mean 1.5), the second not (Cov 0). Shots 4, rel_var 0.1, overhead 2:
+    # reduction 0.25 / (0.25 + 1.5^2 0.1) = 0.25 / 0.475 at cost 4 * 0.5 + 2 = 4.
+    t_draws = jnp.array([1.0, 3.0])
+    noise = jnp.array([[1.0, 2.0], [2.0, 2.0]])
+    rate = information.t_opt_rate(t_draws, noise, jnp.array([0.5, 4.0]), 0.1, 4, 2.0)
+    np.testing.assert_allclose(np.asarray(rate), [0.25 / 0.475 / 4.0, 0.0], rtol=1e-12, atol=1e-300)
+
+
+def test_t_opt_rate_prefers_the_cheaper_of_two_equally_telling_times():
+    t_draws = jnp.array([1.0, 2.0, 3.0])
+    noise = jnp.array([[1.0, 2.0], [2.0, 4.0], [3.0, 6.0]])  # the second is the first doubled: same relative precision
+    rate = np.asarray(information.t_opt_rate(t_draws, noise, jnp.array([1.0, 3.0]), 0.05, 10, 0.0))
+    np.testing.assert_allclose(rate[0] / rate[1], 3.0, rtol=1e-12)

@@ -29,6 +29,13 @@ def test_reward_driven_map_by_hand():
     assert tuple(int(v) for v in argmax_2d(values)) == (1, 1)
 
 
+def test_a_fixed_t_at_the_rewards_worst_keeps_its_x_ranking():
+    # t = 0.5 s has Norm(R) = 0: with the weight the whole column would be 0 and x a tie.
+    values = reward_driven(POST, 1, AcquisitionConfig(policy="reward", fixed_t=0.5), REWARD)
+    np.testing.assert_allclose(np.asarray(values), [[10.0, 2.0, 5.0], [11.0, 3.0, 6.0]], rtol=1e-10)
+    assert int(np.argmax(np.asarray(values)[:, 0])) == 1
+
+
 def test_without_reward_weight_ue_picks_the_noisiest_time():
     values = reward_driven(POST, 1, AcquisitionConfig(policy="reward"), REWARD.model_copy(update={"gamma": 0.0}))
     assert tuple(int(v) for v in argmax_2d(values)) == (1, 0)

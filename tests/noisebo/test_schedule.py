@@ -49,6 +49,6 @@ def test_shots_follow_convergence():
 def test_t_interval_by_hand():
     from noisebo.schedule import t_interval
 
-    draws = np.linspace(1.0, 3.0, 401)  # percentiles 2.5 / 50 / 97.5: 1.05, 2.0, 2.95
-    assert t_interval(draws) == pytest.approx(0.95 / 2.0, rel=1e-12)
+    draws = np.array([1.0, 2.0, 2.0, 3.0])  # sd sqrt(0.5), median 2
+    assert t_interval(draws) == pytest.approx(1.96 * np.sqrt(0.5) / 2.0, rel=1e-12)
     assert t_interval(np.full(20, 2.5)) == 0.0
