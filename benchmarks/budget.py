@@ -17,9 +17,11 @@ interpolated to 200 evenly spaced positions for one axis) against the simulator'
 the instrument time spent when it was made, and at the end the final model. It prints, per
 design, the median RMSE [IQR] once a given time is spent (the last model made within it), the
 median time to first reach --target (when every seed reaches it), and the final predicted t
-against t*; and plots the median curves with their IQR (--figure). Each finished design is
-written to --json after every seed, and a run given the same --json measures only the seeds it
-lacks: a long run interrupted keeps what it has measured.
+against t*; and plots the median curves with their IQR (--figure). A seed still measuring its
+seed points has no model yet: it counts as the worst error, so a median needs half the seeds to
+have one ("-" where fewer do). Results are written to --json after every seed, and a run given
+the same --json measures only the seeds it lacks: a long run interrupted keeps what it has
+measured.
 """
 
 from __future__ import annotations
@@ -101,6 +103,17 @@ def time_to(record: dict, target: float) -> float:
     return next((t for t, e in zip(record["times_s"], record["rmse"]) if e <= target), float("nan"))
 
 
+NO_MODEL = 1e300  # a seed with no model yet (still measuring its seed points) counts as the worst error
+
+
+def quartiles(values) -> tuple[float, float, float]:
+    """Median, first and third quartile over seeds of errors, NaN (no model yet) counting as
+    worse than any: inf where more than that share of the seeds has no model."""
+    v = np.nan_to_num(np.asarray(values, dtype=np.float64), nan=NO_MODEL)
+    q = np.percentile(v, [50, 25, 75], axis=0)
+    return tuple(np.where(q >= NO_MODEL / 10, np.inf, q))
+
+
 def figure(records: dict, budget: float, path: Path, title: str) -> None:
     from matplotlib.figure import Figure
 
@@ -109,12 +122,12 @@ def figure(records: dict, budget: float, path: Path, title: str) -> None:
     ax = fig.subplots()
     for name, recs in records.items():
         curves = np.array([[rmse_at(r, b) for b in grid] for r in recs])
-        ok = np.all(np.isfinite(curves), axis=0)  # where every seed has a model
+        mid, lo, hi = quartiles(curves)
+        ok = np.isfinite(mid)  # where at least half the seeds have a model
         if not ok.any():
             continue
-        lo, mid, hi = np.nanpercentile(curves[:, ok], [25, 50, 75], axis=0)
-        line, = ax.plot(grid[ok], mid, label=name, lw=1.6)
-        ax.fill_between(grid[ok], lo, hi, color=line.get_color(), alpha=0.15)
+        line, = ax.plot(grid[ok], mid[ok], label=name, lw=1.6)
+        ax.fill_between(grid[ok], lo[ok], np.where(np.isfinite(hi), hi, np.nan)[ok], color=line.get_color(), alpha=0.15)
     ax.set(xlabel="instrument time spent (s)", ylabel="RMSE of f (median, IQR shaded)", title=title, yscale="log")
     ax.legend(fontsize=8)
     fig.savefig(path, dpi=120)
@@ -183,9 +196,9 @@ def main(argv=None) -> int:
         cells = []
         for b in at:
             values = [rmse_at(r, b) for r in recs]
-            m, lo, hi = median_iqr([v for v in values if np.isfinite(v)]) if any(np.isfinite(values)) else (np.nan,) * 3
-            cells.append("-" if not np.isfinite(m) else f"{m:.3f} [{lo:.3f}, {hi:.3f}]"
-                         + ("" if all(np.isfinite(values)) else f" ({sum(np.isfinite(values))} seeds)"))
+            m, lo, hi = quartiles(values)
+            cells.append("-" if not np.isfinite(m) else f"{m:.3f} [{lo:.3f}, {'-' if not np.isfinite(hi) else f'{hi:.3f}'}]"
+                         + ("" if all(np.isfinite(values)) else f" ({sum(np.isfinite(values))} with a model)"))
         reach = [time_to(r, args.target) for r in recs]
         reached = [v for v in reach if np.isfinite(v)]
         when = f"{np.median(reach):.0f}" if len(reached) == len(reach) else f"{len(reached)} of {len(reach)} reach it"
