@@ -612,9 +612,9 @@ def informative_t(prediction: Prediction, j: int, shots: int, config: CampaignCo
     (``information.t_opt_rate``); the policy's index j when no draw disagrees about t*."""
     allowed, _ = affordable(config, shots, budget_left)
     t = grids(config).t
-    rel_var = float((1.0 - noise_model.c4(shots) ** 2) / noise_model.c4(shots) ** 2)
-    rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws, jnp.asarray(t), rel_var,
-                                             shots, config.schedule.point_overhead_s))
+    rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws, jnp.asarray(t),
+                                             float(noise_model.sampling_rel_var(shots)), shots,
+                                             config.schedule.point_overhead_s))
     rate = np.where(np.asarray(allowed), rate, -np.inf)
     best = int(np.argmax(rate))
     return best if rate[best] > 0 else j

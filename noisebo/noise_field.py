@@ -124,7 +124,7 @@ from noisebo import inference
 from noisebo.config import NoiseFieldConfig, NoiseModelConfig
 from noisebo.inputs import Grouped, capacity_for, group_ids, merge
 from noisebo.kernels import JITTER, matern52
-from noisebo.noise_model import RESIDUAL_LENGTH_LOC, c4, group_log_factor, mean_law
+from noisebo.noise_model import RESIDUAL_LENGTH_LOC, c4, group_log_factor, mean_law, sampling_rel_var
 from noisebo.noise_model import initial_guess as law_guess
 from noisebo.reward import reward
 
@@ -384,7 +384,7 @@ def prepare(
     scale = float(unbiased.mean()) if n else 1.0
     if not np.isfinite(scale) or scale <= 0:
         scale = 1.0
-    rel = (1.0 - k**2) / k**2
+    rel = sampling_rel_var(n_shots) if n else np.zeros(0)
     value = unbiased / scale
 
     span = t_max - t_min

@@ -53,6 +53,13 @@ def c4(n: np.ndarray) -> np.ndarray:
     return np.sqrt(2.0 / (n - 1.0)) * np.exp(gammaln(n / 2.0) - gammaln((n - 1.0) / 2.0))
 
 
+def sampling_rel_var(n: np.ndarray) -> np.ndarray:
+    """Var[s/c4] / Noise^2 = (1 - c4^2) / c4^2 for the unbiased sample sd of n >= 2 shots (about
+    1 / (2 (n - 1)))."""
+    k = c4(n)
+    return (1.0 - k**2) / k**2
+
+
 def mean_law(kind: str, t: jnp.ndarray, a0, a1, p=0.5) -> jnp.ndarray:
     """Noise(t) for the named law: "inv_sqrt" A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature"
     sqrt(A1^2/t + A0^2) (a shot-noise source and a time-independent one, independent of each other)."""
@@ -110,7 +117,7 @@ def prepare(
     scale = float(unbiased.mean()) if n else 1.0
     if not np.isfinite(scale) or scale <= 0:
         scale = 1.0
-    groups = merge(t, unbiased / scale, (1.0 - k**2) / k**2, t_min, t_max, max_inputs)
+    groups = merge(t, unbiased / scale, sampling_rel_var(n_shots), t_min, t_max, max_inputs)
     g = groups.coord.shape[0]
     pad = (capacity or capacity_for(g)) - g
     if pad < 0:
