@@ -1,18 +1,22 @@
 """Campaign configuration: frozen, validated, versioned data.
 
 Every model here is frozen and forbids unknown keys. A configuration is validated once, at the
-boundary (``load_config`` or ``CampaignConfig(...)``); the rest of the code trusts it.
+boundary (``load_config`` or ``CampaignConfig(...)``); the rest of the code trusts it. Its numbers
+and flags, and those of the drivers' settings, are ``Number``, ``Count`` and ``Flag``: a quoted
+number, a boolean where a number belongs, a NaN or an infinity is an error naming the field.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import types
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 SCHEMA_VERSION = 2
 MIN_T_DRAWS = 16  # posterior draws of the optimal t for its 95 % interval
@@ -29,9 +33,93 @@ class FrozenModel(BaseModel):
 
 
 
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+def given(value: Any) -> str:
+    """How an error names a value it refuses: "the string '8'", "the boolean true", "nan"."""
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    if isinstance(value, str):
+        return f"the string {value!r}"
+    return repr(value)
+
+
+def refusal(value: Any, expected: str = "a number") -> str | None:
+    """Why ``value`` cannot be a number, or None: a string (a quoted number too) or a boolean is
+    not one, and a NaN or an infinity is not a finite one."""
+    if isinstance(value, (bool, str)):
+        return f"expected {expected}, got {given(value)}"
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"must be a finite number, got {given(value)}"
+    return None
+
+
+def _strict(expected: str):
+    def check(value: Any) -> Any:
+        problem = refusal(value, expected)
+        if problem is not None:
+            raise PydanticCustomError("strict_number", problem)
+        return value
+    return check
+
+
+def _flag(value: Any) -> Any:
+    if not isinstance(value, bool):
+        raise PydanticCustomError("strict_flag", f"expected true or false, got {given(value)}")
+    return value
+
+
+# The types of every number and flag that comes from outside (a campaign config, a driver's
+# settings): a string (a quoted "8" too) or a boolean where a number belongs, a NaN or an
+# infinity, and anything but true or false where a flag belongs is refused, with a message that
+# says what was given. An int is a Number; a whole float (2.0) is a Count.
+Number = Annotated[float, BeforeValidator(_strict("a number")), Field(allow_inf_nan=False)]
+Count = Annotated[int, BeforeValidator(_strict("a whole number"))]
+Flag = Annotated[bool, BeforeValidator(_flag)]
+FiniteFloat = Number
+PositiveFloat = Annotated[Number, Field(gt=0)]
+NonNegativeFloat = Annotated[Number, Field(ge=0)]
+_PROBES = {float: ("1", True), int: ("1", True), bool: ("true", 1)}  # what a lax field takes and ours refuse
+
+
+def _members(annotation: Any) -> list[Any]:
+    """The types a field's annotation can hold: Annotated and None dropped, unions flattened."""
+    if get_origin(annotation) is Annotated:
+        return _members(get_args(annotation)[0])
+    if get_origin(annotation) in (Union, types.UnionType):
+        return [m for a in get_args(annotation) if a is not type(None) for m in _members(a)]
+    return [annotation]
+
+
+def lax_fields(model: type[BaseModel], prefix: str = "") -> list[str]:
+    """The number and flag fields of ``model`` and of the models inside it (dotted paths) that
+    take what ``Number``, ``Count`` and ``Flag`` refuse (a quoted number, a boolean for a number,
+    anything but true or false for a flag): a driver's tests can assert that there are none."""
+    lax = []
+    for name, field in model.model_fields.items():
+        for member in _members(field.annotation):
+            args = [_members(a)[0] for a in get_args(member) if a is not Ellipsis]
+            if get_origin(member) is tuple and all(isinstance(a, type) and issubclass(a, BaseModel) for a in args):
+                lax += [f for a in args for f in lax_fields(a, f"{prefix}{name}.")]
+            elif isinstance(member, type) and issubclass(member, BaseModel):
+                lax += lax_fields(member, f"{prefix}{name}.")
+            else:
+                pair = get_origin(member) is tuple
+                probes = _PROBES.get(args[0] if pair else member, ())
+                values = [[p] * len(args) if pair else p for p in probes]
+                where = {(name, k) for k in range(len(args))} if pair else {(name,)}
+                if any(not _refuses(model, name, v, where) for v in values) and f"{prefix}{name}" not in lax:
+                    lax.append(f"{prefix}{name}")
+    return lax
+
+
+def _refuses(model: type[BaseModel], name: str, value: Any, where: set[tuple]) -> bool:
+    """Whether ``model`` refuses ``value`` for ``name`` at every place ``where`` with our errors."""
+    try:
+        model.model_validate({name: value})
+    except ValidationError as error:
+        mine = [e for e in error.errors() if e["loc"][:1] == (name,)]
+        return {tuple(e["loc"]) for e in mine} == where and all(
+            e["type"] in ("strict_number", "strict_flag") for e in mine)
+    return False
 
 
 class UniformPrior(FrozenModel):
@@ -47,7 +135,7 @@ class UniformPrior(FrozenModel):
         return self
 
 
-Rate = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+Rate = Annotated[Number, Field(ge=0, le=1)]
 FAULT_KINDS = ("timeout", "exception", "nan", "inf", "outlier", "corrupt_spectrum")
 
 
@@ -58,7 +146,7 @@ class FaultsConfig(FrozenModel):
     a NaN or infinite reading, an outlier (the reading moved by ``outlier_sd`` times the true
     single-shot noise sd) or, for spectra, a corrupted spectrum; otherwise the real reading."""
 
-    seed: int = Field(0, ge=0)
+    seed: Count = Field(0, ge=0)
     timeout: Rate = 0.0
     exception: Rate = 0.0
     nan: Rate = 0.0
@@ -138,7 +226,7 @@ class AxisConfig(FrozenModel):
     low: FiniteFloat
     high: FiniteFloat
     units: str = Field("", max_length=32)
-    n: int | None = Field(None, ge=2, le=20_000)
+    n: Count | None = Field(None, ge=2, le=20_000)
 
     @model_validator(mode="after")
     def _ordered(self) -> AxisConfig:
@@ -162,8 +250,8 @@ class SpaceConfig(FrozenModel):
     axes: tuple[AxisConfig, ...] = (AxisConfig(name="x", low=0.0, high=1.0, n=200),)
     t_min: PositiveFloat = 0.2
     t_max: PositiveFloat = 10.0
-    n_t: int = Field(100, ge=2, le=20_000)
-    n_candidates: int = Field(1024, ge=16, le=20_000)
+    n_t: Count = Field(100, ge=2, le=20_000)
+    n_candidates: Count = Field(1024, ge=16, le=20_000)
 
     @model_validator(mode="before")
     @classmethod
@@ -173,9 +261,11 @@ class SpaceConfig(FrozenModel):
         if "axes" in data:
             raise ValueError("give either axes or x_min/x_max/n_x (one axis named x), not both")
         low, high = data.get("x_min", 0.0), data.get("x_max", 1.0)
-        for name, v in (("x_min", low), ("x_max", high)):
-            if isinstance(v, float) and not math.isfinite(v):
-                raise ValueError(f"{name} ({v}) must be a finite number")
+        for name, expected in (("x_min", "a number"), ("x_max", "a number"), ("n_x", "a whole number")):
+            problem = refusal(data.get(name), expected)
+            if problem is not None:  # named as given, not as the axis it becomes
+                raise ValidationError.from_exception_data(cls.__name__, [InitErrorDetails(
+                    type=PydanticCustomError("strict_number", problem), loc=(name,), input=data[name])])
         if isinstance(low, (int, float)) and isinstance(high, (int, float)) and not low < high:
             raise ValueError(f"x_min ({low}) must be below x_max ({high})")
         rest = {k: v for k, v in data.items() if k not in ONE_AXIS_KEYS}
@@ -258,7 +348,7 @@ class AcquisitionConfig(FrozenModel):
     policy: Literal["reward", "double", "info_rate"] = "reward"
     f_acquisition: Literal["ue", "ei", "ucb"] = "ue"
     t_acquisition: Literal["ei"] = "ei"
-    maximize: bool = True
+    maximize: Flag = True
     ucb_kappa: PositiveFloat = 2.0
     ei_xi: NonNegativeFloat = 0.01
     fixed_t: PositiveFloat | None = None
@@ -303,8 +393,8 @@ class NoiseFieldConfig(FrozenModel):
     amplitude_scale: PositiveFloat = 1.0
     length_loc: FiniteFloat = math.log(0.2)
     length_scale: PositiveFloat = 0.75
-    basis_per_axis: int | None = Field(None, ge=2, le=256)
-    boundary_factor: float = Field(2.0, ge=1.1, le=4.0, allow_inf_nan=False)
+    basis_per_axis: Count | None = Field(None, ge=2, le=256)
+    boundary_factor: Number = Field(2.0, ge=1.1, le=4.0)
 
 
 class NoiseModelConfig(FrozenModel):
@@ -327,7 +417,7 @@ class NoiseModelConfig(FrozenModel):
     p_prior: UniformPrior = UniformPrior(low=0.1, high=1.5)
     residual_amplitude_loc: FiniteFloat = math.log(0.05)
     residual_amplitude_scale: PositiveFloat = 1.0
-    learn_after_convergence: bool = True
+    learn_after_convergence: Flag = True
     field: NoiseFieldConfig | None = None
 
 
@@ -349,14 +439,14 @@ class InferenceConfig(FrozenModel):
     """
 
     mode: Literal["map", "nuts"] = "map"
-    restarts: int = Field(6, ge=1, le=64)
-    laplace_samples: int = Field(32, ge=0, le=1024)
-    nuts_warmup: int = Field(500, ge=10)
-    nuts_samples: int = Field(500, ge=10)
-    predict_samples: int = Field(100, ge=1)
-    primary_quadrature: int = Field(0, ge=0, le=15)
-    max_inputs: int = Field(256, ge=8, le=8192)
-    restart_every: int = Field(8, ge=1)
+    restarts: Count = Field(6, ge=1, le=64)
+    laplace_samples: Count = Field(32, ge=0, le=1024)
+    nuts_warmup: Count = Field(500, ge=10)
+    nuts_samples: Count = Field(500, ge=10)
+    predict_samples: Count = Field(100, ge=1)
+    primary_quadrature: Count = Field(0, ge=0, le=15)
+    max_inputs: Count = Field(256, ge=8, le=8192)
+    restart_every: Count = Field(8, ge=1)
 
 
 class ScheduleConfig(FrozenModel):
@@ -399,20 +489,20 @@ class ScheduleConfig(FrozenModel):
     ``n_steps`` still ends it first if it is reached first.
     """
 
-    n_seed: int = Field(3, ge=1)
+    n_seed: Count = Field(3, ge=1)
     seed_design: Literal["latin_hypercube", "uniform"] = "latin_hypercube"
     seed_t_scale: Literal["log", "linear", "log_span"] = "log"
-    n_steps: int = Field(15, ge=0)
-    adaptive_shots: bool = False
+    n_steps: Count = Field(15, ge=0)
+    adaptive_shots: Flag = False
     convergence: Literal["variance", "posterior"] = "variance"
     t_interval_rel: PositiveFloat = 0.1
     noise_t: Literal["policy", "informative"] = "policy"
-    shots_before: int = Field(30, ge=2)
-    shots_after: int = Field(3, ge=1)
-    window: int = Field(3, ge=2)
+    shots_before: Count = Field(30, ge=2)
+    shots_after: Count = Field(3, ge=1)
+    window: Count = Field(3, ge=2)
     threshold: PositiveFloat = 5e-4
     clip_sd: PositiveFloat | None = None
-    min_failed: int = Field(5, ge=1)
+    min_failed: Count = Field(5, ge=1)
     tolerated_rate: Rate = 0.5
     budget_s: PositiveFloat | None = None
     point_overhead_s: NonNegativeFloat = 0.0
@@ -421,7 +511,7 @@ class ScheduleConfig(FrozenModel):
 class CampaignConfig(FrozenModel):
     """One campaign: instrument, space, reward, policy, models, inference and schedule."""
 
-    schema_version: int = SCHEMA_VERSION
+    schema_version: Count = SCHEMA_VERSION
     name: str = "campaign"
     instrument: InstrumentConfig = InstrumentConfig(kind="forrester")
     reduction: ReductionConfig = ReductionConfig()
@@ -536,7 +626,7 @@ def parse_config(data: Any, source: str = "config") -> CampaignConfig:
     ``instruments.registry.validated``)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a mapping of settings, got {type(data).__name__}")
-    if data.get("schema_version") == 1:
+    if data.get("schema_version") == 1 and not isinstance(data["schema_version"], bool):
         data = migrate_v1(data)
     try:
         return CampaignConfig.model_validate(data)

@@ -1,8 +1,12 @@
+import json
 from pathlib import Path
+from typing import Literal
 
+import h5py
 import pytest
+from pydantic import BaseModel
 
-from noisebo.config import CampaignConfig, ConfigError, load_config, parse_config
+from noisebo.config import CampaignConfig, ConfigError, Count, Flag, Number, lax_fields, load_config, parse_config
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -55,8 +59,8 @@ BAD = [
     ({"space": {"t_min": 5.0, "t_max": 1.0}}, "space: Value error, t_min"),
     ({"space": {"t_min": 0.0}}, "space.t_min"),
     ({"space": {"t_min": -1.0}}, "space.t_min"),
-    ({"space": {"x_max": float("nan")}}, "x_max (nan) must be a finite number"),
-    ({"space": {"x_max": float("inf")}}, "x_max (inf) must be a finite number"),
+    ({"space": {"x_max": float("nan")}}, "space.x_max: must be a finite number, got nan"),
+    ({"space": {"x_max": float("inf")}}, "space.x_max: must be a finite number, got inf"),
     ({"space": {"x_max": 2.0, "axes": [{"name": "x", "low": 0, "high": 1}]}}, "either axes or x_min/x_max/n_x"),
     ({"space": {"axes": []}}, "1 to 4 axes, got 0"),
     ({"space": {"axes": [{"name": f"a{i}", "low": 0, "high": 1} for i in range(5)]}}, "1 to 4 axes, got 5"),
@@ -116,3 +120,102 @@ def test_bad_files_raise_config_errors(tmp_path, text, message):
 def test_missing_file_is_a_config_error(tmp_path):
     with pytest.raises(ConfigError, match="cannot read config"):
         load_config(tmp_path / "absent.yaml")
+
+
+NAN, INF = float("nan"), float("inf")
+FIELD = {"noise_model": {"field": {}}}
+STRICT = [
+    ({"reward": {"alpha": "0.1"}}, "reward.alpha: expected a number, got the string '0.1'"),
+    ({"reward": {"gamma": True}}, "reward.gamma: expected a number, got the boolean true"),
+    ({"primary_model": {"length_loc": NAN}}, "primary_model.length_loc: must be a finite number, got nan"),
+    ({"space": {"t_max": INF}}, "space.t_max: must be a finite number, got inf"),
+    ({"space": {"t_min": "0.2"}}, "space.t_min: expected a number, got the string '0.2'"),
+    ({"space": {"n_t": "100"}}, "space.n_t: expected a whole number, got the string '100'"),
+    ({"space": {"x_min": "0"}}, "space.x_min: expected a number, got the string '0'"),
+    ({"space": {"x_max": True}}, "space.x_max: expected a number, got the boolean true"),
+    ({"space": {"x_max": -INF}}, "space.x_max: must be a finite number, got -inf"),
+    ({"space": {"n_x": "40"}}, "space.n_x: expected a whole number, got the string '40'"),
+    ({"space": {"axes": [{"name": "x", "low": "0", "high": 1}]}}, "space.axes.0.low: expected a number, got the string '0'"),
+    ({"space": {"axes": [{"name": "x", "low": 0, "high": 1, "n": True}]}},
+     "space.axes.0.n: expected a whole number, got the boolean true"),
+    ({"acquisition": {"maximize": "yes"}}, "acquisition.maximize: expected true or false, got the string 'yes'"),
+    ({"acquisition": {"maximize": 1}}, "acquisition.maximize: expected true or false, got 1"),
+    ({"acquisition": {"fixed_t": "2"}}, "acquisition.fixed_t: expected a number, got the string '2'"),
+    ({"acquisition": {"ucb_kappa": NAN}}, "acquisition.ucb_kappa: must be a finite number, got nan"),
+    ({"noise_model": {"learn_after_convergence": 0}}, "noise_model.learn_after_convergence: expected true or false, got 0"),
+    ({"noise_model": {"a0_prior": {"high": "15"}}}, "noise_model.a0_prior.high: expected a number, got the string '15'"),
+    ({"noise_model": {"field": {"boundary_factor": NAN}}}, "noise_model.field.boundary_factor: must be a finite number, got nan"),
+    ({"noise_model": {"field": {"basis_per_axis": "32"}}},
+     "noise_model.field.basis_per_axis: expected a whole number, got the string '32'"),
+    ({"inference": {"restarts": True}}, "inference.restarts: expected a whole number, got the boolean true"),
+    ({"inference": {"laplace_samples": "32"}}, "inference.laplace_samples: expected a whole number, got the string '32'"),
+    ({"schedule": {"n_steps": "15"}}, "schedule.n_steps: expected a whole number, got the string '15'"),
+    ({"schedule": {"adaptive_shots": "false"}}, "schedule.adaptive_shots: expected true or false, got the string 'false'"),
+    ({"schedule": {"threshold": INF}}, "schedule.threshold: must be a finite number, got inf"),
+    ({"schedule": {"budget_s": "300"}}, "schedule.budget_s: expected a number, got the string '300'"),
+    ({"schedule": {"tolerated_rate": True}}, "schedule.tolerated_rate: expected a number, got the boolean true"),
+    ({"reduction": {"sho": {"q_bounds": [5, "5000"]}}}, "reduction.sho.q_bounds.1: expected a number, got the string '5000'"),
+    ({"reduction": {"sho": {"nominal_q": INF, "nominal_resonance_hz": 1e5}}},
+     "reduction.sho.nominal_q: must be a finite number, got inf"),
+    ({"instrument": {"kind": "forrester", "timeout_s": "5"}}, "instrument.timeout_s: expected a number, got the string '5'"),
+    ({"instrument": {"kind": "forrester", "faults": {"nan": "0.1"}}},
+     "instrument.faults.nan: expected a number, got the string '0.1'"),
+    ({"instrument": {"kind": "forrester", "faults": {"seed": False}}},
+     "instrument.faults.seed: expected a whole number, got the boolean false"),
+    ({"schema_version": True}, "schema_version: expected a whole number, got the boolean true"),
+    ({"schema_version": "2"}, "schema_version: expected a whole number, got the string '2'"),
+]
+
+
+@pytest.mark.parametrize("data, message", STRICT, ids=[s[1] for s in STRICT])
+def test_a_string_a_boolean_or_a_non_finite_number_is_refused_naming_the_field(data, message):
+    with pytest.raises(ConfigError) as info:
+        parse_config(data)
+    assert str(info.value) == f"config: {message}"
+
+
+def test_every_number_and_flag_of_the_config_is_strict():
+    assert lax_fields(CampaignConfig) == []
+
+
+def test_lax_fields_names_the_numbers_and_flags_a_plain_model_lets_through():
+    class Inner(BaseModel):
+        gain: float = 1.0
+        rows: Count = 2
+
+    class Plain(BaseModel):
+        name: str = "x"
+        kind: Literal["a", "b"] = "a"
+        rate: Number = 1.0
+        span: tuple[float, Number] = (0.0, 1.0)
+        limit: int | None = None
+        verbose: bool = False
+        quiet: Flag = False
+        inner: Inner | None = None
+        inners: tuple[Inner, ...] = ()
+
+    assert lax_fields(Plain) == ["span", "limit", "verbose", "inner.gain", "inners.gain"]
+
+
+def test_ints_for_numbers_whole_numbers_for_counts_and_lists_for_pairs_are_accepted():
+    cfg = parse_config({"reward": {"alpha": 1}, "schedule": {"n_steps": 4.0, "adaptive_shots": True},
+                        "reduction": {"sho": {"q_bounds": [5, 50]}}, "space": {"x_min": 0, "x_max": 1, "n_x": 50}})
+    assert cfg.reward.alpha == 1.0 and isinstance(cfg.reward.alpha, float)
+    assert cfg.schedule.n_steps == 4 and isinstance(cfg.schedule.n_steps, int) and cfg.schedule.adaptive_shots is True
+    assert cfg.reduction.sho.q_bounds == (5.0, 50.0) and cfg.space.n_x == 50
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "data" / "configs").glob("*.yaml")), ids=lambda p: p.name)
+def test_a_config_comes_back_from_the_json_a_journal_stores(path):
+    from instruments.registry import validated
+
+    cfg = validated(load_config(path))
+    stored = json.loads(json.dumps(cfg.model_dump(mode="json")))
+    assert parse_config(stored, "journal") == cfg
+
+
+def test_the_config_of_a_schema_1_file_still_loads():
+    with h5py.File(ROOT / "tests" / "data" / "forrester_schema1.h5", "r") as f:
+        cfg = parse_config(json.loads(f.attrs["config_json"]), "journal")
+    assert cfg.schema_version == 2 and cfg.instrument.settings == {"a0": 0.1, "a1": 2.0}
+    assert (cfg.space.n_x, cfg.schedule.n_steps, cfg.acquisition.maximize) == (40, 4, True)
