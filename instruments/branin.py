@@ -17,7 +17,7 @@ import numpy as np
 from pydantic import Field
 
 import noisebo
-from noisebo.config import FrozenModel, NonNegativeFloat
+from noisebo.config import Count, FrozenModel, NonNegativeFloat
 from noisebo.reduction import Reading
 
 BOUNDS = ((-5.0, 10.0), (0.0, 15.0))
@@ -40,7 +40,7 @@ class BraninSettings(FrozenModel):
 
     a0: NonNegativeFloat = 0.1
     a1: NonNegativeFloat = 2.0
-    seed: int = Field(0, ge=0)
+    seed: Count = Field(0, ge=0)
 
 
 class BraninInstrument:

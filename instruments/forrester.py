@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 import noisebo
+from noisebo.config import Count, FrozenModel, NonNegativeFloat, PositiveFloat
 from noisebo.reduction import Reading
 
 
@@ -19,21 +20,20 @@ def forrester(x: np.ndarray) -> np.ndarray:
     return (6.0 * x - 2.0) ** 2 * np.sin(12.0 * x - 4.0)
 
 
-class ForresterSettings(BaseModel):
+class ForresterSettings(FrozenModel):
     """a0, a1: the noise law (value units), ``law`` "inv_sqrt" A1/sqrt(t) + A0 (the paper's) or
     "quadrature" sqrt(A1^2/t + A0^2); a noisy patch adds ``patch_a0`` exp(-(x - patch_x)^2 /
     (2 patch_width^2)) to A0 (0: the same noise at every x, the paper's setting); seed: the
     random stream of shots measured outside a campaign (a campaign draws each shot from its own
     key)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
-    a0: float = Field(0.1, ge=0, allow_inf_nan=False)
-    a1: float = Field(2.0, ge=0, allow_inf_nan=False)
+    a0: NonNegativeFloat = 0.1
+    a1: NonNegativeFloat = 2.0
     law: Literal["inv_sqrt", "quadrature"] = "inv_sqrt"
-    patch_a0: float = Field(0.0, ge=0, allow_inf_nan=False)
-    patch_x: float = Field(0.5, ge=0, le=1, allow_inf_nan=False)
-    patch_width: float = Field(0.05, gt=0, allow_inf_nan=False)
-    seed: int = Field(0, ge=0)
+    patch_a0: NonNegativeFloat = 0.0
+    patch_x: NonNegativeFloat = Field(0.5, le=1)
+    patch_width: PositiveFloat = 0.05
+    seed: Count = Field(0, ge=0)
 
 
 class ForresterInstrument:

@@ -44,7 +44,7 @@ import noisebo
 from instruments.base import Reading
 from instruments.pfm_area import ScanAreaConfig, SyntheticAreaConfig, scan_area, synthetic_area
 from instruments.pfm_profile import ScanProfileConfig, SyntheticProfileConfig, build_profile
-from noisebo.config import FrozenModel, NonNegativeFloat, PositiveFloat
+from noisebo.config import Count, FrozenModel, NonNegativeFloat, Number, PositiveFloat
 from noisebo.sho import model_and_jacobian, sho_amplitude, sho_phase
 
 MIN_SAMPLES = 16
@@ -90,7 +90,7 @@ class PFMSettings(FrozenModel):
 
     profile: Source = ScanProfileConfig()
     resonance_hz: PositiveFloat = 372_000.0
-    q: float = Field(250.0, gt=1, allow_inf_nan=False)
+    q: Number = Field(250.0, gt=1)
     sweep_half_span_hz: PositiveFloat = 5_000.0
     sample_rate_hz: PositiveFloat = 10_000.0
     sample_noise_pm: NonNegativeFloat = 7_500.0
@@ -98,7 +98,7 @@ class PFMSettings(FrozenModel):
     gain_jitter: NonNegativeFloat = 0.002
     position_jitter_um: NonNegativeFloat = 0.0001
     resonance_jitter_hz: NonNegativeFloat = 50.0
-    seed: int = Field(0, ge=0)
+    seed: Count = Field(0, ge=0)
 
     @model_validator(mode="after")
     def _consistent(self) -> PFMSettings:

@@ -21,9 +21,9 @@ from scipy import ndimage
 
 from instruments.pfm_profile import ChannelIndex
 from instruments.pfm_scan import DEFAULT_SCAN, ProfileError, read_scan, signed_response
-from noisebo.config import FiniteFloat, FrozenModel, NonNegativeFloat, PositiveFloat
+from noisebo.config import Count, FrozenModel, NonNegativeFloat, Number, PositiveFloat
 
-PixelIndex = Annotated[int, Field(ge=0)]
+PixelIndex = Annotated[Count, Field(ge=0)]
 
 
 class ScanAreaConfig(FrozenModel):
@@ -63,11 +63,11 @@ class SyntheticAreaConfig(FrozenModel):
     source: Literal["synthetic_area"] = "synthetic_area"
     pattern: Literal["stripes", "checker"] = "stripes"
     size_um: tuple[PositiveFloat, PositiveFloat] = (1.0, 1.0)
-    n_domains: int = Field(4, ge=1, le=1000)
-    angle_deg: FiniteFloat = 0.0
+    n_domains: Count = Field(4, ge=1, le=1000)
+    angle_deg: Number = 0.0
     amplitude_pm: PositiveFloat = 100.0
     wall_um: PositiveFloat = 0.02
-    seed: int = 0
+    seed: Count = 0
 
 
 @dataclass(frozen=True)

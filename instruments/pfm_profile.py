@@ -14,12 +14,12 @@ from pydantic import Field, model_validator
 from scipy import ndimage
 
 from instruments.pfm_scan import DEFAULT_SCAN, PROJECT_ROOT, ProfileError, dominant_phase, read_scan, signed_response
-from noisebo.config import FiniteFloat, FrozenModel, NonNegativeFloat, PositiveFloat
+from noisebo.config import Count, FrozenModel, NonNegativeFloat, Number, PositiveFloat
 
 __all__ = ["PROJECT_ROOT", "ProfileError", "dominant_phase", "ScanProfileConfig", "SyntheticProfileConfig",
            "ProfileConfig", "Profile", "scan_profile", "synthetic_profile", "build_profile", "ChannelIndex"]
 
-ChannelIndex = Annotated[int, Field(ge=0)]
+ChannelIndex = Annotated[Count, Field(ge=0)]
 
 
 class ScanProfileConfig(FrozenModel):
@@ -34,8 +34,8 @@ class ScanProfileConfig(FrozenModel):
     file: str = DEFAULT_SCAN
     amplitude_channel: ChannelIndex | None = None
     phase_channel: ChannelIndex | None = None
-    start_px: tuple[FiniteFloat, FiniteFloat] = (20.0, 120.0)
-    end_px: tuple[FiniteFloat, FiniteFloat] = (200.0, 255.0)
+    start_px: tuple[Number, Number] = (20.0, 120.0)
+    end_px: tuple[Number, Number] = (200.0, 255.0)
     smooth_px: NonNegativeFloat = 1.0
 
     @model_validator(mode="after")
@@ -52,10 +52,10 @@ class SyntheticProfileConfig(FrozenModel):
 
     source: Literal["synthetic"] = "synthetic"
     length_um: PositiveFloat = 1.0
-    n_domains: int = Field(4, ge=1, le=1000)
+    n_domains: Count = Field(4, ge=1, le=1000)
     amplitude_pm: PositiveFloat = 100.0
     wall_um: PositiveFloat = 0.02
-    seed: int = 0
+    seed: Count = 0
 
 
 ProfileConfig = Annotated[Union[ScanProfileConfig, SyntheticProfileConfig], Field(discriminator="source")]

@@ -6,7 +6,11 @@ A driver package declares, in its pyproject.toml,
     my-device = "my_package.driver:MyDevice"
 
 where ``MyDevice`` has a pydantic ``Settings`` model, ``name`` and ``version`` attributes, a
-constructor taking its settings, and ``measure(x, t)`` (see ``instruments.base``). A driver whose
+constructor taking its settings, and ``measure(x, t)`` (see ``instruments.base``). The settings'
+numbers and flags are best ``noisebo.config``'s ``Number``, ``Count`` and ``Flag`` (or the bounded
+``PositiveFloat``, ``NonNegativeFloat``) on a ``FrozenModel``: a quoted number, a boolean for a
+number, a NaN or an infinity is then refused naming the setting (``lax_fields`` finds any that
+are not). A driver whose
 readings are spectra with a reduction of its own declares it as ``reductions = {"name":
 function(spectrum) -> value}``. The built-in drivers register the same way in noisebo's own
 pyproject.toml.

@@ -126,7 +126,7 @@ def config_of(kind, **settings):
     (config_of("laser"), registry.DriverNotInstalled, "no installed instrument driver 'laser'; installed: branin, counter, forrester, halfdone, "),
     (config_of("lamp", watts=-1), ConfigError, "instrument.settings.watts: Input should be greater than 0"),
     (config_of("lamp", colour="red"), ConfigError, "instrument.settings.colour: Extra inputs are not permitted"),
-    (config_of("forrester", a1="loud"), ConfigError, "instrument.settings.a1: Input should be a valid number"),
+    (config_of("forrester", a1="loud"), ConfigError, "instrument.settings.a1: expected a number, got the string 'loud'"),
     (config_of("halfdone"), registry.DriverBroken, "lacks Settings, version, measure"),
     (config_of("typo"), registry.DriverBroken, "could not be loaded: ModuleNotFoundError"),
     (CampaignConfig().with_overrides(instrument={"kind": "forrester", "faults": {"corrupt_spectrum": 0.1}}),
