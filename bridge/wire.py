@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import base64
 import binascii
+import json
 import math
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
+from pydantic import ConfigDict, Discriminator, Field, Strict, Tag, ValidationError, model_validator
 
-from noisebo.config import FrozenModel, describe_errors
+from noisebo.config import FrozenModel
 from noisebo.engine import EngineState
 from noisebo.events import Request, ShotError
 from noisebo.reduction import Reading
@@ -42,6 +43,18 @@ class WireError(ValueError):
         self.status = status
 
 
+# A number or a count on the wire or in the bridge's settings is exactly that: a string ("0.5")
+# or a boolean (true) is refused, not converted. A whole number is a fine Number.
+Number = Annotated[float, Strict()]
+Count = Annotated[int, Strict()]
+
+
+class StrictModel(FrozenModel):
+    """A body that travels on the wire: every field takes only its own JSON type."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
+
+
 class ReadingShape(FrozenModel):
     """What a shot reading must look like. ``reading``: "scalar" (one number per shot) or
     "spectrum" (rows × samples, e.g. frequency Hz, amplitude, phase deg); ``reduction``: the
@@ -50,9 +63,9 @@ class ReadingShape(FrozenModel):
 
     reading: Literal["scalar", "spectrum"] = "scalar"
     reduction: str = Field(default="sho", min_length=1)
-    spectrum_rows: tuple[int, ...] = (2, 3)
-    min_samples: int = Field(default=8, ge=1)
-    max_samples: int = Field(default=1_000_000, ge=1)
+    spectrum_rows: tuple[Count, ...] = (2, 3)
+    min_samples: Count = Field(default=8, ge=1)
+    max_samples: Count = Field(default=1_000_000, ge=1)
 
     @model_validator(mode="after")
     def _consistent(self) -> ReadingShape:
@@ -63,7 +76,7 @@ class ReadingShape(FrozenModel):
         return self
 
 
-class PackedSpectrum(FrozenModel):
+class PackedSpectrum(StrictModel):
     """A spectrum as bytes: ``data`` is base64 of the values, little-endian ``dtype``, row after
     row, ``rows`` rows. Much faster to send than lists of numbers for long sweeps."""
 
@@ -82,11 +95,12 @@ class PackedSpectrum(FrozenModel):
         return np.frombuffer(raw, dtype="<f4" if width == 4 else "<f8").reshape(self.rows, -1)
 
 
-class ReadingBody(FrozenModel):
-    """A posted reading: exactly one of ``value``, ``spectrum`` or ``error``."""
+class ReadingBody(StrictModel):
+    """A posted reading: exactly one of ``value``, ``spectrum`` or ``error``. NaN and infinities
+    parse here and are refused by ``outcome_of`` with the field named."""
 
-    value: float | None = None
-    spectrum: Annotated[Union[Annotated[list[list[float]], Tag("rows")], Annotated[PackedSpectrum, Tag("packed")]],
+    value: Number | None = None
+    spectrum: Annotated[Union[Annotated[list[list[Number]], Tag("rows")], Annotated[PackedSpectrum, Tag("packed")]],
                         Discriminator(lambda v: "packed" if isinstance(v, (dict, PackedSpectrum)) else "rows")] | None = None
     reduction: str | None = None
     error: str | None = Field(default=None, min_length=1, max_length=2000)
@@ -119,9 +133,12 @@ def request_json(state: EngineState, request: Request, shape: ReadingShape) -> d
             "attempt": attempts_at(state, request.point, request.taken), "seed": state.seed, "reading": shape.reading}
 
 
+MAX_PROBLEMS = 5  # a refused body's message names at most this many of its problems
+
+
 def parse_body(raw: bytes) -> ReadingBody:
-    """A posted body parsed and checked for form; ``WireError`` 400 (not JSON) or 422 (a field
-    names what is wrong)."""
+    """A posted body parsed and checked for form; ``WireError`` 400 (not JSON) or 422 (each
+    field that is wrong named, with what was given where a type was wrong)."""
     try:
         return ReadingBody.model_validate_json(raw)
     except ValidationError as error:
@@ -130,7 +147,34 @@ def parse_body(raw: bytes) -> ReadingBody:
             raise WireError(400, f"the body is not JSON: {error.errors()[0]['msg']}") from None
         if "model_type" in kinds and all(not e["loc"] for e in error.errors()):
             raise WireError(422, "the body must be a JSON object") from None
-        raise WireError(422, describe_errors(error, prefix="body")) from None
+        problems = [problem(e, "body") for e in error.errors()[:MAX_PROBLEMS]]
+        more = error.error_count() - len(problems)
+        raise WireError(422, "; ".join(problems) + (f"; and {more} more" if more > 0 else "")) from None
+
+
+def problem(item: dict, prefix: str) -> str:
+    """One of pydantic's errors as "body.field: what is wrong", saying what was given when it
+    was of the wrong type (``body.value: Input should be a valid number, got the string '0.5'``)."""
+    loc = ".".join(str(p) for p in (prefix, *item["loc"]))
+    if item["type"] == "union_tag_not_found":
+        return f"{loc}: Field required"
+    wrong_type = item["type"].endswith("_type") or item["type"] == "model_attributes_type"
+    return f"{loc}: {item['msg']}" + (f", got {given(item['input'])}" if wrong_type else "")
+
+
+def given(value: Any) -> str:
+    """A JSON value as an error message names it: "the string '0.5'", "the boolean true"."""
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    if isinstance(value, str):
+        return f"the string {value[:40]!r}" + ("..." if len(value) > 40 else "")
+    if value is None:
+        return "null"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    kind = "a list" if isinstance(value, list) else "an object" if isinstance(value, dict) else type(value).__name__
+    text = json.dumps(value, default=str)
+    return f"{kind} {text[:40]}" + ("..." if len(text) > 40 else "")
 
 
 def outcome_of(body: ReadingBody, shape: ReadingShape) -> Reading | ShotError:

@@ -25,6 +25,8 @@ def packed(values: np.ndarray, dtype="<f8") -> str:
 
 def test_a_value_a_spectrum_and_an_error_become_their_outcomes():
     assert outcome_of(parse_body(b'{"value": 1.5}'), SCALAR) == Reading(1.5)
+    assert outcome_of(parse_body(b'{"value": 2}'), SCALAR) == Reading(2.0)  # a JSON integer is a number
+    assert outcome_of(parse_body(json.dumps({"spectrum": [[1, 2, 3, 4]] * 3}).encode()), SPECTRUM).spectrum.sum() == 30
     spectrum = outcome_of(parse_body(json.dumps({"spectrum": rows()}).encode()), SPECTRUM)
     assert spectrum == Reading(None, np.array(rows()), "sho")
     named = outcome_of(parse_body(json.dumps({"spectrum": rows(), "reduction": "mine"}).encode()), SPECTRUM)
@@ -42,7 +44,27 @@ def test_a_value_a_spectrum_and_an_error_become_their_outcomes():
     (b"[1, 2]", SCALAR, 422, "JSON object"),
     (b"{}", SCALAR, 422, "exactly one of value, spectrum or error"),
     (b'{"value": 1, "error": "x"}', SCALAR, 422, "got value, error"),
-    (b'{"value": "high"}', SCALAR, 422, "body.value"),
+    (b'{"value": "high"}', SCALAR, 422, "body.value: Input should be a valid number, got the string 'high'"),
+    (b'{"value": "0.5"}', SCALAR, 422, "body.value: Input should be a valid number, got the string '0.5'"),
+    (b'{"value": "NaN"}', SCALAR, 422, "body.value: Input should be a valid number, got the string 'NaN'"),
+    (b'{"value": true}', SCALAR, 422, "body.value: Input should be a valid number, got the boolean true"),
+    (b'{"value": false}', SCALAR, 422, "body.value: Input should be a valid number, got the boolean false"),
+    (b'{"value": [1.0]}', SCALAR, 422, "body.value: Input should be a valid number, got a list [1.0]"),
+    (b'{"error": "x", "attempt": "1"}', SCALAR, 422, "body.attempt: Input should be a valid integer, got the string '1'"),
+    (b'{"error": "x", "attempt": true}', SCALAR, 422, "body.attempt: Input should be a valid integer, got the boolean true"),
+    (b'{"error": "x", "attempt": 1.5}', SCALAR, 422, "body.attempt: Input should be a valid integer, got 1.5"),
+    (b'{"error": 5}', SCALAR, 422, "body.error: Input should be a valid string, got 5"),
+    (b'{"value": 1, "campaign": true}', SCALAR, 422, "body.campaign: Input should be a valid string, got the boolean true"),
+    (json.dumps({"spectrum": [[1.0, "2.0", 3.0, 4.0]] * 3}).encode(), SPECTRUM, 422,
+     "body.spectrum.rows.0.1: Input should be a valid number, got the string '2.0'"),
+    (json.dumps({"spectrum": [[1.0, 2.0, 3.0, True]] * 3}).encode(), SPECTRUM, 422,
+     "body.spectrum.rows.0.3: Input should be a valid number, got the boolean true"),
+    (json.dumps({"spectrum": [["1"] * 100] * 3}).encode(), SPECTRUM, 422, "rows.0.4: Input should be a valid number, "
+     "got the string '1'; and 295 more"),
+    (json.dumps({"spectrum": {"rows": "3", "data": ""}}).encode(), SPECTRUM, 422,
+     "body.spectrum.packed.rows: Input should be a valid integer, got the string '3'"),
+    (json.dumps({"spectrum": {"rows": True, "data": ""}}).encode(), SPECTRUM, 422,
+     "body.spectrum.packed.rows: Input should be a valid integer, got the boolean true"),
     (b'{"value": 1, "colour": "red"}', SCALAR, 422, "body.colour"),
     (b'{"value": NaN}', SCALAR, 422, "nan is not a finite number"),
     (b'{"value": Infinity}', SCALAR, 422, "inf is not a finite number"),
@@ -71,6 +93,9 @@ def test_bad_bodies_are_refused_with_the_problem_named(raw, shape, status, messa
 
 @pytest.mark.parametrize("fields, message", [
     ({"reading": "image"}, "reading"),
+    ({"min_samples": "8"}, "min_samples"),
+    ({"max_samples": True}, "max_samples"),
+    ({"spectrum_rows": [2, "3"]}, "spectrum_rows.1"),
     ({"spectrum_rows": []}, "positive row counts"),
     ({"min_samples": 10, "max_samples": 5}, "above max_samples"),
 ])
