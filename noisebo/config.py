@@ -14,6 +14,7 @@ import types
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
+import numpy as np
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
@@ -35,17 +36,17 @@ class FrozenModel(BaseModel):
 
 def given(value: Any) -> str:
     """How an error names a value it refuses: "the string '8'", "the boolean true", "nan"."""
-    if isinstance(value, bool):
-        return f"the boolean {str(value).lower()}"
+    if isinstance(value, (bool, np.bool_)):
+        return f"the boolean {str(bool(value)).lower()}"
     if isinstance(value, str):
         return f"the string {value!r}"
-    return repr(value)
+    return repr(float(value)) if isinstance(value, float) else repr(value)
 
 
 def refusal(value: Any, expected: str = "a number") -> str | None:
     """Why ``value`` cannot be a number, or None: a string (a quoted number too) or a boolean is
     not one, and a NaN or an infinity is not a finite one."""
-    if isinstance(value, (bool, str)):
+    if isinstance(value, (bool, np.bool_, str)):
         return f"expected {expected}, got {given(value)}"
     if isinstance(value, float) and not math.isfinite(value):
         return f"must be a finite number, got {given(value)}"
@@ -62,9 +63,9 @@ def _strict(expected: str):
 
 
 def _flag(value: Any) -> Any:
-    if not isinstance(value, bool):
+    if not isinstance(value, (bool, np.bool_)):
         raise PydanticCustomError("strict_flag", f"expected true or false, got {given(value)}")
-    return value
+    return bool(value)
 
 
 # The types of every number and flag that comes from outside (a campaign config, a driver's

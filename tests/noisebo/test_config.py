@@ -3,6 +3,7 @@ from pathlib import Path
 from typing import Literal
 
 import h5py
+import numpy as np
 import pytest
 from pydantic import BaseModel
 
@@ -164,6 +165,8 @@ STRICT = [
      "instrument.faults.seed: expected a whole number, got the boolean false"),
     ({"schema_version": True}, "schema_version: expected a whole number, got the boolean true"),
     ({"schema_version": "2"}, "schema_version: expected a whole number, got the string '2'"),
+    ({"reward": {"beta": np.True_}}, "reward.beta: expected a number, got the boolean true"),
+    ({"reward": {"beta": np.float64("nan")}}, "reward.beta: must be a finite number, got nan"),
 ]
 
 
@@ -198,6 +201,7 @@ def test_lax_fields_names_the_numbers_and_flags_a_plain_model_lets_through():
 
 
 def test_ints_for_numbers_whole_numbers_for_counts_and_lists_for_pairs_are_accepted():
+    assert parse_config({"schedule": {"n_steps": np.int64(4), "adaptive_shots": np.True_}}).schedule.adaptive_shots is True
     cfg = parse_config({"reward": {"alpha": 1}, "schedule": {"n_steps": 4.0, "adaptive_shots": True},
                         "reduction": {"sho": {"q_bounds": [5, 50]}}, "space": {"x_min": 0, "x_max": 1, "n_x": 50}})
     assert cfg.reward.alpha == 1.0 and isinstance(cfg.reward.alpha, float)
