@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 import yaml
 
+from instruments.registry import settings_of
+from noisebo.config import ConfigError, InstrumentConfig, lax_fields
 from noisebo.driver import run_campaign
 from storage import journal
 from storage.hdf5 import read_campaign
@@ -110,3 +112,38 @@ def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(target,
     # reported where the driver is not installed: said once, drawn without the truth
     bare = noisebo(["report", str(path), "--out", str(tmp_path / "bare")], environment(prefect_harness))
     assert bare.returncode == 0 and bare.stderr.count("which is not installed here: drawn without") == 1
+
+
+@pytest.fixture(scope="module")
+def example_driver():
+    """The example's driver class, loaded from its source (no installation needed)."""
+    spec = importlib.util.spec_from_file_location("gramacy_lee_source", EXAMPLE / "noisebo_gramacy_lee" / "__init__.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # where pydantic resolves the settings' annotations
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        del sys.modules[spec.name]
+    return module.GramacyLee
+
+
+def test_the_example_settings_use_the_strict_number_types(example_driver):
+    assert lax_fields(example_driver.Settings) == []
+
+
+BAD_SETTINGS = [
+    ({"a0": "0.05"}, "a0: expected a number, got the string '0.05'"),
+    ({"a1": True}, "a1: expected a number, got the boolean true"),
+    ({"a1": float("nan")}, "a1: must be a finite number, got nan"),
+    ({"a0": float("inf")}, "a0: must be a finite number, got inf"),
+    ({"seed": "1"}, "seed: expected a whole number, got the string '1'"),
+    ({"seed": False}, "seed: expected a whole number, got the boolean false"),
+]
+
+
+@pytest.mark.parametrize("settings, message", BAD_SETTINGS, ids=[b[1] for b in BAD_SETTINGS])
+def test_the_example_settings_refuse_what_is_not_a_number_naming_it(example_driver, settings, message):
+    with pytest.raises(ConfigError) as info:
+        settings_of(InstrumentConfig(kind="gramacy-lee", settings=settings), example_driver)
+    assert str(info.value) == f"instrument.settings.{message}"
+    assert settings_of(InstrumentConfig(kind="gramacy-lee", settings={"a0": 0, "a1": 1}), example_driver).a1 == 1.0

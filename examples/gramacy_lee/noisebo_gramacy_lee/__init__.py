@@ -12,20 +12,25 @@ the truth.
 from __future__ import annotations
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from noisebo.config import Count, FrozenModel, NonNegativeFloat
 from noisebo.reduction import Reading
 
 __version__ = "0.2.0"
 
 
-class Settings(BaseModel):
-    """a0, a1: the noise law (value units); seed: the stream of shots measured outside a campaign."""
+class Settings(FrozenModel):
+    """a0, a1: the noise law (value units); seed: the stream of shots measured outside a campaign.
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
-    a0: float = Field(0.05, ge=0, allow_inf_nan=False)
-    a1: float = Field(0.5, ge=0, allow_inf_nan=False)
-    seed: int = Field(0, ge=0)
+    noisebo's own types (``noisebo.config``: ``Number``, ``Count``, ``Flag`` and the bounded
+    ``PositiveFloat``, ``NonNegativeFloat``) refuse a quoted number, a boolean where a number
+    belongs and a NaN or an infinity, naming the setting; ``FrozenModel`` is frozen and refuses
+    unknown keys."""
+
+    a0: NonNegativeFloat = 0.05
+    a1: NonNegativeFloat = 0.5
+    seed: Count = Field(0, ge=0)
 
 
 def gramacy_lee(x: np.ndarray) -> np.ndarray:
