@@ -22,6 +22,7 @@ import base64
 import http.client
 import json
 import math
+import ssl
 import sys
 import time
 import urllib.error
@@ -64,15 +65,17 @@ Measure = Callable[[ShotRequest], Any]
 
 
 def serve_instrument(url: str, token: str, measure: Measure, poll_s: float = 25.0, retry_s: float = 10.0,
-                     log: Callable[[str], None] | None = None) -> str:
+                     log: Callable[[str], None] | None = None, cafile: str | None = None) -> str:
     """Measure the shots the campaign at ``url`` asks for until it ends; returns its final
     status ("completed", "failed", "aborted"). ``measure(request)`` returns a number, a
     ``Spectrum``, or rows (a list of lists or a 2-D array) for a spectrum with the "sho"
     reduction. Network errors and a campaign that is restarting are waited out (retrying at most
     every ``retry_s`` s); ``CampaignRefused`` is raised for a wrong token or a reading the
-    campaign rejects."""
+    campaign rejects (a 4xx answer other than 409: sending it again would not help). For an
+    ``https://`` url, ``cafile`` is the campaign's certificate (PEM) when it is self-signed."""
     say = log or (lambda line: print(line, file=sys.stderr, flush=True))
-    link = _Link(url.rstrip("/"), token, poll_s, retry_s, say)
+    context = ssl.create_default_context(cafile=cafile) if cafile else None
+    link = _Link(url.rstrip("/"), token, poll_s, retry_s, say, context)
     answer: dict = {}
     while True:
         answer = answer.get("next") or link.call("GET", f"/next?wait={poll_s:g}")
@@ -138,8 +141,10 @@ def packed_spectrum(rows: Any) -> dict | None:
 class _Link:
     """HTTP calls to the campaign that wait out network errors and restarts."""
 
-    def __init__(self, url: str, token: str, poll_s: float, retry_s: float, say: Callable[[str], None]):
+    def __init__(self, url: str, token: str, poll_s: float, retry_s: float, say: Callable[[str], None],
+                 context: ssl.SSLContext | None = None):
         self.url, self.token, self.poll_s, self.retry_s, self.say = url, token, poll_s, retry_s, say
+        self.context = context
         self.connected = False
         self.waiting_said = False
 
@@ -152,7 +157,7 @@ class _Link:
             request = urllib.request.Request(self.url + path, data=data, method=method, headers={
                 "Authorization": "Bearer " + self.token, "Content-Type": "application/json"})
             try:
-                with urllib.request.urlopen(request, timeout=self.poll_s + 30.0) as response:
+                with urllib.request.urlopen(request, timeout=self.poll_s + 30.0, context=self.context) as response:
                     answer = json.loads(response.read() or b"{}")
                 if not self.connected:
                     self.say("connected to the campaign at " + self.url)

@@ -5,8 +5,12 @@
     GET  /status                  progress as JSON;  GET /  the same as a page for a person
     GET  /docs, /openapi.json     this API
 
-Every campaign call needs ``Authorization: Bearer TOKEN`` (the pages also take ``?token=``).
-Errors are ``{"error": "..."}`` with a 4xx or 503 status; 503 means "send it again".
+Every campaign call needs ``Authorization: Bearer TOKEN``; ``?token=`` opens only the page ``/``
+(an API call that carries it is refused, so the token stays out of the URLs a program logs).
+Errors are ``{"error": "..."}`` with a 4xx or 503 status; 503 means "send it again". A body over
+the limit is refused (413) without being kept: the rest of it is read and thrown away (up to
+``DRAIN_MAX_BYTES``) before the answer goes out, so a client that sends its whole body before
+reading the answer (Python's urllib) sees the 413 rather than a reset connection.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ from bridge.exchange import Exchange
 from bridge.wire import ReadingBody, WireError, parse_body
 
 MAX_WAIT_S = 60.0
+DRAIN_MAX_BYTES = 256 * 2**20  # an unwanted body is read and discarded up to this; beyond it the connection is closed
+HEADER_ONLY = ("the token goes in the header `Authorization: Bearer TOKEN`; `?token=` opens only the status page /")
 
 
 def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
@@ -37,15 +43,23 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
                               "`Authorization: Bearer TOKEN`. A reading is acknowledged only after the campaign has "
                               "journaled it; posting it again is safe.", redoc_url=None)
 
-    def authorised(request: Request, token_query: str | None = Query(None, alias="token", include_in_schema=False)):
-        header = request.headers.get("authorization", "")
-        given = header[7:].strip() if header.lower().startswith("bearer ") else token_query
+    def check(given: str | None) -> None:
         if not given:
             raise HTTPException(401, "missing token: send the header `Authorization: Bearer TOKEN`",
                                 headers={"WWW-Authenticate": "Bearer"})
         if not secrets.compare_digest(given.encode(), token.encode()):
             raise HTTPException(403, "wrong token")
+
+    def authorised(request: Request):
+        if "token" in request.query_params:
+            raise HTTPException(401, HEADER_ONLY, headers={"WWW-Authenticate": "Bearer"})
+        check(bearer(request))
         exchange.contact()
+
+    def page_authorised(request: Request, token_query: str | None = Query(None, alias="token")):
+        check(bearer(request) or token_query)
+
+    app.add_middleware(Drained)
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, error: StarletteHTTPException):
@@ -53,7 +67,8 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
 
     @app.exception_handler(WireError)
     async def _wire_error(request: Request, error: WireError):
-        return JSONResponse({"error": str(error)}, error.status)
+        return JSONResponse({"error": str(error)}, error.status,
+                            headers={"Connection": "close"} if error.status == 413 else None)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, error: RequestValidationError):
@@ -83,14 +98,23 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
     async def status():
         return exchange.status()
 
-    @app.get("/", dependencies=[Depends(authorised)], response_class=HTMLResponse, include_in_schema=False)
+    @app.get("/", dependencies=[Depends(page_authorised)], response_class=HTMLResponse, include_in_schema=False)
     async def page():
         return status_page(exchange.status())
 
     return app
 
 
+def bearer(request: Request) -> str | None:
+    """The token of an ``Authorization: Bearer TOKEN`` header, or None."""
+    header = request.headers.get("authorization", "")
+    return header[7:].strip() if header.lower().startswith("bearer ") else None
+
+
 async def _body_within(request: Request, limit: int) -> bytes:
+    """The body, or ``WireError`` 413 as soon as it is known to be over ``limit`` bytes: from its
+    Content-Length before anything is read, else (a chunked body) once ``limit`` bytes have come
+    without its end. What is left unread is drained by ``Drained``."""
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > limit:
         raise WireError(413, f"the body of {int(declared)} bytes is over the bridge's limit of {limit} bytes")
@@ -101,6 +125,46 @@ async def _body_within(request: Request, limit: int) -> bytes:
             raise WireError(413, f"the body is over the bridge's limit of {limit} bytes")
         chunks.append(chunk)
     return b"".join(chunks)
+
+
+class Drained:
+    """ASGI middleware: before an answer goes out, the part of the request's body that the app
+    left unread is read and thrown away (up to ``cap`` bytes; a body declared larger is not
+    read at all), so that a client still sending it can finish and read the answer. Past the
+    cap the answer says ``Connection: close``."""
+
+    def __init__(self, app, cap: int = DRAIN_MAX_BYTES):
+        self.app, self.cap = app, cap
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        pending = [True]  # whether more of the body may come
+
+        async def reading():
+            message = await receive()
+            pending[0] = message["type"] == "http.request" and message.get("more_body", False)
+            return message
+
+        async def answering(message):
+            if message["type"] == "http.response.start" and pending[0]:
+                if not await self._drain(scope, receive, pending):
+                    message = {**message, "headers": [*message.get("headers", []), (b"connection", b"close")]}
+            await send(message)
+
+        await self.app(scope, reading, answering)
+
+    async def _drain(self, scope, receive, pending: list) -> bool:
+        """Read and discard the rest of the body; False when it was over the cap (left unread)."""
+        declared = dict(scope.get("headers", ())).get(b"content-length", b"")
+        if declared.isdigit() and int(declared) > self.cap:
+            return False
+        drained = 0
+        while pending[0] and drained <= self.cap:
+            message = await receive()
+            pending[0] = message["type"] == "http.request" and message.get("more_body", False)
+            drained += len(message.get("body", b""))
+        return not pending[0]
 
 
 def status_page(status: dict) -> str:
@@ -119,22 +183,29 @@ def status_page(status: dict) -> str:
 
 
 class BridgeServer:
-    """The API served on ``host:port`` from a background thread. The port is bound in
-    ``start`` (``OSError`` when taken), so a campaign whose port is taken stops before its
-    file is created."""
+    """The API served on ``host:port`` from a background thread, over TLS when ``tls`` names a
+    certificate and its key (PEM files). The port is bound in ``start`` (``OSError`` when
+    taken), so a campaign whose port is taken stops before its file is created."""
 
-    def __init__(self, exchange: Exchange, token: str, host: str, port: int, max_body_bytes: int):
+    def __init__(self, exchange: Exchange, token: str, host: str, port: int, max_body_bytes: int,
+                 tls: tuple[str, str] | None = None):
         self.exchange = exchange
-        self.host, self.port = host, port
+        self.host, self.port, self.tls = host, port, tls
         app = make_app(exchange, token, max_body_bytes)
+        certfile, keyfile = tls or (None, None)
         self._server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off", access_log=False,
-                                                     timeout_graceful_shutdown=2))
+                                                     timeout_graceful_shutdown=2, ssl_certfile=certfile,
+                                                     ssl_keyfile=keyfile))
         self._thread: threading.Thread | None = None
+
+    @property
+    def scheme(self) -> str:
+        return "https" if self.tls else "http"
 
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}"
+        return f"{self.scheme}://{host}:{self.port}"
 
     def start(self) -> None:
         family = socket.AF_INET6 if ":" in self.host else socket.AF_INET

@@ -1,4 +1,5 @@
 import json
+import subprocess
 import threading
 import urllib.error
 import urllib.request
@@ -21,6 +22,17 @@ TOKEN = "test-token-123"
 @pytest.fixture(autouse=True)
 def bridge_token(monkeypatch):
     monkeypatch.setenv("NOISEBO_BRIDGE_TOKEN", TOKEN)
+
+
+@pytest.fixture(scope="session")
+def certificate(tmp_path_factory) -> tuple[Path, Path]:
+    """A self-signed certificate for 127.0.0.1 and its key, made with openssl as the README says."""
+    where = tmp_path_factory.mktemp("tls")
+    cert, key = where / "bridge.pem", where / "bridge.key"
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-keyout", str(key),
+                    "-out", str(cert), "-subj", "/CN=127.0.0.1", "-addext", "subjectAltName=IP:127.0.0.1"],
+                   check=True, capture_output=True)
+    return cert, key
 
 
 def remote_config(base: str, overrides: dict, port: int = 0, **settings):

@@ -69,6 +69,18 @@ def test_a_failing_measure_is_reported_and_the_shot_asked_again(tmp_path):
     assert [s.reading.value for p in final.points for s in p.shots] == [1.0, 2.0, 1.0, 2.0]
 
 
+def test_the_client_serves_a_campaign_over_https_with_its_certificate(tmp_path, certificate):
+    cert, key = certificate
+    config = remote_config("data/configs/forrester.yaml", SMALL, tls_certfile=str(cert), tls_keyfile=str(key))
+    with served(config, tmp_path / "c.h5") as running:
+        assert running.url.startswith("https://127.0.0.1:")
+        status = serve_instrument(running.url, TOKEN, lambda r: 10.0 * r.point + r.shot, poll_s=2,
+                                  log=lambda line: None, cafile=str(cert))
+        final = running.final()
+    assert status == "completed"
+    assert [s.reading.value for p in final.points for s in p.shots] == [0.0, 1.0, 10.0, 11.0]
+
+
 def test_a_wrong_token_stops_the_client_with_the_reason(tmp_path):
     config = remote_config("data/configs/forrester.yaml", SMALL)
     with served(config, tmp_path / "c.h5") as running:
