@@ -27,10 +27,12 @@ from bridge.wire import (
 from noisebo import engine
 from noisebo.engine import EngineState
 from noisebo.events import Done, Request, ShotError
-from noisebo.failures import InstrumentError, InstrumentTimeout
+from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
 from noisebo.reduction import Reading
 
 Clock = Callable[[], float]
+StopRequested = Callable[[], "str | None"]  # the name of a signal that asked the campaign to stop, or None
+WAIT_SLICE_S = 0.2  # the campaign, waiting for a reading, looks up this often whether it should stop
 
 
 @dataclass
@@ -72,11 +74,13 @@ class Exchange:
                 del self._taken_at[key]
             self._cond.notify_all()
 
-    def wait_outcome(self, x, t: float) -> Reading:
+    def wait_outcome(self, x, t: float, stop_requested: StopRequested = lambda: None) -> Reading:
         """Block the campaign until the instrument PC hands in the next wanted shot at (x, t);
         ``InstrumentTimeout`` once it has gone silent, ``InstrumentError`` for a failure it
         reports. The reading stays held until the campaign journals it, so a campaign that
-        stopped waiting (a timeout) finds it again on its next try."""
+        stopped waiting (a timeout) finds it again on its next try. Once ``stop_requested()``
+        names a signal (checked every ``WAIT_SLICE_S``), ``MeasurementStopped`` ends the wait
+        unless the instrument PC is at work on the shot (polling, or measuring it)."""
         with self._cond:
             request = self._wanted()
             if request is None or tuple(float(v) for v in x) != request.x or float(t) != request.t:
@@ -95,7 +99,16 @@ class Exchange:
                                             + (f" beyond the shot's t = {t:g} s" if key in self._taken_at else ""))
                 if self.closed:
                     raise InstrumentError("the bridge was shut down")
-                self._cond.wait(0.2)
+                signal_name = stop_requested()
+                if signal_name is not None and not self._at_work(key, t):
+                    raise MeasurementStopped(f"{signal_name} received")
+                self._cond.wait(WAIT_SLICE_S)
+
+    def _at_work(self, key: tuple[int, int], t: float) -> bool:
+        """Whether the instrument PC is polling, or took shot ``key`` less than its ``t`` plus
+        ``silence_s`` ago (its reading may still come). Holds the lock."""
+        taken = self._taken_at.get(key)
+        return self._polling > 0 or (taken is not None and self._clock() - taken <= t + self.silence_s)
 
     def _silent_since(self, key: tuple[int, int], t: float, started: float) -> bool:
         """Whether the instrument PC has been silent for ``silence_s`` since the campaign began

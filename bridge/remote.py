@@ -191,7 +191,9 @@ class RemoteInstrument:
     def measure(self, x, t: float) -> Reading:
         if self._server is None:
             raise InstrumentUnavailable("the remote instrument is not open (its bridge is not serving)")
-        return self.exchange.wait_outcome(x, t)
+        from flows import abort  # only its flag, read while waiting
+
+        return self.exchange.wait_outcome(x, t, abort.requested)
 
 
 class ManualSettings(FrozenModel):

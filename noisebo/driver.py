@@ -20,7 +20,7 @@ from noisebo.campaign import compile_first_decision
 from noisebo.decision import Decision, capacities_ahead, compile_ahead, programs_key
 from noisebo.engine import EngineState
 from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
-from noisebo.failures import InstrumentError, InstrumentTimeout
+from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
 from noisebo.keys import MEASURE, numpy_rng
 from noisebo.state import CampaignState
 
@@ -48,10 +48,14 @@ def take_shot(instrument, seed: int, request: Request) -> Outcome:
 def take_point(instrument, state: EngineState, committed: Commit, measure: Measure = take_shot) -> EngineState:
     """The shots of the point under way, each committed as it is taken (a failed attempt too, and
     tried again), until the engine wants something else: a decision, the next point, or nothing
-    more. Returns the state after the last commit."""
+    more. Returns the state after the last commit. An instrument that stops waiting because the
+    campaign was asked to stop (``MeasurementStopped``) ends it as aborted."""
     step = engine.ask(state)
     while isinstance(step, Request):
-        outcome = measure(instrument, state.seed, step)
+        try:
+            outcome = measure(instrument, state.seed, step)
+        except MeasurementStopped as stopped:
+            return committed(state, engine.stop(state, Status.ABORTED, str(stopped)))
         state = committed(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
         point, step = step.point, engine.ask(state)
         if isinstance(step, Request) and step.point != point:

@@ -11,6 +11,12 @@ class InstrumentTimeout(InstrumentError):
     """The instrument did not answer within its timeout."""
 
 
+class MeasurementStopped(RuntimeError):
+    """The instrument stopped waiting for a shot that nothing was measuring, because the
+    campaign was asked to stop (a signal): the campaign records the status "aborted" with this
+    reason, and the shot stays wanted."""
+
+
 class InstrumentUnavailable(RuntimeError):
     """The instrument could not be opened for a campaign; nothing was measured."""
 
