@@ -1,0 +1,72 @@
+"""`noisebo run` of a bridged campaign, the real command against a real Prefect server: SIGTERM
+while the campaign waits for an instrument PC that never connected stops it within 2 s with status
+aborted; a short token with a host beyond loopback is refused in one line before anything is
+bound or written. (Only loopback is ever reached.)"""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tests.bridge.conftest import call
+from tests.bridge.kills import free_port, write_remote_config
+from tests.bridge.test_signals import ABORT_WITHIN_S, journaled_status
+
+pytestmark = pytest.mark.e2e
+CLI = [sys.executable, "-m", "cli.main"]
+TOKEN = "e2e-signal-token-0123456789abcdef"
+
+
+def test_sigterm_while_noisebo_run_waits_for_the_instrument_pc_aborts_within_2_s(tmp_path, prefect_server):
+    port = free_port()
+    config = write_remote_config(tmp_path / "killed.yaml", port)
+    path = tmp_path / "runs" / "killed_reward_s0000.h5"
+    env = {**os.environ, **prefect_server, "NOISEBO_BRIDGE_TOKEN": TOKEN}
+    campaign = subprocess.Popen([*CLI, "run", str(config), "--out", str(tmp_path / "runs"), "--no-rrd"], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not path.with_suffix(".journal").exists() or _now(port) != "measuring":
+            assert campaign.poll() is None, campaign.communicate()
+            assert time.monotonic() < deadline, "the campaign never came to wait for its first shot"
+            time.sleep(0.1)
+        time.sleep(1.0)  # waiting for the PC, well past starting
+        campaign.send_signal(signal.SIGTERM)
+        sent = time.monotonic()
+        while journaled_status(path) != "aborted":
+            assert time.monotonic() - sent < ABORT_WITHIN_S, f"not aborted {ABORT_WITHIN_S} s after SIGTERM"
+            time.sleep(0.02)
+        out, err = campaign.communicate(timeout=120)
+    finally:
+        campaign.kill()
+    assert campaign.returncode == 143, err
+    assert "SIGTERM received" in out and TOKEN not in out + err
+    assert f"continue it with `noisebo resume {path}`" in err.strip().splitlines()[-1]
+
+
+def _now(port: int) -> str | None:
+    try:
+        return call(f"http://127.0.0.1:{port}", "GET", "/status", token=TOKEN)[1].get("now")
+    except OSError:  # not listening yet
+        return None
+
+
+def test_a_short_token_off_loopback_stops_noisebo_run_in_one_line(tmp_path, prefect_server):
+    import yaml
+
+    config = write_remote_config(tmp_path / "exposed.yaml", free_port())
+    data = yaml.safe_load(config.read_text())
+    data["instrument"]["settings"].update(host="0.0.0.0", token_file=str(tmp_path / "bridge.token"))
+    config.write_text(yaml.safe_dump(data))
+    env = {**os.environ, **prefect_server, "NOISEBO_BRIDGE_TOKEN": "too-short"}
+    done = subprocess.run([*CLI, "run", str(config), "--out", str(tmp_path / "runs"), "--no-rrd"], env=env,
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 3
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert lines[0].startswith("noisebo: error: instrument.settings.host 0.0.0.0 lets other computers reach the bridge, "
+                               "which then needs a token of at least 32 characters; $NOISEBO_BRIDGE_TOKEN holds one of 9")
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "bridge.token").exists()
