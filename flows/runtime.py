@@ -11,11 +11,19 @@ mistakes for missing CPU features: openxla/xla#44565), so with the cache on, XLA
 is kept to fatal messages (TF_CPP_MIN_LOG_LEVEL=3) unless that variable is set.
 
 ``configure()`` runs when the ``flows`` package is imported, before Prefect is.
+
+A command that fails says so in one line; the traceback behind it goes to this process's failure
+log, data/logs/noisebo-DATE-TIME-PID.log of the checkout (or of ~/.noisebo; NOISEBO_LOG_DIR=DIR
+puts it elsewhere), a file that exists only once something is written to it. While flows run,
+tracebacks that Prefect logs go there too instead of the terminal (``divert_tracebacks``).
 """
 
 from __future__ import annotations
 
+import logging
 import os
+import sys
+import time
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
@@ -71,3 +79,81 @@ def cpu_fingerprint() -> str:
         text = f"{platform.machine()} {platform.processor()}"
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
+
+
+def log_dir() -> Path:
+    return Path(os.environ.get("NOISEBO_LOG_DIR") or _state_dir() / "data" / "logs")
+
+
+class FailureLog(logging.FileHandler):
+    """This process's failure log: records that carry a traceback. The file (and its folder, which
+    git then ignores) is made when the first one arrives."""
+
+    def __init__(self):
+        self.path = log_dir() / f"noisebo-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
+        super().__init__(self.path, encoding="utf-8", delay=True)
+        self.addFilter(has_traceback)
+        self.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+
+    def _open(self):
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        ignore = self.path.parent / ".gitignore"
+        if not ignore.exists():
+            ignore.write_text("*\n")
+        return super()._open()
+
+    @property
+    def written(self) -> bool:
+        return self.stream is not None
+
+    def report(self, error: BaseException) -> str:
+        """Write ``error``'s traceback; one line that names the error and this log."""
+        self.handle(logging.LogRecord("noisebo", logging.ERROR, __file__, 0, "the command failed", None,
+                                      (type(error), error, error.__traceback__)))
+        self.flush()
+        lines = str(error).strip().splitlines()
+        return f"{type(error).__name__}{': ' + lines[0] if lines else ''}; the traceback is in {self.path}"
+
+    def mention(self) -> str:
+        """"; tracebacks in PATH" once something was written, else nothing."""
+        return f"; tracebacks in {self.path}" if self.written else ""
+
+
+def has_traceback(record: logging.LogRecord) -> bool:
+    return bool(record.exc_info)
+
+
+def has_no_traceback(record: logging.LogRecord) -> bool:
+    return not record.exc_info
+
+
+_FAILURE_LOG: list[FailureLog] = []
+
+
+def failure_log() -> FailureLog:
+    """The failure log of this process, on the root logger (made on first use)."""
+    if not _FAILURE_LOG:
+        _FAILURE_LOG.append(FailureLog())
+        logging.getLogger().addHandler(_FAILURE_LOG[0])
+    return _FAILURE_LOG[0]
+
+
+def divert_tracebacks() -> None:
+    """Records with a traceback go to the failure log and no longer to the terminal: Prefect logs a
+    failing flow's traceback before the command's one line about it. Call it once Prefect has set
+    up its logging; the terminal handlers it finds then keep every other record."""
+    failure_log()
+    loggers = [logging.getLogger()] + [logger for logger in logging.Logger.manager.loggerDict.values()
+                                       if isinstance(logger, logging.Logger)]
+    for logger in loggers:
+        for handler in logger.handlers:
+            if _is_terminal(handler) and has_no_traceback not in handler.filters:
+                handler.addFilter(has_no_traceback)
+
+
+def _is_terminal(handler: logging.Handler) -> bool:
+    """Prefect's console handler, or a plain handler writing to stdout or stderr."""
+    if type(handler).__name__ == "PrefectConsoleHandler":
+        return True
+    return isinstance(handler, logging.StreamHandler) and not isinstance(handler, logging.FileHandler) and \
+        handler.stream in (sys.stderr, sys.stdout, sys.__stderr__, sys.__stdout__)
