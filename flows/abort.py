@@ -21,6 +21,15 @@ class CampaignAborted(RuntimeError):
         self.signal_name, self.path = signal_name, path
 
 
+class StoppedAtOnce(KeyboardInterrupt):
+    """The second signal: stop now. A KeyboardInterrupt, so that nothing on the way catches it as
+    an ordinary error; ``signal_name`` gives the exit code."""
+
+    def __init__(self, signal_name: str):
+        super().__init__(f"second {signal_name}")
+        self.signal_name = signal_name
+
+
 class AbortFlag:
     """Set by the first SIGINT/SIGTERM while ``installed``; campaigns read it between points
     through ``requested()``."""
@@ -33,7 +42,7 @@ class AbortFlag:
 
     def _handle(self, signum, frame) -> None:
         if self.signal_name is not None:  # the second signal: stop now
-            raise KeyboardInterrupt(f"second {signal.Signals(signum).name}")
+            raise StoppedAtOnce(signal.Signals(signum).name)
         self.signal_name = signal.Signals(signum).name
         print(f"noisebo: {self.signal_name} received: finishing the current point, then stopping "
               "(send it again to stop at once)", flush=True)
