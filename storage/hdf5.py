@@ -15,8 +15,13 @@ its committed rows) and give the same values for the same campaign.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import ctypes.util
+import functools
 import json
 import os
+import zlib
 from pathlib import Path
 from typing import Sequence
 
@@ -25,13 +30,17 @@ import numpy as np
 
 from noisebo.decision import Decision, grids
 from storage.faults import crash_point
+from storage import manifest
+from storage.integrity import NO_JOURNAL, CampaignFileError, Opening, examine
 from storage.journal import _fsync_dir
 from noisebo.engine import EngineState, PointEntry
 from noisebo.events import ShotFailed, ShotTaken
 
 SCHEMA = "noisebo.campaign"
-SCHEMA_VERSION = 2
-READABLE_VERSIONS = (1, 2)  # version 1: no driver record; its config is migrated when parsed
+SCHEMA_VERSION = 3
+# version 1: no driver record (its config is migrated when parsed); 1 and 2: no checksums
+READABLE_VERSIONS = (1, 2, 3)
+CHECKSUMMED_FROM = 3
 LIBVER = ("v110", "v114")
 STEP_COLUMNS = {
     "step": ("1", "0-based BO step"),
@@ -63,14 +72,31 @@ POINT_STEP = ("1", "BO step that proposed it (-1: seed)")
 MUTABLE_ATTRS = ("converged_step", "n_points", "n_steps", "n_shots", "n_failed_attempts")
 
 
-def _put(group: h5py.Group, name: str, data, units: str, description: str) -> None:
-    ds = group.create_dataset(name, data=data)
+def _put(group: h5py.Group, name: str, data, units: str, description: str) -> h5py.Dataset:
+    """A dataset with its units and description; a numeric array chunked with HDF5's fletcher32
+    checksum, so that a damaged byte is a read error, not a number (text: ``_put_text``)."""
+    data = np.asarray(data)
+    ds = group.create_dataset(name, data=data, fletcher32=data.ndim > 0 and data.dtype.kind != "O")
     ds.attrs["units"] = units
     ds.attrs["description"] = description
+    return ds
 
 
 def _put_text(group: h5py.Group, name: str, values, description: str) -> None:
-    _put(group, name, np.asarray(list(values), dtype=object).astype(h5py.string_dtype()), "text", description)
+    """A text column (variable-length UTF-8). HDF5 keeps such strings in its global heap, which no
+    filter checksums: the "crc32" attribute is the CRC-32 of the rows' UTF-8 bytes, each row
+    followed by a NUL (``text_crc32``), checked by the readers."""
+    values = [str(v) for v in values]
+    ds = _put(group, name, np.asarray(values, dtype=object).astype(h5py.string_dtype()), "text", description)
+    ds.attrs["crc32"] = text_crc32(v.encode() for v in values)
+
+
+def text_crc32(rows) -> int:
+    """CRC-32 of byte strings, each followed by a NUL."""
+    crc = 0
+    for row in rows:
+        crc = zlib.crc32(b"\0", zlib.crc32(row, crc))
+    return crc
 
 
 ARRAY_COLUMNS = {
@@ -243,6 +269,7 @@ def _fill(f: h5py.File, state: EngineState) -> None:
         if name in tables["steps"]:
             _put(steps, name, tables["steps"][name], units, description)
     fill_summary(f, state)
+    manifest.write(f)
 
 
 SHOT_COLUMNS = (
@@ -365,7 +392,8 @@ def _fill_shots(f: h5py.File, state: EngineState, columns: dict) -> None:
         group.attrs["rows"] = SPECTRA_ROWS
         for i, shots_of in sorted(spectra.items()):
             data = np.stack([s.reading.spectrum for s in shots_of])
-            ds = group.create_dataset(f"point_{i:04d}", data=data, chunks=(1, *data.shape[1:]), compression="gzip", compression_opts=1)
+            ds = group.create_dataset(f"point_{i:04d}", data=data, chunks=(1, *data.shape[1:]), compression="gzip",
+                                      compression_opts=1, fletcher32=True)
             ds.attrs["units"] = "Hz, pm, deg"
 
 
@@ -403,40 +431,95 @@ def stray_temporaries(path: Path) -> list[Path]:
     return sorted(path.parent.glob(f".{path.name}.tmp-*"))
 
 
-class CampaignFileError(RuntimeError):
-    """A campaign file that cannot be read as one; the message names the file and the problem."""
-
-
 def check_present(path: Path) -> Path:
-    """``path`` if it names a non-empty file, else a CampaignFileError saying what it is."""
+    """``path`` if it names an HDF5 file that is whole as far as its superblock tells (read in
+    this process, before a reader is spawned), else a CampaignFileError saying what it is."""
     path = Path(path)
-    if not path.exists():
-        raise CampaignFileError(f"{path}: no such file")
-    if not path.is_file():
-        raise CampaignFileError(f"{path}: not a file")
-    if path.stat().st_size == 0:
-        raise CampaignFileError(f"{path}: empty file (0 bytes), not a campaign")
+    examine(path, rebuild_advice(path))
     return path
 
 
+def rebuild_advice(path: Path) -> str | None:
+    """What to do about a damaged campaign file: rebuild it from its journal (None: it has none)."""
+    path = Path(path)
+    if not path.with_suffix(".journal").is_file():
+        return None
+    return f"its journal holds every measurement: write the file anew with `noisebo rebuild {path}`"
+
+
 def open_campaign(path: Path) -> h5py.File:
-    """``path`` opened read-only: plainly (a finished file), else as an SWMR reader (a file a
-    running campaign holds, or one it held when it was killed: plain h5py refuses those)."""
-    path = check_present(path)
+    """``path`` opened read-only: plainly (a finished file), or as an SWMR reader (a file a
+    running campaign holds, or held when it was killed), as its superblock says
+    (``storage.integrity.examine``: a truncated or damaged file is an error before HDF5 sees it)."""
+    path = Path(path)
+    opening = examine(path, rebuild_advice(path))
     try:
-        return h5py.File(path, "r")
+        return _open_swmr(path) if opening is Opening.SWMR else h5py.File(path, "r")
     except OSError as error:
-        first = error
+        raise damaged(path, error) from None
+
+
+# An SWMR reader tries a metadata block again when its checksum fails (the writer may be writing
+# it); HDF5's default of 100 tries backs off for minutes on a damaged block, 10 take about 1 s.
+SWMR_READ_ATTEMPTS = 10
+
+
+def _open_swmr(path: Path) -> h5py.File:
+    """``path`` opened as an SWMR reader that gives up on a damaged block after SWMR_READ_ATTEMPTS."""
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    library = _hdf5_library()
+    if library is not None:
+        library.H5Pset_metadata_read_attempts(ctypes.c_int64(fapl.id), ctypes.c_uint(SWMR_READ_ATTEMPTS))
+    fid = h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ, fapl=fapl)
+    return h5py.File(fid)
+
+
+@functools.cache
+def _hdf5_library() -> ctypes.CDLL | None:
+    """The HDF5 library h5py runs on (h5py has no call for the read attempts), None where it is
+    not found: then an SWMR read of a damaged file is stopped by the isolated reader's timeout."""
+    here = Path(h5py.__file__).resolve().parent
+    found = [p for p in (*here.parent.glob("h5py.libs/libhdf5-*"), *here.glob(".dylibs/libhdf5.*"))
+             if "_hl" not in p.name]
+    system = ctypes.util.find_library("hdf5")
+    for candidate in [*map(str, found), *([system] if system else [])]:
+        try:
+            library = ctypes.CDLL(candidate)
+        except OSError:
+            continue
+        probe = h5py.h5p.create(h5py.h5p.FILE_ACCESS)  # the same library instance knows h5py's ids
+        if library.H5Pset_metadata_read_attempts(ctypes.c_int64(probe.id), ctypes.c_uint(1)) >= 0:
+            return library
+    return None
+
+
+def damaged(path: Path, error: BaseException) -> CampaignFileError:
+    """The one-line error for a campaign file HDF5 could not read, with what to do about it."""
+    cause = str(error).splitlines()[0] if str(error) else type(error).__name__
+    advice = rebuild_advice(path) or NO_JOURNAL
+    return CampaignFileError(f"{path}: damaged campaign file ({cause}); {advice}")
+
+
+@contextlib.contextmanager
+def reading(path: Path):
+    """Errors HDF5 raises inside (a failed checksum, a damaged object header) as ``damaged``."""
     try:
-        return h5py.File(path, "r", swmr=True)
-    except OSError:
-        raise CampaignFileError(f"{path}: not a readable HDF5 file ({str(first).split('(')[0].strip()})") from None
+        yield
+    except CampaignFileError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as error:
+        raise damaged(path, error) from None
 
 
 def _opened_campaign(path: Path) -> tuple[h5py.File, dict]:
     """The open file and its root attributes, checked to be a campaign this noisebo reads."""
     f = open_campaign(path)
-    attrs = dict(f.attrs)
+    try:
+        with reading(path):
+            attrs = dict(f.attrs)
+    except CampaignFileError:
+        f.close()
+        raise
     if attrs.get("schema") != SCHEMA:
         f.close()
         raise CampaignFileError(f"{path}: an HDF5 file but not a noisebo campaign (no schema {SCHEMA!r})")
@@ -445,13 +528,45 @@ def _opened_campaign(path: Path) -> tuple[h5py.File, dict]:
         f.close()
         raise CampaignFileError(f"{path}: campaign schema version {version}; this noisebo reads "
                                 f"{', '.join(map(str, READABLE_VERSIONS))}")
+    if version >= CHECKSUMMED_FROM:
+        try:
+            with reading(path):
+                wrong = manifest.check(f)
+        except CampaignFileError:
+            f.close()
+            raise
+        if wrong:
+            f.close()
+            raise damaged(path, ValueError(wrong))
     return f, attrs
+
+
+@contextlib.contextmanager
+def _campaign(path: Path):
+    """The open campaign file and its root attributes, HDF5's errors inside as ``damaged``."""
+    f, attrs = _opened_campaign(path)
+    with f, reading(path):
+        yield f, attrs
 
 
 def _is_live(attrs: dict) -> bool:
     from storage import live
 
     return attrs.get("layout") == live.LAYOUT
+
+
+def values(ds: h5py.Dataset) -> np.ndarray:
+    """A finished file's dataset read whole, its text checked against its "crc32" attribute."""
+    data = ds[()]
+    if "crc32" in ds.attrs:
+        rows = (v if isinstance(v, bytes) else str(v).encode() for v in np.ravel(data))
+        if text_crc32(rows) != int(ds.attrs["crc32"]):
+            raise ValueError(f"{ds.name} fails its checksum")
+    return data
+
+
+def _datasets(group: h5py.Group) -> dict:
+    return {k: values(v) for k, v in group.items() if isinstance(v, h5py.Dataset)}
 
 
 def read_campaign(path: Path) -> dict:
@@ -461,27 +576,18 @@ def read_campaign(path: Path) -> dict:
     "steps" (with "hyperparameters"), "shots" (dicts of arrays) and "summary" (None until done)."""
     from storage import live
 
-    f, attrs = _opened_campaign(path)
-    with f:
-        try:
-            if _is_live(attrs):
-                out = live.read_tables(f, path)
-                attrs = {k: v for k, v in attrs.items() if k != "layout"} | out.pop("counts")
-            else:
-                out = {
-                    "grid": {k: v[()] for k, v in f["grid"].items()},
-                    "points": {k: v[()] for k, v in f["points"].items()},
-                    "shots": {k: v[()] for k, v in f["shots"].items() if isinstance(v, h5py.Dataset)},
-                    "steps": {k: v[()] for k, v in f["steps"].items() if isinstance(v, h5py.Dataset)},
-                }
-                out["steps"]["hyperparameters"] = {k: v[()] for k, v in f["steps/hyperparameters"].items()}
-            out["summary"] = read_summary(f)
-            out["attrs"] = {k: (v.item() if hasattr(v, "item") else v) for k, v in attrs.items()}
-            out["attrs"]["config"] = json.loads(out["attrs"]["config_json"])
-            out["attrs"]["driver"] = json.loads(out["attrs"]["driver_json"]) if "driver_json" in attrs else {
-                "name": out["attrs"]["instrument"], "version": "not recorded (schema 1)", "settings": {}}
-        except (KeyError, ValueError, OSError) as error:
-            raise CampaignFileError(f"{path}: damaged campaign file ({error})") from None
+    with _campaign(path) as (f, attrs):
+        if _is_live(attrs):
+            out = live.read_tables(f, path)
+            attrs = {k: v for k, v in attrs.items() if k != "layout"} | out.pop("counts")
+        else:
+            out = {name: _datasets(f[name]) for name in ("grid", "points", "shots", "steps")}
+            out["steps"]["hyperparameters"] = _datasets(f["steps/hyperparameters"])
+        out["summary"] = read_summary(f)
+        out["attrs"] = {k: (v.item() if hasattr(v, "item") else v) for k, v in attrs.items()}
+        out["attrs"]["config"] = json.loads(out["attrs"]["config_json"])
+        out["attrs"]["driver"] = json.loads(out["attrs"]["driver_json"]) if "driver_json" in attrs else {
+            "name": out["attrs"]["instrument"], "version": "not recorded (schema 1)", "settings": {}}
     return out
 
 
@@ -490,16 +596,14 @@ def read_summary(f: h5py.File) -> dict | None:
     if "summary" not in f:
         return None
     s = f["summary"]
-    return {k: v[()] for k, v in s.items()} | {
-        "t_opt": float(s.attrs["t_opt"]), "hyperparameters": json.loads(s.attrs["hyperparameters_json"])}
+    return _datasets(s) | {"t_opt": float(s.attrs["t_opt"]), "hyperparameters": json.loads(s.attrs["hyperparameters_json"])}
 
 
 def read_spectra(path: Path, point: int) -> np.ndarray:
     """The raw sweeps of one point, (n_shots, 3, N): rows frequency Hz, amplitude pm, phase deg."""
     from storage import live
 
-    f, attrs = _opened_campaign(path)
-    with f:
+    with _campaign(path) as (f, attrs):
         if _is_live(attrs):
             found = live.read_spectra(f, path, point)
         else:
@@ -515,21 +619,19 @@ def read_shot_fits(path: Path) -> dict | None:
     shots are not sweeps."""
     from storage import live
 
-    f, attrs = _opened_campaign(path)
-    with f:
+    with _campaign(path) as (f, attrs):
         if _is_live(attrs):
             return live.read_shot_fits(f, path)
         if "shots/fit" not in f:
             return None
-        return {k: v[()] for k, v in f["shots/fit"].items() if k in FIT_UNITS}
+        return {k: v for k, v in _datasets(f["shots/fit"]).items() if k in FIT_UNITS}
 
 
 def read_failures(path: Path) -> dict:
     """The failed attempts (``/failures``): point, shot, x, t (n,) and kind, reason (n,) bytes."""
     from storage import live
 
-    f, attrs = _opened_campaign(path)
-    with f:
+    with _campaign(path) as (f, attrs):
         if _is_live(attrs):
             return live.read_failures(f, path)
-        return {k: v[()] for k, v in f["failures"].items()}
+        return _datasets(f["failures"])

@@ -65,26 +65,94 @@ def _decode(head: bytes, payload: bytes) -> Record:
     return Record(header["type"], header["fields"], arrays)
 
 
-def read(path: Path) -> tuple[list[Record], int]:
-    """All valid records from the start of the file, and the byte length they occupy (anything
-    after that is a torn or corrupt tail)."""
+@dataclass(frozen=True)
+class Damage:
+    """Where a journal stops being readable: ``record`` (its index) at byte ``offset`` of a file
+    of ``length`` bytes, and ``intact_after`` records that still read after it. A torn tail (a
+    record cut short by a crash mid-write, nothing readable after it) is ``torn``."""
+
+    record: int
+    offset: int
+    length: int
+    intact_after: int
+
+    @property
+    def torn(self) -> bool:
+        return self.intact_after == 0
+
+    def describe(self, path: Path) -> str:
+        kept = "no record is intact before it" if self.record == 0 else \
+            f"records 0-{self.record - 1} (bytes 0-{self.offset - 1}) are intact"
+        if self.torn:
+            return (f"{path}: its last record ({self.record}, bytes {self.offset}-{self.length - 1}) is incomplete "
+                    f"or fails its checksum, as a crash while writing it leaves it: it is dropped; {kept}")
+        return (f"{path}: record {self.record} (at byte {self.offset}) is damaged and {self.intact_after} intact "
+                f"records follow it; {kept}")
+
+
+class JournalDamaged(JournalError):
+    """A journal damaged before its end: reading past the damage would lose or misplace records."""
+
+    def __init__(self, path: Path, damage: Damage):
+        super().__init__(damage.describe(path))
+        self.path, self.damage = Path(path), damage
+
+
+def _frame_at(data: bytes, offset: int) -> tuple[Record, int] | None:
+    """The record whose frame starts at ``offset`` and the offset after it, None if there is none."""
+    if offset + _FRAME.size > len(data):
+        return None
+    magic, head_len, payload_len, crc = _FRAME.unpack_from(data, offset)
+    end = offset + _FRAME.size + head_len + payload_len
+    if magic != MAGIC or end > len(data):
+        return None
+    head = data[offset + _FRAME.size : offset + _FRAME.size + head_len]
+    payload = data[offset + _FRAME.size + head_len : end]
+    if zlib.crc32(payload, zlib.crc32(head)) != crc:
+        return None
+    try:
+        return _decode(head, payload), end
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
+def _intact_after(data: bytes, offset: int) -> int:
+    """How many records read from the first frame found past ``offset`` on, to the end."""
+    start = data.find(MAGIC, offset + 1)
+    while start >= 0:
+        found, count, at = _frame_at(data, start), 0, start
+        while found is not None:
+            count, at = count + 1, found[1]
+            found = _frame_at(data, at)
+        if count:
+            return count
+        start = data.find(MAGIC, start + 1)
+    return 0
+
+
+def scan(path: Path) -> tuple[list[Record], int, Damage | None]:
+    """Every record that reads from the start of the file, the bytes they occupy, and where and
+    how reading stopped before the end (None: it reached the end)."""
     data = Path(path).read_bytes()
     records, offset = [], 0
-    while offset + _FRAME.size <= len(data):
-        magic, head_len, payload_len, crc = _FRAME.unpack_from(data, offset)
-        end = offset + _FRAME.size + head_len + payload_len
-        if magic != MAGIC or end > len(data):
-            break
-        head = data[offset + _FRAME.size : offset + _FRAME.size + head_len]
-        payload = data[offset + _FRAME.size + head_len : end]
-        if zlib.crc32(payload, zlib.crc32(head)) != crc:
-            break
-        try:
-            records.append(_decode(head, payload))
-        except (ValueError, KeyError, TypeError):
-            break
-        offset = end
-    return records, offset
+    while offset < len(data):
+        found = _frame_at(data, offset)
+        if found is None:
+            return records, offset, Damage(len(records), offset, len(data), _intact_after(data, offset))
+        records.append(found[0])
+        offset = found[1]
+    return records, offset, None
+
+
+def read(path: Path) -> tuple[list[Record], int]:
+    """All records, and the byte length they occupy: anything after it is a torn tail (a record a
+    crash cut short), dropped when the journal is next opened for writing. ``JournalDamaged`` for a
+    journal damaged before its end (records that still read follow the damage): reading past it
+    would lose them."""
+    records, length, damage = scan(path)
+    if damage is not None and not damage.torn:
+        raise JournalDamaged(path, damage)
+    return records, length
 
 
 class JournalWriter:

@@ -11,6 +11,9 @@ refuses a file killed while open for writing) and shows exactly the committed ro
 are not fsynced: the journal is the durable record, and ``noisebo resume`` rewrites the file
 from it.
 
+Every dataset is chunked with HDF5's fletcher32 checksum, so a damaged byte in a table is a read
+error, not a number.
+
 Layout "appending" (root attribute ``layout``): the finished layout's groups, dataset names,
 dtypes and attributes (``storage.hdf5``), except that
 - the root attributes that change per point (``MUTABLE_ATTRS``) are in ``/committed`` (int64,
@@ -47,6 +50,7 @@ from storage.hdf5 import (
     CampaignFileError, array_dtype, array_shapes, column_dtype, failure_rows, fill_grid, fill_summary, fsync_file,
     hyperparameter_names, point_rows, root_attrs, shot_rows, spectra_of, step_rows, temporary_path, x_tail,
 )
+from storage import manifest
 from storage.journal import _fsync_dir
 
 LAYOUT = "appending"
@@ -87,7 +91,8 @@ def _column(group: h5py.Group, name: str, dtype, units: str, description: str, t
             chunk: int = ROWS_PER_CHUNK) -> _Column:
     """An empty resizable column of rows shaped ``tail``, ``chunk`` rows to a chunk (1 for rows
     that are arrays of their own, such as acquisition maps)."""
-    ds = group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), chunks=(chunk, *tail), dtype=dtype)
+    ds = group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), chunks=(chunk, *tail), dtype=dtype,
+                              fletcher32=True)
     ds.attrs["units"] = units
     ds.attrs["description"] = description
     return _Column(ds)
@@ -98,9 +103,10 @@ class _Blobs:
     Remembers where each row it wrote ends, so rows can be written again from any row on."""
 
     def __init__(self, group: h5py.Group, data: str = "utf8", chunk: int = TEXT_CHUNK):
-        self.data = _Column(group.create_dataset(data, shape=(0,), maxshape=(None,), chunks=(chunk,), dtype=np.uint8))
+        self.data = _Column(group.create_dataset(data, shape=(0,), maxshape=(None,), chunks=(chunk,), dtype=np.uint8,
+                                                 fletcher32=True))
         self.end = _Column(group.create_dataset("end", shape=(0,), maxshape=(None,), chunks=(ROWS_PER_CHUNK,),
-                                                dtype=np.int64))
+                                                dtype=np.int64, fletcher32=True))
         self.ends: list[int] = []
 
     @classmethod
@@ -212,7 +218,7 @@ class LiveFile:
         f = self._f
         f.attrs.update({k: v for k, v in root_attrs(state).items() if k not in MUTABLE_ATTRS})
         f.attrs["layout"] = LAYOUT
-        counters = f.create_dataset("committed", data=np.zeros(len(COUNTERS), dtype=np.int64))
+        counters = f.create_dataset("committed", data=np.zeros(len(COUNTERS), dtype=np.int64), fletcher32=True)
         self._add(_Column(counters))
         counters.attrs["names"] = " ".join(COUNTERS)
         counters.attrs["description"] = ("rows of each table to trust (points, steps, shots, failures, spectra) "
@@ -222,6 +228,7 @@ class LiveFile:
         self._layout_shots_and_failures()
         self._layout_spectra()
         fill_summary(f, state)
+        manifest.write(f)
 
     def _layout_points_and_steps(self) -> None:
         points = self._f.create_group("points")

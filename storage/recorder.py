@@ -14,6 +14,7 @@ finished layout (``storage.hdf5.write_snapshot``).
 from __future__ import annotations
 
 import importlib.metadata
+import os
 import platform
 from pathlib import Path
 from typing import Sequence
@@ -56,9 +57,11 @@ def read_started(h5_path: Path) -> Started:
     if not jpath.exists():
         what = "no campaign file" if not h5_path.exists() else "no journal beside it"
         raise CampaignFileError(f"cannot resume {h5_path}: {what} ({jpath} is missing)")
-    found, _ = journal.read(jpath)
     try:
+        found, _ = journal.read(jpath)
         started = records.decode(found[0]) if found else None
+    except journal.JournalDamaged as error:
+        raise CampaignFileError(f"{error}; {DAMAGED_JOURNAL_ADVICE.format(path=h5_path)}") from None
     except records.CorruptJournal as error:
         raise CampaignFileError(f"cannot resume {h5_path}: {error}") from None
     if not isinstance(started, Started):
@@ -67,6 +70,8 @@ def read_started(h5_path: Path) -> Started:
 
 
 SNAPSHOT_AFTER = (Started, PointCommitted, Summarised, StatusChanged)
+DAMAGED_JOURNAL_ADVICE = ("nothing was changed; `noisebo rebuild {path} --keep-intact` moves the journal aside "
+                          "(as .journal.damaged) and continues the campaign from its intact records before the damage")
 
 
 class Recorder:
@@ -78,6 +83,7 @@ class Recorder:
         self._writer = writer
         self.state = state
         self._live: LiveFile | None = None
+        self.dropped: str | None = None  # what reopening the journal cut off (a torn tail), said to the user
 
     @classmethod
     def create(cls, h5_path: Path, started: Started) -> Recorder:
@@ -120,15 +126,22 @@ class Recorder:
         except JournalError as error:
             raise CampaignFileError(str(error)) from None
         try:
-            found, valid_length = journal.read(jpath)
+            found, valid_length, damage = journal.scan(jpath)
+            if damage is not None and not damage.torn:
+                raise journal.JournalDamaged(jpath, damage)
             state = records.rebuild(found)
+        except journal.JournalDamaged as error:
+            writer.close()
+            raise CampaignFileError(f"{error}; {DAMAGED_JOURNAL_ADVICE.format(path=h5_path)}") from None
         except (records.CorruptJournal, OSError) as error:
             writer.close()
             raise CampaignFileError(f"cannot resume {h5_path}: {error}") from None
         writer.truncate_to(valid_length)
         for tmp in stray_temporaries(h5_path):
             tmp.unlink()
-        return cls(h5_path, writer, state)
+        recorder = cls(h5_path, writer, state)
+        recorder.dropped = None if damage is None else damage.describe(jpath)
+        return recorder
 
     def commit(self, state: EngineState, events: Sequence[Event]) -> EngineState:
         """Journal and apply ``events`` to ``state`` in order; returns the new state."""
@@ -178,3 +191,59 @@ class Recorder:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def rebuild_file(h5_path: Path, keep_intact: bool = False) -> list[str]:
+    """Write the campaign's HDF5 file anew from its journal (the source of truth), as the journal
+    has it: a damaged, truncated or missing file becomes whole again. ``keep_intact``: a journal
+    damaged before its end is moved aside (FILE.journal.damaged) and a new one keeps the records
+    before the damage. Returns the lines that say what was done."""
+    h5_path = Path(h5_path)
+    jpath = journal_path(h5_path)
+    if not jpath.is_file():
+        raise CampaignFileError(f"cannot rebuild {h5_path}: there is no journal {jpath} beside it to rebuild it from")
+    said = []
+    if keep_intact:
+        said += _keep_intact(jpath)
+    with Recorder.attach(h5_path) as recorder:
+        recorder.snapshot()
+        state = recorder.state
+        if recorder.dropped:
+            said.append(recorder.dropped)
+    said.append(f"wrote {h5_path} anew from its journal: {len(state.points)} points, {state.n_shots} shots, "
+                f"status {state.status.value}")
+    return said
+
+
+def _keep_intact(jpath: Path) -> list[str]:
+    """Move a journal damaged before its end aside and keep, in a new one, the records before the
+    damage; nothing when it is not damaged so."""
+    try:
+        writer = JournalWriter.open(jpath)  # no running campaign holds it
+    except JournalError as error:
+        raise CampaignFileError(str(error)) from None
+    try:
+        found, _, damage = journal.scan(jpath)
+        if damage is None or damage.torn:
+            return []
+        if not found:
+            raise CampaignFileError(f"{damage.describe(jpath)}: not even its first record is intact, so there is "
+                                    "no campaign to keep")
+        aside = jpath.with_name(jpath.name + ".damaged")
+        if aside.exists():
+            raise CampaignFileError(f"cannot keep the intact records of {jpath}: {aside} exists (move it away first)")
+        os.link(jpath, aside)
+        fresh = jpath.with_name(jpath.name + ".intact")
+        fresh.unlink(missing_ok=True)
+        new = JournalWriter.create(fresh, found[0])
+        try:
+            for record in found[1:]:
+                new.append(record)
+        finally:
+            new.close()
+        os.replace(fresh, jpath)
+        journal._fsync_dir(jpath.parent)
+    finally:
+        writer.close()
+    return [damage.describe(jpath), f"moved it to {aside} and kept records 0-{damage.record - 1} in {jpath}; "
+            f"`noisebo resume` measures again what followed them"]

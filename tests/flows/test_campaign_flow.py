@@ -52,7 +52,7 @@ def test_each_step_records_the_inputs_its_models_saw(finished):
 
 def test_file_layout_is_readable_with_plain_h5py(finished):
     with h5py.File(finished, "r") as f:
-        assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 2
+        assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 3
         assert json.loads(f.attrs["driver_json"]) == {"name": "forrester", "version": "0.1.0",
                                                       "settings": {"a0": 0.1, "a1": 2.0, "law": "inv_sqrt", "patch_a0": 0.0,
                                                                    "patch_x": 0.5, "patch_width": 0.05, "seed": 0}}

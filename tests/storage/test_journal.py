@@ -47,14 +47,19 @@ def test_a_torn_tail_is_not_read_and_is_cut_on_reopen(tmp_path, cut):
     assert [r.type for r in journal.read(path)[0]] == ["campaign", "shot", "point"]
 
 
-def test_a_corrupt_byte_stops_reading_at_that_record(tmp_path):
+def test_a_corrupt_byte_before_the_end_is_an_error_naming_the_record_not_a_shorter_journal(tmp_path):
     path = tmp_path / "j.journal"
     write(path, records())
     data = bytearray(path.read_bytes())
     first = len(journal.encode(records()[0]))
-    data[first + 30] ^= 0xFF  # inside the second record
+    data[first + 30] ^= 0xFF  # inside the second record; the third still reads
     path.write_bytes(bytes(data))
-    assert [r.type for r in journal.read(path)[0]] == ["campaign"]
+    with pytest.raises(journal.JournalDamaged, match=rf"record 1 \(at byte {first}\) is damaged and 1 intact records "
+                                                    rf"follow it; records 0-0 \(bytes 0-{first - 1}\) are intact"):
+        journal.read(path)
+    found, length, damage = journal.scan(path)
+    assert [r.type for r in found] == ["campaign"] and length == first
+    assert (damage.record, damage.offset, damage.intact_after, damage.torn) == (1, first, 1, False)
 
 
 def test_one_writer_at_a_time(tmp_path):
