@@ -3,18 +3,25 @@
 from __future__ import annotations
 
 import contextlib
-import os
 
 import prefect.settings as ps
+
+from flows import runtime
 
 
 @contextlib.contextmanager
 def flow_settings():
-    """With Prefect's temporary server (PREFECT_API_URL unset) nothing watches flow-run
-    heartbeats, and their thread makes every flow run end on a whole second (0.5-1 s lost per
-    campaign): turn them off there. Against a real server, leave them on."""
-    if os.environ.get("PREFECT_API_URL"):
+    """With Prefect's temporary server (no API URL set) nothing watches flow-run heartbeats, and
+    their thread makes every flow run end on a whole second (0.5-1 s lost per campaign): turn them
+    off there, and start the server now, from this thread, guarded (flows/temporary_server.py).
+    Against a real server, leave them on. Either way, tracebacks Prefect logs go to the failure
+    log, not the terminal."""
+    runtime.divert_tracebacks()
+    if ps.PREFECT_API_URL.value():
         yield
         return
+    from flows.temporary_server import temporary_server
+
+    temporary_server().start()
     with ps.temporary_settings({ps.PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None}):
         yield

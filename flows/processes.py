@@ -1,7 +1,9 @@
-"""Local helper processes: a Prefect server on a free loopback port, workers, serve processes.
+"""Local helper processes: a Prefect server on a free loopback port, workers, serve processes;
+and what Linux's /proc says about a process (elsewhere these answer None or nothing).
 
-Used by the end-to-end tests and the sweep benchmark. Every process starts in its own process
-group, so stopping it also stops its children (a worker's flow-run subprocesses).
+Used by the end-to-end tests, the sweep benchmark and the temporary server's clean-up. Every
+process started here starts in its own process group, so stopping it also stops its children (a
+worker's flow-run subprocesses).
 """
 
 import contextlib
@@ -75,3 +77,65 @@ def local_server(folder: Path):
         yield env
     finally:
         stop(process)
+
+
+PROC = Path("/proc")
+
+
+def started_ticks(pid: int) -> int | None:
+    """When the process started (clock ticks after boot): with its pid, it names one process
+    even after the pid is reused. None if there is no such live process (a zombie counts as gone)."""
+    try:
+        stat = (PROC / str(pid) / "stat").read_text()
+    except (OSError, ValueError):
+        return None
+    fields = stat[stat.rindex(")") + 2:].split()  # after "pid (command name) "
+    return None if fields[0] == "Z" else int(fields[19])
+
+
+def parent_of(pid: int) -> int | None:
+    try:
+        stat = (PROC / str(pid) / "stat").read_text()
+    except OSError:
+        return None
+    return int(stat[stat.rindex(")") + 2:].split()[1])
+
+
+def command_line(pid: int) -> list[str]:
+    try:
+        return (PROC / str(pid) / "cmdline").read_bytes().decode(errors="replace").split("\0")[:-1]
+    except OSError:
+        return []
+
+
+def environment(pid: int) -> dict[str, str]:
+    """The environment the process started with (readable for one's own processes)."""
+    try:
+        entries = (PROC / str(pid) / "environ").read_bytes().decode(errors="replace").split("\0")
+    except OSError:
+        return {}
+    return dict(entry.split("=", 1) for entry in entries if "=" in entry)
+
+
+def live_pids() -> list[int]:
+    try:
+        return [int(p.name) for p in PROC.iterdir() if p.name.isdigit()]
+    except OSError:
+        return []
+
+
+def children_of(pid: int) -> list[int]:
+    return [child for child in live_pids() if parent_of(child) == pid]
+
+
+def terminate(pid: int, started: int, grace_s: float = 3.0) -> None:
+    """SIGTERM to the process ``pid`` that started at ``started`` (and to no later one with its
+    pid), SIGKILL if it is still there after ``grace_s``."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        if started_ticks(pid) != started:
+            return
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, sig)
+        deadline = time.monotonic() + grace_s
+        while started_ticks(pid) == started and time.monotonic() < deadline:
+            time.sleep(0.05)

@@ -1,0 +1,149 @@
+"""noisebo's temporary Prefect server: the one flows use when no PREFECT_API_URL is set.
+
+It is Prefect's own (``SubprocessASGIServer``), started through ``flows/server_guard.py`` so that
+it dies with the process that started it, however that process ends. Each one is recorded in
+PREFECT_HOME/noisebo-servers/ (its pid and start time, and its parent's); a later start stops a
+recorded server whose parent is gone, and an unrecorded temporary server of the same PREFECT_HOME
+whose parent is gone (pid 1, or a process younger than the server), as servers left by older
+versions were. Both checks read /proc: elsewhere they find nothing to stop.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import prefect
+import prefect.settings as ps
+from prefect.server.api.server import SubprocessASGIServer
+
+from flows import processes
+
+SERVER_APP = "prefect.server.api.server:create_app"
+GUARD = Path(__file__).resolve().with_name("server_guard.py")
+
+
+def temporary_server() -> SubprocessASGIServer:
+    """The temporary server Prefect's clients will use in this process: a ``GuardedServer``,
+    put where Prefect looks for it (as ``prefect_test_harness`` puts its own), unless a server is
+    already running there."""
+    current = SubprocessASGIServer._instances.get(None)
+    if current is not None and (current.running or isinstance(current, GuardedServer)):
+        return current
+    SubprocessASGIServer._instances.pop(None, None)
+    return GuardedServer()
+
+
+class GuardedServer(SubprocessASGIServer):
+    """Prefect's temporary server (the same uvicorn command and environment as Prefect 3.8.8's),
+    run through ``flows/server_guard.py`` and recorded while it runs."""
+
+    def start(self, timeout: int | None = None) -> None:
+        if not self.running:
+            stop_stale_servers(prefect_home())
+        super().start(timeout)
+
+    def _run_uvicorn_command(self) -> subprocess.Popen:
+        self._forget()  # a retry on another port: the process before it has exited
+        mode = "pdeathsig" if threading.current_thread() is threading.main_thread() else "watch"
+        process = subprocess.Popen([sys.executable, "-P", str(GUARD), str(os.getpid()), mode,
+                                    *uvicorn_args(self.port)], env=server_environment())
+        self._record = record_server(prefect_home(), process.pid)
+        return process
+
+    def stop(self) -> None:
+        super().stop()
+        self._forget()
+
+    def _forget(self) -> None:
+        record = getattr(self, "_record", None)
+        if record is not None:
+            record.unlink(missing_ok=True)
+            self._record = None
+
+
+def uvicorn_args(port: int) -> list[str]:
+    return ["--app-dir", str(prefect.__module_path__.parent), "--factory", SERVER_APP, "--host", "127.0.0.1",
+            "--port", str(port), "--log-level", "error", "--lifespan", "on"]
+
+
+def server_environment() -> dict[str, str]:
+    return {**os.environ, "PREFECT_UI_ENABLED": "0", "PREFECT__SERVER_EPHEMERAL": "1", "PREFECT__SERVER_FINAL": "1",
+            **ps.get_current_settings().to_environment_variables(exclude_unset=True)}
+
+
+def prefect_home() -> Path:
+    return Path(ps.PREFECT_HOME.value())
+
+
+def records(home: Path) -> Path:
+    return home / "noisebo-servers"
+
+
+def record_server(home: Path, pid: int) -> Path:
+    """Write down the server ``pid`` just started by this process."""
+    folder = records(home)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{pid}.json"
+    path.write_text(json.dumps({"server": pid, "server_started": processes.started_ticks(pid),
+                                "parent": os.getpid(), "parent_started": processes.started_ticks(os.getpid())}))
+    return path
+
+
+def is_temporary_server(pid: int) -> bool:
+    """Whether ``pid`` runs a Prefect temporary server (Prefect's own, or through the guard)."""
+    return SERVER_APP in processes.command_line(pid) and \
+        processes.environment(pid).get("PREFECT__SERVER_EPHEMERAL") == "1"
+
+
+def stop_stale_servers(home: Path) -> list[int]:
+    """Stop the temporary servers of ``home`` whose parent is gone; the pids stopped."""
+    stopped = stop_recorded_orphans(home)
+    return stopped + stop_unrecorded_orphans(home)
+
+
+def stop_recorded_orphans(home: Path) -> list[int]:
+    stopped = []
+    for path in sorted(records(home).glob("*.json")):
+        try:
+            record = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue  # being written, or not ours to judge
+        server, started = record["server"], record["server_started"]
+        alive = started is not None and processes.started_ticks(server) == started and is_temporary_server(server)
+        if alive and processes.started_ticks(record["parent"]) == record["parent_started"]:
+            continue  # its parent still runs
+        if alive:
+            processes.terminate(server, started)
+            stopped.append(server)
+        path.unlink(missing_ok=True)
+    return stopped
+
+
+def stop_unrecorded_orphans(home: Path) -> list[int]:
+    stopped = []
+    for pid in processes.live_pids():
+        if not is_temporary_server(pid) or not same_home(processes.environment(pid).get("PREFECT_HOME"), home):
+            continue
+        started = processes.started_ticks(pid)
+        if started is not None and is_orphan(pid, started):
+            processes.terminate(pid, started)
+            stopped.append(pid)
+    return stopped
+
+
+def same_home(value: str | None, home: Path) -> bool:
+    return value is not None and Path(value).expanduser().resolve() == home.expanduser().resolve()
+
+
+def is_orphan(pid: int, started: int) -> bool:
+    """Adopted by pid 1 or by a process younger than itself: the process that started it is gone."""
+    parent = processes.parent_of(pid)
+    if parent is None:
+        return False
+    parent_started = processes.started_ticks(parent)
+    return parent == 1 or (parent_started is not None and parent_started > started)

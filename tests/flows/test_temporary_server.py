@@ -1,0 +1,183 @@
+"""Nothing left behind: noisebo's temporary Prefect server dies with the process that started it,
+however that process ends, and a later start stops servers whose parent is gone. Real processes,
+real Prefect servers, real SIGKILL (Linux: these tests read /proc)."""
+
+import asyncio
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import httpx
+import pytest
+
+from flows import processes, server_guard
+from flows import temporary_server as temporary
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+
+
+def gone_within(pid: int, started: int, seconds: float) -> float | None:
+    """Seconds until the process ``pid`` that started at ``started`` was gone, or None."""
+    begin = time.monotonic()
+    while time.monotonic() - begin < seconds:
+        if processes.started_ticks(pid) != started:
+            return time.monotonic() - begin
+        time.sleep(0.02)
+    return None
+
+
+def server_children(pid: int) -> list[int]:
+    return [child for child in processes.children_of(pid) if temporary.is_temporary_server(child)]
+
+
+def run_env(tmp_path) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
+    env.update(PREFECT_HOME=str(tmp_path / "home"), NOISEBO_JAX_CACHE="", NOISEBO_LOG_DIR=str(tmp_path / "logs"))
+    return env
+
+
+def spawn_and_vanish(code: str, env: dict[str, str], folder) -> list[tuple[int, int]]:
+    """Run ``code`` in a Python process that dies by SIGKILL after it; the processes it named by
+    ``shown(pid)``, as (pid, start time). Output goes through files: the processes it leaves
+    behind would hold a pipe open."""
+    shown, errors = folder / "shown.txt", folder / "stderr.txt"
+    code = f"import os, signal\nfrom flows import processes\nshown_to = open({str(shown)!r}, 'w')\n" \
+           "def shown(pid): print(pid, processes.started_ticks(pid), file=shown_to, flush=True)\n" + \
+           textwrap.dedent(code) + "\nos.kill(os.getpid(), signal.SIGKILL)"
+    with errors.open("w") as stderr:
+        parent = subprocess.run([sys.executable, "-c", code], env=env, stdout=subprocess.DEVNULL, stderr=stderr,
+                                timeout=120, check=False)
+    assert parent.returncode == -signal.SIGKILL, errors.read_text()[-3000:]
+    return [(int(pid), int(started)) for pid, started in (line.split() for line in shown.read_text().splitlines())]
+
+
+@pytest.mark.e2e
+def test_kill_9_of_noisebo_run_takes_its_temporary_server_with_it(tmp_path, tiny_yaml):
+    run = subprocess.Popen([sys.executable, "-m", "cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs"),
+                            "--no-rrd"], env=run_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                           text=True)
+    try:
+        for line in run.stdout:  # the first point measured: the flow run is using the server
+            if line.startswith("seed point"):
+                break
+        servers = server_children(run.pid)
+        assert len(servers) == 1, f"one temporary server under the run, not {servers}"
+        started = processes.started_ticks(servers[0])
+        assert (tmp_path / "home" / "noisebo-servers" / f"{servers[0]}.json").exists()
+        run.kill()
+        run.wait(timeout=30)
+        took = gone_within(servers[0], started, 5.0)
+        assert took is not None, "the temporary server outlived its kill -9'd parent by 5 s"
+        print(f"server gone {took:.2f} s after the kill")
+    finally:
+        run.kill()
+        run.stdout.close()
+
+
+def test_the_guard_stops_the_server_when_the_parent_goes_without_a_death_signal(tmp_path):
+    """The watch thread alone (as where PR_SET_PDEATHSIG is not available, or a thread that is
+    not the main one started the server): the parent is killed once the server answers."""
+    port = processes.free_port()
+    [(server, started)] = spawn_and_vanish(f"""
+        import subprocess, sys, time
+        import httpx
+        from flows import temporary_server as temporary
+        server = subprocess.Popen([sys.executable, "-P", str(temporary.GUARD), str(os.getpid()), "watch",
+                                   *temporary.uvicorn_args({port})], env=temporary.server_environment())
+        for _ in range(1200):
+            try:
+                if httpx.get("http://127.0.0.1:{port}/api/health", timeout=1).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                time.sleep(0.1)
+        shown(server.pid)
+        """, run_env(tmp_path), tmp_path)
+    took = gone_within(server, started, 5.0)
+    assert took is not None, "the server outlived its parent by 5 s"
+    with pytest.raises(httpx.ConnectError):
+        httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=1)
+
+
+def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path):
+    """Two real Prefect servers left behind by a parent killed before it could stop them, started
+    as Prefect starts them: one recorded (as this version records its servers), one not (as older
+    versions left them). A live server of the test's own, with its record, and an orphan of another
+    PREFECT_HOME stay; so does a live process that is no server, named by a stale record."""
+    env = run_env(tmp_path)
+    home = tmp_path / "home"
+    (recorded, _), (unrecorded, _) = spawn_and_vanish("""
+        from prefect.server.api.server import SubprocessASGIServer
+        from flows import temporary_server as temporary
+        server = SubprocessASGIServer()
+        for record in (True, False):
+            server.port = server.find_available_port()
+            pid = server._run_uvicorn_command().pid
+            if record:
+                temporary.record_server(temporary.prefect_home(), pid)
+            shown(pid)
+        """, env, tmp_path)
+    [(elsewhere, _)] = spawn_and_vanish("""
+        from prefect.server.api.server import SubprocessASGIServer
+        server = SubprocessASGIServer()
+        server.port = server.find_available_port()
+        shown(server._run_uvicorn_command().pid)
+        """, run_env(tmp_path / "other"), tmp_path)
+    ours = subprocess.Popen([sys.executable, "-m", "uvicorn", *temporary.uvicorn_args(processes.free_port())],
+                            env=env | {"PREFECT__SERVER_EPHEMERAL": "1"})
+    bystander = subprocess.Popen(["sleep", "60"])
+    try:
+        started = {pid: processes.started_ticks(pid) for pid in (recorded, unrecorded, elsewhere, ours.pid)}
+        assert all(started.values()), started
+        temporary.record_server(home, ours.pid)
+        (temporary.records(home) / f"{bystander.pid}.json").write_text(json.dumps({
+            "server": bystander.pid, "server_started": processes.started_ticks(bystander.pid),
+            "parent": recorded, "parent_started": 1}))  # a parent long gone
+
+        assert temporary.stop_recorded_orphans(home) == [recorded]
+        assert gone_within(recorded, started[recorded], 5.0) is not None
+        assert temporary.stop_unrecorded_orphans(home) == [unrecorded]
+        assert gone_within(unrecorded, started[unrecorded], 5.0) is not None
+        assert temporary.stop_stale_servers(home) == []
+        assert processes.started_ticks(ours.pid) == started[ours.pid]
+        assert processes.started_ticks(elsewhere) == started[elsewhere]
+        assert bystander.poll() is None
+        assert [p.name for p in temporary.records(home).iterdir()] == [f"{ours.pid}.json"]
+    finally:
+        for process in (ours, bystander):
+            process.kill()
+            process.wait()
+        processes.terminate(elsewhere, started[elsewhere])
+
+
+@pytest.fixture
+def recorder_logger():
+    logger = logging.getLogger(server_guard.RECORDER_LOGGER)
+    filters = list(logger.filters)
+    server_guard.quiet_shutdown_noise()
+    yield logger
+    logger.filters[:] = filters
+
+
+def logged_while_handling(logger, error: BaseException, message: str) -> None:
+    try:
+        raise error
+    except BaseException:
+        logger.error(message, exc_info=True)
+
+
+def test_only_the_cancelled_flush_at_shutdown_is_silenced(recorder_logger, caplog):
+    import sqlite3
+
+    logged_while_handling(recorder_logger, asyncio.CancelledError(), "Error flushing 1 events (1 to retry, 0 dropped)")
+    assert caplog.records == []
+    logged_while_handling(recorder_logger, sqlite3.OperationalError("database is locked"),
+                          "Error flushing 3 events (3 to retry, 0 dropped)")
+    logged_while_handling(recorder_logger, asyncio.CancelledError(), "Dropping event 42 after 4 failed attempts")
+    logging.getLogger("prefect.server.services").error("Error flushing", exc_info=(asyncio.CancelledError,
+                                                                                    asyncio.CancelledError(), None))
+    assert [r.getMessage()[:14] for r in caplog.records] == ["Error flushing", "Dropping event", "Error flushing"]
