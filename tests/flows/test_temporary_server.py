@@ -181,3 +181,38 @@ def test_only_the_cancelled_flush_at_shutdown_is_silenced(recorder_logger, caplo
     logging.getLogger("prefect.server.services").error("Error flushing", exc_info=(asyncio.CancelledError,
                                                                                     asyncio.CancelledError(), None))
     assert [r.getMessage()[:14] for r in caplog.records] == ["Error flushing", "Dropping event", "Error flushing"]
+
+
+FOUR_HUNDRED_TASKS = """
+import sys
+from prefect import flow, task
+from flows import local
+
+@task
+def one(i):
+    return i
+
+@flow
+def many():
+    return sum(one(i) for i in range(400))
+
+if sys.argv[1] == "guarded":
+    with local.flow_settings():
+        many()
+else:
+    many()
+"""
+
+
+@pytest.mark.e2e
+def test_a_successful_flow_on_the_guarded_server_prints_no_shutdown_traceback(tmp_path):
+    """400 tasks on Prefect's temporary server as Prefect starts it end with the task-run
+    recorder's cancelled flushes (tracebacks on stderr, exit 0); on noisebo's, with nothing."""
+    def run(mode: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", FOUR_HUNDRED_TASKS, mode], env=run_env(tmp_path),
+                              capture_output=True, text=True, timeout=300, check=False)
+
+    plain = run("plain")
+    assert plain.returncode == 0 and "Error flushing" in plain.stderr, plain.stderr[-3000:]
+    guarded = run("guarded")
+    assert guarded.returncode == 0 and guarded.stderr == "" and guarded.stdout == ""
