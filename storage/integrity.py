@@ -142,7 +142,8 @@ def _read_head(path: Path, advice: str | None) -> tuple[int, Superblock | None]:
         head = f.read(64)
         size = f.seek(0, 2)
     if size == 0:
-        raise CampaignFileError(f"{path}: empty file (0 bytes), not a campaign")
+        raise CampaignFileError(f"{path}: empty file (0 bytes), not a campaign"
+                                + (f"; if it was one, {advice}" if advice else ""))
     try:
         return size, superblock(head)
     except ValueError as error:

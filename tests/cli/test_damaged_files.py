@@ -1,0 +1,161 @@
+"""Every command that reads a campaign file answers a damaged one within 5 s with one line
+``noisebo: error: FILE: ...``, exit 2, and changes no file; the same for a damaged journal."""
+
+import shutil
+import struct
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from cli.main import main
+from storage import journal
+from tests.storage.test_damage import finished, killed
+
+ANSWER_S = 5.0
+
+
+def snapshot(folder: Path) -> dict:
+    return {p: p.read_bytes() if p.is_file() else None for p in sorted(folder.rglob("*"))}
+
+
+def _root_header(data: bytes) -> int:
+    """The byte offset of the root group's object header (superblock version 2/3, 8-byte addresses)."""
+    return struct.unpack_from("<Q", data, 12 + 3 * 8)[0]
+
+
+def _chunk_of(path: Path, dataset: str) -> int:
+    with h5py.File(path, "r", swmr=True) as f:
+        return f[dataset].id.get_chunk_info(0).byte_offset
+
+
+def _damage(kind: str, path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    if kind == "truncated":
+        path.write_bytes(bytes(data[: len(data) // 2]))
+    elif kind == "metadata byte flipped":
+        data[_root_header(data) + 24] ^= 0xFF
+        path.write_bytes(bytes(data))
+    elif kind == "data byte flipped":
+        data[_chunk_of(path, "points/value") + 3] ^= 0xFF
+        path.write_bytes(bytes(data))
+    elif kind == "superblock zeroed":
+        path.write_bytes(bytes(48) + bytes(data[48:]))
+    elif kind == "empty":
+        path.write_bytes(b"")
+    elif kind == "a directory":
+        path.unlink()
+        path.mkdir()
+    elif kind == "another program's file":
+        path.write_bytes(b"%PDF-1.7\n" + bytes(range(256)) * 64)
+
+
+DAMAGES = ["truncated", "metadata byte flipped", "data byte flipped", "superblock zeroed", "empty", "a directory",
+           "another program's file"]
+COMMANDS = [["inspect"], ["inspect", "--json"], ["report"], ["replay"]]
+
+
+@pytest.fixture(scope="module")
+def campaigns(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("campaigns")
+    return {"finished": finished(folder / "finished.h5", spectra=False),
+            "killed": killed(folder / "killed.h5", spectra=False)}
+
+
+def run_cli(argv: list[str], capsys) -> tuple[int, str, float]:
+    began = time.perf_counter()
+    code = main(argv)
+    seconds = time.perf_counter() - began
+    return code, capsys.readouterr().err.strip(), seconds
+
+
+@pytest.mark.parametrize("damage", DAMAGES)
+@pytest.mark.parametrize("which", ["finished", "killed"])
+def test_a_damaged_file_is_one_line_exit_2_within_5_s_and_nothing_changes(which, damage, campaigns, tmp_path, capsys):
+    path = tmp_path / "c.h5"
+    shutil.copy(campaigns[which], path)
+    shutil.copy(campaigns[which].with_suffix(".journal"), path.with_suffix(".journal"))
+    _damage(damage, path)
+    before = snapshot(tmp_path)
+    for command in COMMANDS:
+        code, err, seconds = run_cli([command[0], str(path), *command[1:]], capsys)
+        assert code == 2, f"{command}: {err}"
+        assert len(err.splitlines()) == 1 and err.startswith(f"noisebo: error: {path}: "), f"{command}: {err}"
+        assert seconds < ANSWER_S, f"{command}: {seconds:.1f} s"
+        if damage not in ("a directory",):
+            assert f"noisebo rebuild {path}" in err, f"{command}: {err}"
+    assert snapshot(tmp_path) == before
+
+
+def test_rebuild_makes_a_damaged_file_whole_and_says_so(campaigns, tmp_path, capsys):
+    path = tmp_path / "c.h5"
+    shutil.copy(campaigns["killed"], path)
+    shutil.copy(campaigns["killed"].with_suffix(".journal"), path.with_suffix(".journal"))
+    assert main(["inspect", str(path), "--json"]) == 0
+    whole = capsys.readouterr().out
+    _damage("metadata byte flipped", path)
+    assert main(["rebuild", str(path)]) == 0
+    assert capsys.readouterr().out.strip() == f"wrote {path} anew from its journal: 12 points, 48 shots, status running"
+    assert main(["inspect", str(path), "--json"]) == 0
+    assert capsys.readouterr().out == whole
+
+
+def _journal_offsets(path: Path, n: int, seed: int = 0) -> list[tuple[int, int]]:
+    """(offset, record) for ``n`` bytes (fixed seed) in the journal's records before its last."""
+    found, length, _ = journal.scan(path)
+    ends = np.cumsum([len(journal.encode(r)) for r in found])
+    rng = np.random.default_rng(seed)
+    offsets = sorted(int(o) for o in rng.integers(0, int(ends[-2]), n))
+    return [(o, int(np.searchsorted(ends, o, side="right"))) for o in offsets]
+
+
+@pytest.mark.parametrize("argv", [["resume"], ["ask"], ["tell", "0.5"], ["rebuild"]], ids=" ".join)
+def test_a_journal_damaged_before_its_end_is_named_and_nothing_changes(argv, campaigns, tmp_path, capsys):
+    source = campaigns["killed"].with_suffix(".journal")
+    for offset, record in _journal_offsets(source, 10):
+        folder = tmp_path / str(offset)
+        folder.mkdir()
+        path = folder / "c.h5"
+        shutil.copy(campaigns["killed"], path)
+        data = bytearray(source.read_bytes())
+        data[offset] ^= 0xFF
+        path.with_suffix(".journal").write_bytes(bytes(data))
+        before = snapshot(folder)
+        code, err, seconds = run_cli([argv[0], str(path), *argv[1:]], capsys)
+        assert code == 2 and len(err.splitlines()) == 1, f"byte {offset}: {err}"
+        assert f"record {record} (at byte " in err and "is damaged" in err, f"byte {offset}: {err}"
+        assert "nothing was changed" in err and "--keep-intact" in err, f"byte {offset}: {err}"
+        assert seconds < ANSWER_S
+        assert snapshot(folder) == before
+
+
+def test_keep_intact_moves_the_damaged_journal_aside_and_keeps_the_records_before_it(campaigns, tmp_path, capsys):
+    path = tmp_path / "c.h5"
+    shutil.copy(campaigns["killed"], path)
+    source = campaigns["killed"].with_suffix(".journal")
+    (offset, record), = _journal_offsets(source, 1, seed=3)
+    data = bytearray(source.read_bytes())
+    data[offset] ^= 0xFF
+    path.with_suffix(".journal").write_bytes(bytes(data))
+    assert main(["rebuild", str(path), "--keep-intact"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert f"record {record} (at byte " in out[0] and out[1].startswith(f"moved it to {path}.journal.damaged"[:-len("c.h5.journal.damaged")])
+    assert Path(f"{path.with_suffix('.journal')}.damaged").read_bytes() == bytes(data)
+    kept, _, damage = journal.scan(path.with_suffix(".journal"))
+    assert damage is None and len(kept) == record
+    assert [journal.encode(r) for r in kept] == [journal.encode(r) for r in journal.scan(source)[0][:record]]
+
+
+def test_a_torn_last_record_is_dropped_and_said(campaigns, tmp_path, capsys):
+    path = tmp_path / "c.h5"
+    shutil.copy(campaigns["killed"], path)
+    data = campaigns["killed"].with_suffix(".journal").read_bytes()
+    found, _, _ = journal.scan(campaigns["killed"].with_suffix(".journal"))
+    last = len(journal.encode(found[-1]))
+    path.with_suffix(".journal").write_bytes(data[: len(data) - last // 2])
+    assert main(["rebuild", str(path)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert f"its last record ({len(found) - 1}, bytes {len(data) - last}-" in out[0] and "it is dropped" in out[0]
+    assert path.with_suffix(".journal").read_bytes() == data[: len(data) - last]
