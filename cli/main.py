@@ -143,13 +143,32 @@ def _resume(args) -> int:
 
 
 def _journal_state(path: Path):
-    """The campaign as its journal (its source of truth) has it."""
+    """The campaign as its journal (its source of truth) has it; a torn last record (which the
+    resume drops) is said on stderr."""
     from storage import journal, records
+    from storage.recorder import DAMAGED_JOURNAL_ADVICE
 
+    jpath = path.with_suffix(".journal")
     try:
-        return records.rebuild(journal.read(path.with_suffix(".journal"))[0])
+        found, _, damage = journal.scan(jpath)
+        if damage is not None and not damage.torn:
+            raise journal.JournalDamaged(jpath, damage)
+        state = records.rebuild(found)
+    except journal.JournalDamaged as error:
+        raise CampaignFileError(f"{error}; {DAMAGED_JOURNAL_ADVICE.format(path=path)}") from None
     except (records.CorruptJournal, OSError) as error:
         raise CampaignFileError(f"cannot resume {path}: {error}") from None
+    if damage is not None:
+        _warn(f"noisebo: {damage.describe(jpath)}")
+    return state
+
+
+def _rebuild(args) -> int:
+    from storage.recorder import rebuild_file
+
+    for line in rebuild_file(Path(args.file), keep_intact=args.keep_intact):
+        print(line)
+    return 0
 
 
 EXIT_SIGNAL = {"SIGINT": 130, "SIGTERM": 143}
@@ -173,9 +192,9 @@ def _abortable(path: Path):
             yield
     except CampaignAborted as stopped:
         raise Aborted(str(stopped), EXIT_SIGNAL.get(stopped.signal_name, 130)) from None
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stopped:  # a second signal (StoppedAtOnce), or Ctrl-C outside the handlers
         raise Aborted(f"stopped at once; {path} keeps every shot taken: continue it with `noisebo resume {path}`",
-                      130) from None
+                      EXIT_SIGNAL.get(getattr(stopped, "signal_name", "SIGINT"), 130)) from None
 
 
 def _require_server(what: str) -> None:
@@ -577,6 +596,13 @@ def build_parser() -> argparse.ArgumentParser:
     tell.add_argument("--json", action="store_true", help="print the next request as JSON")
     tell.set_defaults(handler=_tell)
 
+    rebuild = commands.add_parser("rebuild", help="write a campaign's .h5 file anew from its journal (a damaged, "
+                                                  "truncated or lost file)")
+    rebuild.add_argument("file", help="the campaign's .h5 file (its .journal beside it)")
+    rebuild.add_argument("--keep-intact", action="store_true",
+                         help="for a journal damaged before its end: move it aside and keep the records before the damage")
+    rebuild.set_defaults(handler=_rebuild)
+
     instruments = commands.add_parser("instruments", help="list the installed instrument drivers")
     instruments.set_defaults(handler=_instruments)
 
@@ -603,19 +629,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"noisebo: {stopped}", file=sys.stderr)
         return stopped.code
     except FailureBudgetExceeded as error:
-        print(f"noisebo: stopped: {error}; the file records status failed", file=sys.stderr)
+        print(f"noisebo: stopped: {error}; the file records status failed{runtime.failure_log().mention()}",
+              file=sys.stderr)
         return EXIT_FAILED
     except InstrumentUnavailable as error:
-        print(f"noisebo: error: {error}; nothing was measured", file=sys.stderr)
-        return EXIT_FAILED
-    except RuntimeError as error:
-        if "ephemeral Prefect API server" not in str(error):
-            raise
-        print(f"noisebo: error: {server_timeout_message()}; nothing was measured", file=sys.stderr)
+        print(f"noisebo: error: {error}; nothing was measured{runtime.failure_log().mention()}", file=sys.stderr)
         return EXIT_FAILED
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except Exception as error:  # one line here, the traceback in the failure log (flows/runtime.py)
+        if isinstance(error, RuntimeError) and "ephemeral Prefect API server" in str(error):
+            print(f"noisebo: error: {server_timeout_message()}; nothing was measured", file=sys.stderr)
+        else:
+            print(f"noisebo: error: {runtime.failure_log().report(error)}", file=sys.stderr)
+        return EXIT_FAILED
 
 
 if __name__ == "__main__":
