@@ -2,6 +2,7 @@
 
     python benchmarks/storage.py [--n 100,500,1000,2000] [--repeats 20] [--old-repeats 3]
                                  [--kind scalar,spectra] [--json benchmarks/results/storage.json]
+    python benchmarks/storage.py --checksums [--n ...] [--repeats ...] [--kind ...] [--json ...]
 
 A synthetic campaign goes through the real engine events and ``storage.recorder.Recorder`` (the
 journal fsynced per event, as ``noisebo run`` commits them: a decision, each shot, the last shot
@@ -16,6 +17,10 @@ not made, they are synthetic) over the points that follow n, and the file's size
   that the end of the run writes (``write_snapshot``) at that n.
 - old: the recorder as it was, rewriting the whole file after every point (``write_snapshot``),
   timed over ``--old-repeats`` points after n (on a state built in memory up to n).
+
+``--checksums`` instead grows the campaign twice, a point of each in turn, once with the running
+file's tables checksummed (fletcher32, as noisebo writes them) and once without, and prints both
+medians and their ratio.
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ from noisebo.state import Point  # noqa: E402
 from storage.hdf5 import write_snapshot  # noqa: E402
 from storage.journal import JournalWriter  # noqa: E402
 from storage.recorder import Recorder, journal_path  # noqa: E402
-from storage import records  # noqa: E402
+from storage import live, records  # noqa: E402
 
 HYPERPARAMETERS = ("noise.a0", "noise.a1", "primary.amplitude", "primary.length")
 CONVERGED_AT = 5  # BO step from which points get shots_after shots
@@ -188,6 +193,62 @@ def grow_new(config: CampaignConfig, sizes: list[int], repeats: int, spectra: bo
     return out
 
 
+class UncheckedRecorder(AppendingRecorder):
+    """The recorder as it is, its running file's tables without the fletcher32 checksum."""
+
+    def snapshot(self) -> None:
+        live.CHECKSUMS = False
+        try:
+            super().snapshot()
+        finally:
+            live.CHECKSUMS = True
+
+
+def grow_pair(config: CampaignConfig, sizes: list[int], repeats: int, spectra: bool, folder: Path) -> dict:
+    """The same campaign grown twice, point by point in turn, with and without the tables'
+    checksums: {n: {"checked_s", "unchecked_s": medians per point over the ``repeats`` points
+    after n, "checked_bytes", "unchecked_bytes": the running files' sizes at n}}."""
+    recorders = {"checked": AppendingRecorder.create(folder / "checked.h5", started(config)),
+                 "unchecked": UncheckedRecorder.create(folder / "unchecked.h5", started(config))}
+    times: dict[str, list[float]] = {name: [] for name in recorders}
+    out: dict[int, dict] = {}
+    try:
+        for i in range(max(sizes) + repeats):
+            order = list(recorders.items()) if i % 2 else list(recorders.items())[::-1]
+            for name, recorder in order:
+                if i in sizes:
+                    out.setdefault(i, {})[f"{name}_bytes"] = recorder.h5_path.stat().st_size
+                times[name].append(commit_point(recorder, config, i, spectra)[0])
+    finally:
+        for recorder in recorders.values():
+            recorder.close()
+    for n in sizes:
+        out[n] |= {f"{name}_s": statistics.median(times[name][n:n + repeats]) for name in recorders}
+    return out
+
+
+def compare_checksums(configs: dict, kinds: list[str], sizes: list[int], repeats: int) -> list[dict]:
+    """Print and return the commit time per point with and without the tables' checksums."""
+    rows = []
+    for kind in kinds:
+        config = configs[kind].with_overrides(schedule={"n_steps": max(sizes) + repeats})
+        print(f"{kind}: Recorder.commit per point (journal + HDF5), median of {repeats} points after n, the two "
+              "campaigns grown in turn", flush=True)
+        print(f"{'n':>6} {'no checksums ms':>16} {'fletcher32 ms':>14} {'ratio':>6} {'file MB':>8} {'file MB':>8}",
+              flush=True)
+        with tempfile.TemporaryDirectory(prefix="noisebo-storage-") as tmp:
+            pair = grow_pair(config, sizes, repeats, kind == "spectra", Path(tmp))
+        for n in sizes:
+            p = pair[n]
+            row = {"kind": kind, "n": n, "unchecked_ms": p["unchecked_s"] * 1e3, "checked_ms": p["checked_s"] * 1e3,
+                   "ratio": p["checked_s"] / p["unchecked_s"], "unchecked_mb": p["unchecked_bytes"] / 1e6,
+                   "checked_mb": p["checked_bytes"] / 1e6}
+            rows.append(row)
+            print(f"{n:>6} {row['unchecked_ms']:>16.2f} {row['checked_ms']:>14.2f} {row['ratio']:>6.3f} "
+                  f"{row['unchecked_mb']:>8.2f} {row['checked_mb']:>8.2f}", flush=True)
+    return rows
+
+
 def old_at(config: CampaignConfig, n: int, repeats: int, spectra: bool, folder: Path, state) -> dict:
     """The old recorder from the in-memory ``state`` of n points: {"s", "hdf5_s": medians per
     point over ``repeats`` points after n, "bytes": its file's size at n}."""
@@ -209,10 +270,17 @@ def main(argv=None) -> int:
     parser.add_argument("--old-repeats", type=int, default=3, help="points timed after each n (old)")
     parser.add_argument("--kind", default="scalar,spectra")
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    parser.add_argument("--checksums", action="store_true",
+                        help="instead: the commit time with and without the tables' fletcher32 checksums")
     args = parser.parse_args(argv)
     sizes = [int(v) for v in args.n.split(",")]
     configs = {"scalar": load_config(ROOT / "data/configs/forrester.yaml"),
                "spectra": load_config(ROOT / "data/configs/pfm.yaml")}
+    if args.checksums:
+        rows = compare_checksums(configs, args.kind.split(","), sizes, args.repeats)
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=1))
+        return 0
     rows = []
     for kind in args.kind.split(","):
         config, spectra = configs[kind], kind == "spectra"

@@ -63,6 +63,9 @@ MAX_DIMS = 4  # dimensions of one shot's raw array
 # full of rows already written made each flush slower as the campaign grew (0.25 ms at 200
 # points, 2.2 ms at 2000); nothing written is read back, so a small one keeps flushes flat.
 CHUNK_CACHE_BYTES, CHUNK_CACHE_SLOTS = 65536, 31
+# Every table chunk carries HDF5's fletcher32 checksum; off only to measure what it costs
+# (benchmarks/storage.py --checksums).
+CHECKSUMS = True
 
 
 class _Column:
@@ -92,7 +95,7 @@ def _column(group: h5py.Group, name: str, dtype, units: str, description: str, t
     """An empty resizable column of rows shaped ``tail``, ``chunk`` rows to a chunk (1 for rows
     that are arrays of their own, such as acquisition maps)."""
     ds = group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), chunks=(chunk, *tail), dtype=dtype,
-                              fletcher32=True)
+                              fletcher32=CHECKSUMS)
     ds.attrs["units"] = units
     ds.attrs["description"] = description
     return _Column(ds)
@@ -104,9 +107,9 @@ class _Blobs:
 
     def __init__(self, group: h5py.Group, data: str = "utf8", chunk: int = TEXT_CHUNK):
         self.data = _Column(group.create_dataset(data, shape=(0,), maxshape=(None,), chunks=(chunk,), dtype=np.uint8,
-                                                 fletcher32=True))
+                                                 fletcher32=CHECKSUMS))
         self.end = _Column(group.create_dataset("end", shape=(0,), maxshape=(None,), chunks=(ROWS_PER_CHUNK,),
-                                                dtype=np.int64, fletcher32=True))
+                                                dtype=np.int64, fletcher32=CHECKSUMS))
         self.ends: list[int] = []
 
     @classmethod
@@ -218,7 +221,8 @@ class LiveFile:
         f = self._f
         f.attrs.update({k: v for k, v in root_attrs(state).items() if k not in MUTABLE_ATTRS})
         f.attrs["layout"] = LAYOUT
-        counters = f.create_dataset("committed", data=np.zeros(len(COUNTERS), dtype=np.int64), fletcher32=True)
+        counters = f.create_dataset("committed", data=np.zeros(len(COUNTERS), dtype=np.int64),
+                                       fletcher32=CHECKSUMS)
         self._add(_Column(counters))
         counters.attrs["names"] = " ".join(COUNTERS)
         counters.attrs["description"] = ("rows of each table to trust (points, steps, shots, failures, spectra) "
