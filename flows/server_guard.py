@@ -1,5 +1,6 @@
 """The process of noisebo's temporary Prefect server: Prefect's own uvicorn server, which dies with
-the process that started it and keeps Prefect's shutdown noise off the terminal.
+the process that started it and keeps Prefect's shutdown noise off the terminal (a cancelled
+flush at shutdown, a start on a port taken meanwhile, which Prefect retries on another).
 
     python -P flows/server_guard.py PARENT_PID pdeathsig|watch UVICORN_ARGS...
 
@@ -26,6 +27,7 @@ import time
 
 PR_SET_PDEATHSIG = 1
 RECORDER_LOGGER = "prefect.server.services.task_run_recorder"
+UVICORN_LOGGER = "uvicorn.error"
 
 
 def die_with_parent() -> None:
@@ -67,8 +69,23 @@ class ShutdownNoise(logging.Filter):
         return not (cancelled and str(record.msg).startswith("Error flushing"))
 
 
+class TakenPortNoise(logging.Filter):
+    """Drops uvicorn's report that the port was taken and everything it logs after it (Prefect's
+    lifespan shutdown of a server that never served: a traceback, "Application shutdown failed"):
+    the process exits with code 3 and Prefect starts the server again on another port."""
+
+    def __init__(self):
+        super().__init__()
+        self.port_taken = False
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        self.port_taken = self.port_taken or "error while attempting to bind" in record.getMessage()
+        return not self.port_taken
+
+
 def quiet_shutdown_noise() -> None:
     logging.getLogger(RECORDER_LOGGER).addFilter(ShutdownNoise())
+    logging.getLogger(UVICORN_LOGGER).addFilter(TakenPortNoise())
 
 
 def main(argv: list[str]) -> None:

@@ -7,6 +7,7 @@ import json
 import logging
 import os
 import signal
+import socket
 import subprocess
 import sys
 import textwrap
@@ -152,6 +153,25 @@ def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path)
             process.kill()
             process.wait()
         processes.terminate(elsewhere, started[elsewhere])
+
+
+def test_a_port_taken_meanwhile_is_retried_on_another_without_a_word(tmp_path):
+    """The port Prefect picked is taken by the time the server binds it: uvicorn exits 3 after
+    Prefect's lifespan shutdown traceback, Prefect starts it again elsewhere; none of it is shown."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))  # bound, not listening: Prefect's health check is refused there
+        port = taken.getsockname()[1]
+        code = textwrap.dedent(f"""
+            import httpx
+            from flows import temporary_server
+            server = temporary_server.GuardedServer(port={port})
+            server.start()
+            print(server.port != {port}, httpx.get(server.api_url + "/health").status_code)
+            server.stop()
+            """)
+        done = subprocess.run([sys.executable, "-c", code], env=run_env(tmp_path), capture_output=True, text=True,
+                              timeout=300, check=False)
+    assert (done.returncode, done.stdout.split(), done.stderr) == (0, ["True", "200"], "")
 
 
 @pytest.fixture
