@@ -15,8 +15,9 @@ def flow_settings():
     their thread makes every flow run end on a whole second (0.5-1 s lost per campaign): turn them
     off there, and start the server now, from this thread, guarded (flows/temporary_server.py).
     Against a real server, leave them on. Either way, tracebacks Prefect logs go to the failure
-    log, not the terminal."""
+    log, not the terminal, and its exit notices are not shown."""
     runtime.divert_tracebacks()
+    runtime.quiet_draining()
     if ps.PREFECT_API_URL.value():
         yield
         return

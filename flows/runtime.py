@@ -15,7 +15,8 @@ is kept to fatal messages (TF_CPP_MIN_LOG_LEVEL=3) unless that variable is set.
 A command that fails says so in one line; the traceback behind it goes to this process's failure
 log, data/logs/noisebo-DATE-TIME-PID.log of the checkout (or of ~/.noisebo; NOISEBO_LOG_DIR=DIR
 puts it elsewhere), a file that exists only once something is written to it. While flows run,
-tracebacks that Prefect logs go there too instead of the terminal (``divert_tracebacks``).
+tracebacks that Prefect logs go there too instead of the terminal (``divert_tracebacks``), and
+Prefect's notice that it is still sending events at exit is not shown (``quiet_draining``).
 """
 
 from __future__ import annotations
@@ -157,3 +158,20 @@ def _is_terminal(handler: logging.Handler) -> bool:
         return True
     return isinstance(handler, logging.StreamHandler) and not isinstance(handler, logging.FileHandler) and \
         handler.stream in (sys.stderr, sys.stdout, sys.__stderr__, sys.__stdout__)
+
+
+PREFECT_QUEUE_SERVICES = ("EventsWorker", "APILogWorker")  # their loggers are named after the class
+
+
+def quiet_draining() -> None:
+    """Drop Prefect's "Still processing items: N items remaining..." warnings: its event and log
+    workers say so whenever they still hold items when they stop (a flow's last events, usually),
+    which reads like a problem at the end of every run that ends on a busy machine."""
+    for name in PREFECT_QUEUE_SERVICES:
+        logger = logging.getLogger(name)
+        if is_not_draining_notice not in logger.filters:
+            logger.addFilter(is_not_draining_notice)
+
+
+def is_not_draining_notice(record: logging.LogRecord) -> bool:
+    return not str(record.msg).startswith("Still processing items:")

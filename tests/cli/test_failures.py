@@ -93,3 +93,22 @@ def test_a_failing_flow_is_one_line_without_prefects_traceback(tiny_config, tmp_
     assert_one_line_naming_a_log(stderr, tmp_path, "noisebo: stopped: failure budget exceeded",
                                  "noisebo.failures.FailureBudgetExceeded")
     assert "Encountered exception during execution" in (next((tmp_path / "logs").glob("*.log"))).read_text()
+
+
+def test_a_bridge_port_in_use_is_one_line_without_prefects_traceback(tiny_config, tmp_path, prefect_harness):
+    from noisebo.config import load_config
+
+    root = Path(__file__).resolve().parents[2]
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        remote = load_config(root / "data" / "configs" / "forrester_remote.yaml")
+        config = remote.with_overrides(space=tiny_config.space.model_dump(), schedule=tiny_config.schedule.model_dump(),
+                                       instrument={"settings": {"port": taken.getsockname()[1]}})
+        path = tmp_path / "remote.yaml"
+        path.write_text(yaml.safe_dump(config.model_dump(mode="json")))
+        env = cli_env(tmp_path, prefect_harness) | {"NOISEBO_BRIDGE_TOKEN": "t" * 32}
+        run = start_run(path, tmp_path, env)
+        _, stderr = run.communicate(timeout=300)
+    assert run.returncode == 3
+    assert_one_line_naming_a_log(stderr, tmp_path, "noisebo: error: the bridge cannot listen on", "InstrumentUnavailable")

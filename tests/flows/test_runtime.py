@@ -43,3 +43,21 @@ def test_no_failure_no_log(tmp_path):
     env = dict(os.environ, NOISEBO_LOG_DIR=str(tmp_path / "logs"), NOISEBO_JAX_CACHE="")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120)
     assert out.stdout.strip() == "True" and not (tmp_path / "logs").exists()
+
+
+def test_prefects_exit_notice_is_not_shown_and_its_other_warnings_are(caplog):
+    import logging
+
+    from flows import runtime
+
+    worker = logging.getLogger("EventsWorker")
+    filters = list(worker.filters)
+    try:
+        runtime.quiet_draining()
+        runtime.quiet_draining()
+        assert len(worker.filters) == len(filters) + 1
+        worker.warning("Still processing items: 1 items remaining...")
+        worker.warning("Service failed to send 3 events")
+    finally:
+        worker.filters[:] = filters
+    assert [r.getMessage() for r in caplog.records] == ["Service failed to send 3 events"]
