@@ -102,6 +102,8 @@ def is_temporary_server(pid: int) -> bool:
 
 def stop_stale_servers(home: Path) -> list[int]:
     """Stop the temporary servers of ``home`` whose parent is gone; the pids stopped."""
+    if not processes.PROC.is_dir():  # nothing to tell a live process from a stale record with
+        return []
     stopped = stop_recorded_orphans(home)
     return stopped + stop_unrecorded_orphans(home)
 

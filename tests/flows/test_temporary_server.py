@@ -104,6 +104,11 @@ def test_the_guard_stops_the_server_when_the_parent_goes_without_a_death_signal(
         httpx.get(f"http://127.0.0.1:{port}/api/health", timeout=1)
 
 
+def database(tmp_path, name: str) -> str:
+    """A database of its own for each server of one PREFECT_HOME: they start side by side."""
+    return f"sqlite+aiosqlite:///{tmp_path}/{name}.db"
+
+
 def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path):
     """Two real Prefect servers left behind by a parent killed before it could stop them, started
     as Prefect starts them: one recorded (as this version records its servers), one not (as older
@@ -111,29 +116,32 @@ def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path)
     PREFECT_HOME stay; so does a live process that is no server, named by a stale record."""
     env = run_env(tmp_path)
     home = tmp_path / "home"
-    (recorded, _), (unrecorded, _) = spawn_and_vanish("""
+    (recorded, recorded_at), (unrecorded, unrecorded_at) = spawn_and_vanish(f"""
         from prefect.server.api.server import SubprocessASGIServer
         from flows import temporary_server as temporary
         server = SubprocessASGIServer()
-        for record in (True, False):
+        for record, url in ((True, {database(tmp_path, "recorded")!r}), (False, {database(tmp_path, "unrecorded")!r})):
+            os.environ["PREFECT_API_DATABASE_CONNECTION_URL"] = url
             server.port = server.find_available_port()
             pid = server._run_uvicorn_command().pid
             if record:
                 temporary.record_server(temporary.prefect_home(), pid)
             shown(pid)
         """, env, tmp_path)
-    [(elsewhere, _)] = spawn_and_vanish("""
+    (tmp_path / "other").mkdir()
+    [(elsewhere, elsewhere_at)] = spawn_and_vanish("""
         from prefect.server.api.server import SubprocessASGIServer
         server = SubprocessASGIServer()
         server.port = server.find_available_port()
         shown(server._run_uvicorn_command().pid)
         """, run_env(tmp_path / "other"), tmp_path)
     ours = subprocess.Popen([sys.executable, "-m", "uvicorn", *temporary.uvicorn_args(processes.free_port())],
-                            env=env | {"PREFECT__SERVER_EPHEMERAL": "1"})
+                            env=env | {"PREFECT__SERVER_EPHEMERAL": "1",
+                                       "PREFECT_API_DATABASE_CONNECTION_URL": database(tmp_path, "ours")})
     bystander = subprocess.Popen(["sleep", "60"])
     try:
-        started = {pid: processes.started_ticks(pid) for pid in (recorded, unrecorded, elsewhere, ours.pid)}
-        assert all(started.values()), started
+        started = {recorded: recorded_at, unrecorded: unrecorded_at, elsewhere: elsewhere_at,
+                   ours.pid: processes.started_ticks(ours.pid)}
         temporary.record_server(home, ours.pid)
         (temporary.records(home) / f"{bystander.pid}.json").write_text(json.dumps({
             "server": bystander.pid, "server_started": processes.started_ticks(bystander.pid),
