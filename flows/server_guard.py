@@ -1,23 +1,26 @@
-"""The process of noisebo's temporary Prefect server: Prefect's own uvicorn server, which dies with
-the process that started it and keeps Prefect's shutdown noise off the terminal (a cancelled
-flush at shutdown, a start on a port taken meanwhile, which Prefect retries on another).
+"""The process of noisebo's temporary Prefect server: Prefect's own server app under uvicorn, which
+dies with the process that started it and says nothing once it is told to stop.
 
-    python -P flows/server_guard.py PARENT_PID pdeathsig|watch UVICORN_ARGS...
+    python -P flows/server_guard.py PARENT_PID pdeathsig|watch PORT
 
-It is run by path (``flows.temporary_server.GuardedServer`` starts it) so that it imports neither the
-``flows`` package nor JAX; only the standard library until uvicorn starts. The server goes when its
-parent goes, however the parent ends (``kill -9`` included):
+It is run by path (``flows.temporary_server.GuardedServer`` starts it) so that it imports neither
+the ``flows`` package nor JAX; only the standard library until uvicorn starts. The server goes when
+its parent goes, however the parent ends (``kill -9`` included):
 
 - on Linux, with ``pdeathsig``, the kernel sends it SIGTERM when the parent dies (PR_SET_PDEATHSIG;
   only asked for when the parent's main thread starts it, since the signal follows the thread that
   started the child, not its process);
 - everywhere, a thread checks every half second whether the parent is still its parent, and if not
   sends the server SIGTERM and ends the process 3 s later if it is still running.
+
+Once told to stop (a signal), or when the port it was given is taken (it then exits with code 3 and
+Prefect starts it again on another port), the server logs nothing more: Prefect's shutdown of its
+services, cut short, otherwise ends a run that succeeded with tracebacks (a task-run recorder flush
+cancelled, a database connection reset, tasks still pending) that no one needs.
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import os
 import signal
@@ -26,8 +29,8 @@ import threading
 import time
 
 PR_SET_PDEATHSIG = 1
-RECORDER_LOGGER = "prefect.server.services.task_run_recorder"
-UVICORN_LOGGER = "uvicorn.error"
+SERVER_APP = "prefect.server.api.server:create_app"
+STARTUP_FAILURE = 3  # uvicorn's exit code when it cannot start, which Prefect answers with another port
 
 
 def die_with_parent() -> None:
@@ -58,47 +61,51 @@ def watch_parent(parent: int, every_s: float = 0.5, grace_s: float = 3.0) -> thr
     return thread
 
 
-class ShutdownNoise(logging.Filter):
-    """Drops Prefect's task-run recorder report ``Error flushing N events ...`` when the flush was
-    cancelled (a CancelledError): the server's shutdown cancels a flush in progress, the recorder
-    retries what it can, and its 80-line traceback reads like a failure of a run that succeeded.
-    Its other errors (events dropped, a database error) still show."""
+def go_quiet() -> None:
+    logging.disable(logging.CRITICAL)
+
+
+def is_port_taken_report(record: logging.LogRecord) -> bool:
+    return "error while attempting to bind" in record.getMessage()
+
+
+class QuietWhenTaken(logging.Filter):
+    """On uvicorn's report that the port is taken: drop it, and every record after it."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        cancelled = record.exc_info is not None and isinstance(record.exc_info[1], asyncio.CancelledError)
-        return not (cancelled and str(record.msg).startswith("Error flushing"))
+        if is_port_taken_report(record):
+            go_quiet()
+            return False
+        return True
 
 
-class TakenPortNoise(logging.Filter):
-    """Drops uvicorn's report that the port was taken and everything it logs after it (Prefect's
-    lifespan shutdown of a server that never served: a traceback, "Application shutdown failed"):
-    the process exits with code 3 and Prefect starts the server again on another port."""
+def serve(port: int) -> None:
+    """Prefect's server app on 127.0.0.1:``port``, as Prefect 3.8.8 runs its temporary server
+    (``python -m uvicorn --factory ... --log-level error --lifespan on``); exit code 3 if it
+    cannot start."""
+    import uvicorn
 
-    def __init__(self):
-        super().__init__()
-        self.port_taken = False
+    class QuietServer(uvicorn.Server):
+        def handle_exit(self, sig, frame) -> None:
+            go_quiet()
+            super().handle_exit(sig, frame)
 
-    def filter(self, record: logging.LogRecord) -> bool:
-        self.port_taken = self.port_taken or "error while attempting to bind" in record.getMessage()
-        return not self.port_taken
-
-
-def quiet_shutdown_noise() -> None:
-    logging.getLogger(RECORDER_LOGGER).addFilter(ShutdownNoise())
-    logging.getLogger(UVICORN_LOGGER).addFilter(TakenPortNoise())
+    logging.getLogger("uvicorn.error").addFilter(QuietWhenTaken())
+    server = QuietServer(uvicorn.Config(SERVER_APP, factory=True, host="127.0.0.1", port=port, log_level="error",
+                                        lifespan="on"))
+    server.run()
+    if not server.started:
+        raise SystemExit(STARTUP_FAILURE)
 
 
 def main(argv: list[str]) -> None:
-    parent, mode, uvicorn_args = int(argv[1]), argv[2], argv[3:]
+    parent, mode, port = int(argv[1]), argv[2], int(argv[3])
     if mode == "pdeathsig":
         die_with_parent()
     if os.getppid() != parent:  # the parent died before this process could watch it
         raise SystemExit(0)
     watch_parent(parent)
-    quiet_shutdown_noise()
-    from uvicorn.main import main as uvicorn
-
-    uvicorn(args=uvicorn_args, prog_name="uvicorn")
+    serve(port)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,6 @@ import sys
 import threading
 from pathlib import Path
 
-import prefect
 import prefect.settings as ps
 from prefect.server.api.server import SubprocessASGIServer
 
@@ -39,8 +38,8 @@ def temporary_server() -> SubprocessASGIServer:
 
 
 class GuardedServer(SubprocessASGIServer):
-    """Prefect's temporary server (the same uvicorn command and environment as Prefect 3.8.8's),
-    run through ``flows/server_guard.py`` and recorded while it runs."""
+    """Prefect's temporary server (its app, settings and environment as Prefect 3.8.8 runs it), run
+    by ``flows/server_guard.py`` and recorded while it runs."""
 
     def start(self, timeout: int | None = None) -> None:
         if not self.running:
@@ -50,8 +49,8 @@ class GuardedServer(SubprocessASGIServer):
     def _run_uvicorn_command(self) -> subprocess.Popen:
         self._forget()  # a retry on another port: the process before it has exited
         mode = "pdeathsig" if threading.current_thread() is threading.main_thread() else "watch"
-        process = subprocess.Popen([sys.executable, "-P", str(GUARD), str(os.getpid()), mode,
-                                    *uvicorn_args(self.port)], env=server_environment())
+        process = subprocess.Popen([sys.executable, "-P", str(GUARD), str(os.getpid()), mode, str(self.port)],
+                                   env=server_environment())
         self._record = record_server(prefect_home(), process.pid)
         return process
 
@@ -64,11 +63,6 @@ class GuardedServer(SubprocessASGIServer):
         if record is not None:
             record.unlink(missing_ok=True)
             self._record = None
-
-
-def uvicorn_args(port: int) -> list[str]:
-    return ["--app-dir", str(prefect.__module_path__.parent), "--factory", SERVER_APP, "--host", "127.0.0.1",
-            "--port", str(port), "--log-level", "error", "--lifespan", "on"]
 
 
 def server_environment() -> dict[str, str]:
@@ -95,9 +89,10 @@ def record_server(home: Path, pid: int) -> Path:
 
 
 def is_temporary_server(pid: int) -> bool:
-    """Whether ``pid`` runs a Prefect temporary server (Prefect's own, or through the guard)."""
-    return SERVER_APP in processes.command_line(pid) and \
-        processes.environment(pid).get("PREFECT__SERVER_EPHEMERAL") == "1"
+    """Whether ``pid`` runs a Prefect temporary server: Prefect's own, or noisebo's guarded one."""
+    command = processes.command_line(pid)
+    runs_server = SERVER_APP in command or any(Path(arg).name == GUARD.name for arg in command[1:3])
+    return runs_server and processes.environment(pid).get("PREFECT__SERVER_EPHEMERAL") == "1"
 
 
 def stop_stale_servers(home: Path) -> list[int]:

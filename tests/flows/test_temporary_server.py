@@ -2,9 +2,7 @@
 however that process ends, and a later start stops servers whose parent is gone. Real processes,
 real Prefect servers, real SIGKILL (Linux: these tests read /proc)."""
 
-import asyncio
 import json
-import logging
 import os
 import signal
 import socket
@@ -16,7 +14,7 @@ import time
 import httpx
 import pytest
 
-from flows import processes, server_guard
+from flows import processes
 from flows import temporary_server as temporary
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
@@ -88,8 +86,8 @@ def test_the_guard_stops_the_server_when_the_parent_goes_without_a_death_signal(
         import subprocess, sys, time
         import httpx
         from flows import temporary_server as temporary
-        server = subprocess.Popen([sys.executable, "-P", str(temporary.GUARD), str(os.getpid()), "watch",
-                                   *temporary.uvicorn_args({port})], env=temporary.server_environment())
+        server = subprocess.Popen([sys.executable, "-P", str(temporary.GUARD), str(os.getpid()), "watch", "{port}"],
+                                  env=temporary.server_environment())
         for _ in range(1200):
             try:
                 if httpx.get("http://127.0.0.1:{port}/api/health", timeout=1).status_code == 200:
@@ -135,7 +133,8 @@ def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path)
         server.port = server.find_available_port()
         shown(server._run_uvicorn_command().pid)
         """, run_env(tmp_path / "other"), tmp_path)
-    ours = subprocess.Popen([sys.executable, "-m", "uvicorn", *temporary.uvicorn_args(processes.free_port())],
+    ours = subprocess.Popen([sys.executable, "-P", str(temporary.GUARD), str(os.getpid()), "watch",
+                             str(processes.free_port())],
                             env=env | {"PREFECT__SERVER_EPHEMERAL": "1",
                                        "PREFECT_API_DATABASE_CONNECTION_URL": database(tmp_path, "ours")})
     bystander = subprocess.Popen(["sleep", "60"])
@@ -180,35 +179,6 @@ def test_a_port_taken_meanwhile_is_retried_on_another_without_a_word(tmp_path):
         done = subprocess.run([sys.executable, "-c", code], env=run_env(tmp_path), capture_output=True, text=True,
                               timeout=300, check=False)
     assert (done.returncode, done.stdout.split(), done.stderr) == (0, ["True", "200"], "")
-
-
-@pytest.fixture
-def recorder_logger():
-    logger = logging.getLogger(server_guard.RECORDER_LOGGER)
-    filters = list(logger.filters)
-    server_guard.quiet_shutdown_noise()
-    yield logger
-    logger.filters[:] = filters
-
-
-def logged_while_handling(logger, error: BaseException, message: str) -> None:
-    try:
-        raise error
-    except BaseException:
-        logger.error(message, exc_info=True)
-
-
-def test_only_the_cancelled_flush_at_shutdown_is_silenced(recorder_logger, caplog):
-    import sqlite3
-
-    logged_while_handling(recorder_logger, asyncio.CancelledError(), "Error flushing 1 events (1 to retry, 0 dropped)")
-    assert caplog.records == []
-    logged_while_handling(recorder_logger, sqlite3.OperationalError("database is locked"),
-                          "Error flushing 3 events (3 to retry, 0 dropped)")
-    logged_while_handling(recorder_logger, asyncio.CancelledError(), "Dropping event 42 after 4 failed attempts")
-    logging.getLogger("prefect.server.services").error("Error flushing", exc_info=(asyncio.CancelledError,
-                                                                                    asyncio.CancelledError(), None))
-    assert [r.getMessage()[:14] for r in caplog.records] == ["Error flushing", "Dropping event", "Error flushing"]
 
 
 FOUR_HUNDRED_TASKS = """
