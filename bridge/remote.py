@@ -15,8 +15,8 @@ from pydantic import Field, model_validator
 import noisebo
 from bridge.exchange import Exchange
 from bridge.server import BridgeServer
-from bridge.wire import Count, Number, ReadingShape
-from noisebo.config import FrozenModel
+from bridge.wire import ReadingShape
+from noisebo.config import Count, FrozenModel, Number
 from noisebo.engine import EngineState
 from noisebo.failures import InstrumentUnavailable
 from noisebo.reduction import Reading
@@ -46,7 +46,7 @@ class RemoteSettings(FrozenModel):
     tls_certfile: str | None = Field(default=None, min_length=1)
     tls_keyfile: str | None = Field(default=None, min_length=1)
     silence_s: Number = Field(default=120.0, gt=0)
-    max_body_mib: Number = Field(default=64.0, gt=0, allow_inf_nan=False)
+    max_body_mib: Number = Field(default=64.0, gt=0)
     shape: ReadingShape = ReadingShape()
 
     @model_validator(mode="after")

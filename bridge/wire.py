@@ -28,6 +28,7 @@ from typing import Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import ConfigDict, Discriminator, Field, Strict, Tag, ValidationError, model_validator
 
+from noisebo import config
 from noisebo.config import FrozenModel
 from noisebo.engine import EngineState
 from noisebo.events import Request, ShotError
@@ -43,8 +44,9 @@ class WireError(ValueError):
         self.status = status
 
 
-# A number or a count on the wire or in the bridge's settings is exactly that: a string ("0.5")
-# or a boolean (true) is refused, not converted. A whole number is a fine Number.
+# A number or a count on the wire is exactly that: a string ("0.5") or a boolean (true) is
+# refused, not converted. A whole number is a fine Number. NaN passes here to be refused with the
+# wire's own message; the bridge's settings use the config's types (noisebo.config.Number, Count).
 Number = Annotated[float, Strict()]
 Count = Annotated[int, Strict()]
 
@@ -63,9 +65,9 @@ class ReadingShape(FrozenModel):
 
     reading: Literal["scalar", "spectrum"] = "scalar"
     reduction: str = Field(default="sho", min_length=1)
-    spectrum_rows: tuple[Count, ...] = (2, 3)
-    min_samples: Count = Field(default=8, ge=1)
-    max_samples: Count = Field(default=1_000_000, ge=1)
+    spectrum_rows: tuple[config.Count, ...] = (2, 3)
+    min_samples: config.Count = Field(default=8, ge=1)
+    max_samples: config.Count = Field(default=1_000_000, ge=1)
 
     @model_validator(mode="after")
     def _consistent(self) -> ReadingShape:

@@ -191,10 +191,13 @@ def test_a_short_token_off_loopback_is_refused_before_anything_is_bound_or_writt
 
 
 @pytest.mark.parametrize("settings, message", [
-    ({"port": "8765"}, "instrument.settings.port: Input should be a valid integer"),
-    ({"port": True}, "instrument.settings.port: Input should be a valid integer"),
-    ({"silence_s": "120"}, "instrument.settings.silence_s: Input should be a valid number"),
-    ({"max_body_mib": False}, "instrument.settings.max_body_mib: Input should be a valid number"),
+    ({"port": "8765"}, "instrument.settings.port: expected a whole number, got the string '8765'"),
+    ({"port": True}, "instrument.settings.port: expected a whole number, got the boolean true"),
+    ({"silence_s": "120"}, "instrument.settings.silence_s: expected a number, got the string '120'"),
+    ({"silence_s": float("nan")}, "instrument.settings.silence_s: must be a finite number, got nan"),
+    ({"max_body_mib": False}, "instrument.settings.max_body_mib: expected a number, got the boolean false"),
+    ({"shape": {"reading": "spectrum", "min_samples": "8"}},
+     "instrument.settings.shape.min_samples: expected a whole number, got the string '8'"),
     ({"tls_certfile": "cert.pem"}, "tls_certfile is given without tls_keyfile"),
     ({"tls_keyfile": "key.pem"}, "tls_keyfile is given without tls_certfile"),
 ])
