@@ -87,6 +87,16 @@ NO_ABORT = AbortFlag()  # never set: campaigns outside ``installed`` (tests, swe
 _active = NO_ABORT
 
 
+def stopping_signal(stopped: BaseException) -> str:
+    """The signal behind a stop at once: a second signal (``StoppedAtOnce``), Prefect's
+    ``TerminationSignal`` (a SIGTERM that came while Prefect's engine held the handler, as it does
+    between a flow run's start and ``reclaimed``), or else Ctrl-C."""
+    number = getattr(stopped, "signal", None)
+    if isinstance(number, int):
+        return signal.Signals(number).name
+    return getattr(stopped, "signal_name", "SIGINT")
+
+
 def requested() -> str | None:
     """The name of the signal that asked the running campaign to stop, or None."""
     return _active.requested()

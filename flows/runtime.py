@@ -15,7 +15,8 @@ is kept to fatal messages (TF_CPP_MIN_LOG_LEVEL=3) unless that variable is set.
 A command that fails says so in one line; the traceback behind it goes to this process's failure
 log, data/logs/noisebo-DATE-TIME-PID.log of the checkout (or of ~/.noisebo; NOISEBO_LOG_DIR=DIR
 puts it elsewhere), a file that exists only once something is written to it. While flows run,
-tracebacks that Prefect logs go there too instead of the terminal (``divert_tracebacks``), and
+tracebacks that Prefect logs, and its reports of failed or crashed runs, go there too instead of
+the terminal (``divert_failure_reports``), and
 Prefect's notice that it is still sending events at exit is not shown (``quiet_draining``).
 """
 
@@ -87,13 +88,14 @@ def log_dir() -> Path:
 
 
 class FailureLog(logging.FileHandler):
-    """This process's failure log: records that carry a traceback. The file (and its folder, which
-    git then ignores) is made when the first one arrives."""
+    """This process's failure log: tracebacks and Prefect's reports of failed runs
+    (``is_failure_report``). The file (and its folder, which git then ignores) is made when the
+    first one arrives."""
 
     def __init__(self):
         self.path = log_dir() / f"noisebo-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
         super().__init__(self.path, encoding="utf-8", delay=True)
-        self.addFilter(has_traceback)
+        self.addFilter(is_failure_report)
         self.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
 
     def _open(self):
@@ -116,16 +118,21 @@ class FailureLog(logging.FileHandler):
         return f"{type(error).__name__}{': ' + lines[0] if lines else ''}; the traceback is in {self.path}"
 
     def mention(self) -> str:
-        """"; tracebacks in PATH" once something was written, else nothing."""
-        return f"; tracebacks in {self.path}" if self.written else ""
+        """"; details in PATH" once something was written, else nothing."""
+        return f"; details in {self.path}" if self.written else ""
 
 
-def has_traceback(record: logging.LogRecord) -> bool:
-    return bool(record.exc_info)
+PREFECT_RUN_LOGGERS = ("prefect.flow_runs", "prefect.task_runs")
 
 
-def has_no_traceback(record: logging.LogRecord) -> bool:
-    return not record.exc_info
+def is_failure_report(record: logging.LogRecord) -> bool:
+    """A record with a traceback, or an error from Prefect's flow- and task-run loggers ("Crash
+    detected!", "Finished in state Failed(...)"): what the command's one line sums up."""
+    return bool(record.exc_info) or (record.levelno >= logging.ERROR and record.name in PREFECT_RUN_LOGGERS)
+
+
+def is_not_failure_report(record: logging.LogRecord) -> bool:
+    return not is_failure_report(record)
 
 
 _FAILURE_LOG: list[FailureLog] = []
@@ -139,17 +146,18 @@ def failure_log() -> FailureLog:
     return _FAILURE_LOG[0]
 
 
-def divert_tracebacks() -> None:
-    """Records with a traceback go to the failure log and no longer to the terminal: Prefect logs a
-    failing flow's traceback before the command's one line about it. Call it once Prefect has set
-    up its logging; the terminal handlers it finds then keep every other record."""
+def divert_failure_reports() -> None:
+    """Failure reports (``is_failure_report``) go to the failure log and no longer to the terminal:
+    Prefect logs a failing or crashing flow's traceback and state before the command's one line
+    about it. Call it once Prefect has set up its logging; the terminal handlers it finds then keep
+    every other record."""
     failure_log()
     loggers = [logging.getLogger()] + [logger for logger in logging.Logger.manager.loggerDict.values()
                                        if isinstance(logger, logging.Logger)]
     for logger in loggers:
         for handler in logger.handlers:
-            if _is_terminal(handler) and has_no_traceback not in handler.filters:
-                handler.addFilter(has_no_traceback)
+            if _is_terminal(handler) and is_not_failure_report not in handler.filters:
+                handler.addFilter(is_not_failure_report)
 
 
 def _is_terminal(handler: logging.Handler) -> bool:

@@ -15,13 +15,15 @@ def test_importing_flows_sets_the_temporary_servers_defaults_and_keeps_what_is_s
     assert out.stdout.split() == ["120", "DEBUG", "True"]
 
 
-def test_tracebacks_go_to_the_failure_log_and_nothing_else_leaves_the_terminal(tmp_path):
+def test_failure_reports_go_to_the_failure_log_and_other_records_stay_on_the_terminal(tmp_path):
     code = ("import logging, sys\n"
             "from flows import runtime\n"
-            "logging.getLogger('prefect.flow_runs').addHandler(logging.StreamHandler(sys.stderr))\n"
-            "runtime.divert_tracebacks()\n"
+            "logging.getLogger().addHandler(logging.StreamHandler(sys.stderr))\n"
+            "runtime.divert_failure_reports()\n"
             "log = logging.getLogger('prefect.flow_runs')\n"
-            "log.error('a plain error')\n"
+            "log.error('Crash detected! Execution was aborted by a termination signal.')\n"
+            "log.warning('a warning')\n"
+            "logging.getLogger('prefect.client').error('a plain error')\n"
             "try:\n"
             "    1 / 0\n"
             "except ZeroDivisionError:\n"
@@ -29,17 +31,17 @@ def test_tracebacks_go_to_the_failure_log_and_nothing_else_leaves_the_terminal(t
             "print(runtime.failure_log().report(KeyError('missing')))\n")
     env = dict(os.environ, NOISEBO_LOG_DIR=str(tmp_path / "logs"), NOISEBO_JAX_CACHE="")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120)
-    assert out.stderr.splitlines() == ["a plain error"]
+    assert out.stderr.splitlines() == ["a warning", "a plain error"]
     [log] = (tmp_path / "logs").glob("noisebo-*.log")
     assert out.stdout.strip() == f"KeyError: 'missing'; the traceback is in {log}"
     text = log.read_text()
     assert "Encountered exception during execution" in text and "ZeroDivisionError" in text and "KeyError" in text
-    assert "a plain error" not in text
+    assert "Crash detected!" in text and "a warning" not in text and "a plain error" not in text
     assert (tmp_path / "logs" / ".gitignore").read_text() == "*\n"
 
 
 def test_no_failure_no_log(tmp_path):
-    code = "from flows import runtime\nruntime.divert_tracebacks()\nprint(runtime.failure_log().mention() == '')\n"
+    code = "from flows import runtime\nruntime.divert_failure_reports()\nprint(runtime.failure_log().mention() == '')\n"
     env = dict(os.environ, NOISEBO_LOG_DIR=str(tmp_path / "logs"), NOISEBO_JAX_CACHE="")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120)
     assert out.stdout.strip() == "True" and not (tmp_path / "logs").exists()
