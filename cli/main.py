@@ -185,16 +185,18 @@ class Aborted(Exception):
 @contextlib.contextmanager
 def _abortable(path: Path):
     """SIGINT/SIGTERM stop the campaign cleanly after the current point (see flows/abort.py)."""
-    from flows.abort import AbortFlag, CampaignAborted
+    from prefect.exceptions import TerminationSignal
+
+    from flows.abort import AbortFlag, CampaignAborted, stopping_signal
 
     try:
         with AbortFlag().installed():
             yield
     except CampaignAborted as stopped:
         raise Aborted(str(stopped), EXIT_SIGNAL.get(stopped.signal_name, 130)) from None
-    except KeyboardInterrupt as stopped:  # a second signal (StoppedAtOnce), or Ctrl-C outside the handlers
+    except (KeyboardInterrupt, TerminationSignal) as stopped:  # a second signal, or one Prefect's engine took
         raise Aborted(f"stopped at once; {path} keeps every shot taken: continue it with `noisebo resume {path}`",
-                      EXIT_SIGNAL.get(getattr(stopped, "signal_name", "SIGINT"), 130)) from None
+                      EXIT_SIGNAL.get(stopping_signal(stopped), 130)) from None
 
 
 def _require_server(what: str) -> None:
@@ -628,6 +630,9 @@ def main(argv: list[str] | None = None) -> int:
     except Aborted as stopped:
         print(f"noisebo: {stopped}", file=sys.stderr)
         return stopped.code
+    except KeyboardInterrupt:  # Ctrl-C outside a campaign's signal handlers (loading, starting the server)
+        print("noisebo: interrupted", file=sys.stderr)
+        return EXIT_SIGNAL["SIGINT"]
     except FailureBudgetExceeded as error:
         print(f"noisebo: stopped: {error}; the file records status failed{runtime.failure_log().mention()}",
               file=sys.stderr)
