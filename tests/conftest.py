@@ -7,6 +7,7 @@ import yaml
 # Before anything imports Prefect: a private Prefect home, quiet logs, no analytics.
 os.environ.setdefault("PREFECT_HOME", tempfile.mkdtemp(prefix="noisebo-test-prefect-"))
 os.environ.setdefault("NOISEBO_JAX_CACHE", "")
+os.environ.setdefault("NOISEBO_LOG_DIR", tempfile.mkdtemp(prefix="noisebo-test-logs-"))  # failure logs
 
 from flows import runtime  # noqa: E402
 
