@@ -141,7 +141,11 @@ def _read_blobs(group: h5py.Group, start: int, stop: int, data: str, path) -> li
 
 
 def _check_rows(ds: h5py.Dataset, n: int, path) -> None:
-    """A file whose table is shorter than its counter is damaged."""
+    """A file whose table is shorter than its counter is damaged. An SWMR reader may hold the
+    table's extent from before the counters it read (the structure's checksum loads every
+    object first): it looks again before saying so."""
+    if ds.shape[0] < n and ds.file.swmr_mode:
+        ds.refresh()
     if ds.shape[0] < n:
         raise CampaignFileError(f"{path}: damaged campaign file ({ds.name} holds {ds.shape[0]} rows, "
                                 f"{n} committed)")

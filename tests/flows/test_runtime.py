@@ -54,10 +54,11 @@ def test_prefects_exit_notice_is_not_shown_and_its_other_warnings_are(caplog):
 
     worker = logging.getLogger("EventsWorker")
     filters = list(worker.filters)
+    worker.filters[:] = []  # another test in this process may have installed it already
     try:
         runtime.quiet_draining()
         runtime.quiet_draining()
-        assert len(worker.filters) == len(filters) + 1
+        assert len(worker.filters) == 1
         worker.warning("Still processing items: 1 items remaining...")
         worker.warning("Service failed to send 3 events")
     finally:
