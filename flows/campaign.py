@@ -5,6 +5,10 @@ The journal is the campaign's memory: the flow starts from the state the recorde
 the same code starts a new campaign and resumes a killed one, and a resumed campaign proposes and
 measures exactly what the uninterrupted one would have. Large arguments are passed ``quote``d:
 Prefect then skips walking them for futures, which otherwise costs milliseconds per task.
+
+What the flow run shows in Prefect (its name and tags, log lines, progress, summary and points
+artifacts, an event per status change) is sent by ``flows.reporting.RunReport`` after each commit:
+a report that cannot be sent never stops the campaign.
 """
 
 from contextlib import contextmanager
@@ -15,6 +19,7 @@ from prefect import flow
 from prefect.utilities.annotations import quote
 
 from flows import abort
+from flows.reporting import RunReport, run_name
 from instruments import build, registry
 from noisebo.config import CampaignConfig, load_config
 from noisebo.driver import drive, now_utc
@@ -58,20 +63,24 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
 
 
 def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda state: None,
-        instrument=None) -> Path:
+        instrument=None, report: RunReport | None = None) -> Path:
     """Drive a campaign from wherever its journal stands to the end: each point's shots are a
     ``measure point`` task, each decision a ``decide`` task, every event journaled (shot by shot)
     before it counts. ``observe``
     sees the campaign after every committed point and at the end (the live view). Past the
     failure budget the campaign records the status "failed" with the reason and raises
     ``FailureBudgetExceeded``; on a signal it finishes the point, records "aborted" and raises
-    ``abort.CampaignAborted``."""
+    ``abort.CampaignAborted``. ``report``: the flow run's Prefect reports (flows/reporting.py),
+    sent after each commit, never before it."""
     instrument = instrument if instrument is not None else build(recorder.state.config.instrument)
 
     def commit(state: EngineState, events: Sequence[Event]) -> EngineState:
         new = recorder.commit(state, events)
-        for line in progress_lines(state, events):
+        lines = progress_lines(state, events)
+        for line in lines:
             say(line)
+        if report is not None:
+            report.committed(state, new, events, lines)
         if len(new.points) > len(state.points) or new.status is not state.status:
             observe(new)
         return new
@@ -91,8 +100,12 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
         return None if name is None else f"{name} received"
 
     observe(recorder.state)
+    if report is not None:
+        report.start(recorder.state)
     final = drive(recorder.state, instrument, commit, measure_point, decide, stop_requested)
     observe(final)
+    if report is not None:
+        report.finish(final)
     if final.status is Status.FAILED:
         raise FailureBudgetExceeded(final.reason)
     if final.status is Status.ABORTED and abort.requested() is not None:
@@ -156,7 +169,7 @@ def _viewed(recorder: Recorder, instrument, record_rrd: bool, live: str | None, 
         recording.close()
 
 
-@flow(name="campaign")
+@flow(name="campaign", persist_result=True, result_serializer="json")
 def campaign(
     config: str | CampaignConfig = "data/configs/forrester.yaml",
     seed: int = 0,
@@ -165,28 +178,48 @@ def campaign(
     show_progress: bool = True,
     record_rrd: bool = True,
     live: str | None = None,
+    per_run_dir: bool = False,
 ) -> str:
-    """Run one campaign and return the path of its HDF5 file. ``record_rrd``: also write a Rerun
-    recording beside it; ``live``: stream to a Rerun viewer ("spawn" or a gRPC url). The
-    instrument is opened before the campaign's file is created."""
+    """Run one campaign and return the path of its HDF5 file (the flow run's result, stored as
+    JSON). ``record_rrd``: also write a Rerun recording beside it; ``live``: stream to a Rerun
+    viewer ("spawn" or a gRPC url); ``per_run_dir``: write into a folder of its own,
+    OUT_DIR/NAME-POLICY-sSEED-<start, UTC>-<flow run id, 8 digits>, so that a deployment runs the
+    same seed as often as asked. The instrument is opened before the campaign's file is created.
+    The flow run is named NAME-POLICY-sSEED and tagged (flows/reporting.py)."""
     cfg = resolve_config(config, policy)
+    if per_run_dir:
+        out_dir = str(Path(out_dir) / run_folder(run_name(cfg.name, cfg.acquisition.policy, seed)))
     with opened(build(cfg.instrument)) as instrument:
         with start_campaign(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
+            report = RunReport(recorder.state, recorder.h5_path)
             with _viewed(recorder, instrument, record_rrd, live, print) as observe, abort.reclaimed():
-                return str(run(recorder, print if show_progress else _silent, observe, instrument))
+                return str(run(recorder, print if show_progress else _silent, observe, instrument, report))
 
 
-@flow(name="resume")
+def run_folder(name: str) -> str:
+    """A folder name of its own for this flow run: NAME-<now, UTC>-<the flow run's id, 8 digits>."""
+    from datetime import datetime, timezone
+
+    from prefect.runtime import flow_run
+
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    run_id = str(flow_run.id or "").replace("-", "")[:8]
+    return f"{name}-{stamp}" + (f"-{run_id}" if run_id else "")
+
+
+@flow(name="resume", persist_result=True, result_serializer="json")
 def resume(path: str, show_progress: bool = True, record_rrd: bool = True, live: str | None = None,
            budget_s: float | None = None) -> str:
     """Continue a campaign from its file (after a crash, a kill, an abort or a spent budget)
     with the driver it was made with; ``budget_s``: its new instrument-time budget in all (s;
-    None: keep it). Its recording is rebuilt from the journal first, then continues."""
+    None: keep it). Its recording is rebuilt from the journal first, then continues. The flow run
+    is named NAME-POLICY-sSEED-resumed."""
     with opened(driver_of(Path(path))) as instrument:
         budget = KEEP_BUDGET if budget_s is None else float(budget_s)
         with Recorder.resume(Path(path), budget) as recorder:
+            report = RunReport(recorder.state, recorder.h5_path, resumed=True)
             with _viewed(recorder, instrument, record_rrd, live, print) as observe, abort.reclaimed():
-                return str(run(recorder, print if show_progress else _silent, observe, instrument))
+                return str(run(recorder, print if show_progress else _silent, observe, instrument, report))
 
 
 def _silent(line: str) -> None:
