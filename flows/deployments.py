@@ -1,7 +1,8 @@
 """Prefect deployments of the campaign and sweep flows, served by one long-running process.
 
 For a config named NAME (its ``name`` field) it declares:
-    campaign/NAME   one campaign; parameters seed, policy, out_dir, record_rrd (config fixed)
+    campaign/NAME   one campaign; parameters seed, policy, out_dir, record_rrd (config fixed), each
+                    run in a folder of its own: out_dir/NAME-POLICY-sSEED-<start, UTC>-<run id>/
     sweep/NAME      seeds x policies into out_dir/sweep-NAME/<scheduled start, UTC>/, on a cron
                     or interval schedule if one is given (otherwise run on demand)
 
@@ -31,7 +32,7 @@ def deployments_for(config_path: str | Path, out_dir: str | Path, sweep_seeds: l
     schedule = {"cron": cron} if cron else ({"interval": timedelta(seconds=interval_s)} if interval_s else {})
     return [
         campaign.to_deployment(
-            name=name, parameters={"config": config_path, "out_dir": out_dir, "show_progress": True},
+            name=name, parameters={"config": config_path, "out_dir": out_dir, "show_progress": True, "per_run_dir": True},
             description=f"one {name} campaign; pass seed (and policy) as parameters", tags=["noisebo", name],
         ),
         sweep.to_deployment(

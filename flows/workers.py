@@ -25,14 +25,16 @@ def ensure_process_pool(pool: str) -> None:
 
 def deploy_campaign(config_path: str | Path, pool: str, out_dir: str | Path) -> str:
     """Register ``campaign/NAME`` (NAME: the config's name) in the process work pool ``pool``,
-    its code taken from this checkout; returns the deployment's full name."""
+    its code taken from this checkout; returns the deployment's full name. Each run triggered by
+    hand writes a folder of its own under ``out_dir`` (a sweep's runs write into the sweep's)."""
     config_path = str(Path(config_path).resolve())
     name = load_config(config_path).name
     ensure_process_pool(pool)
     source = flow.from_source(source=str(PROJECT_ROOT), entrypoint="flows/campaign.py:campaign")
     source.deploy(
         name=name, work_pool_name=pool, build=False, push=False, print_next_steps=False,
-        parameters={"config": config_path, "out_dir": str(Path(out_dir).resolve()), "show_progress": False},
+        parameters={"config": config_path, "out_dir": str(Path(out_dir).resolve()), "show_progress": False,
+                    "per_run_dir": True},
         description=f"one {name} campaign on the {pool} work pool; pass seed (and policy)", tags=["noisebo", name],
     )
     return f"campaign/{name}"

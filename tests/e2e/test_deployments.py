@@ -1,5 +1,6 @@
 """End to end: a real Prefect server on loopback, `noisebo serve` registering the deployments, and
-`prefect deployment run` triggering a campaign whose HDF5 file equals the seed run alone.
+`prefect deployment run` triggering a campaign (twice, each in its own folder) whose HDF5 file
+equals the seed run alone.
 
 Marked e2e: not in the default run (it starts servers), run by `.ci/run`."""
 
@@ -39,11 +40,15 @@ def served(prefect_server, tiny_config, tmp_path_factory):
 
 def test_deployment_run_with_a_parameter_runs_the_campaign(served, tiny_config):
     env, out, serve_log = served
-    run = subprocess.run([str(BIN / "prefect"), "deployment", "run", "campaign/tiny", "--param", "seed=3",
-                          "--watch", "--watch-timeout", "600"], env=env, capture_output=True, text=True, timeout=660)
-    assert run.returncode == 0, run.stdout + run.stderr + serve_log.read_text()[-3000:]
-    assert "COMPLETED" in (run.stdout + run.stderr).upper()
-    data = read_campaign(out / "tiny_reward_s0003.h5")
+    for _ in range(2):  # the same seed twice: each run in a folder of its own
+        run = subprocess.run([str(BIN / "prefect"), "deployment", "run", "campaign/tiny", "--param", "seed=3",
+                              "--watch", "--watch-timeout", "600"], env=env, capture_output=True, text=True,
+                             timeout=660)
+        assert run.returncode == 0, run.stdout + run.stderr + serve_log.read_text()[-3000:]
+        assert "COMPLETED" in (run.stdout + run.stderr).upper()
+    files = sorted(out.glob("tiny-reward-s3-*/tiny_reward_s0003.h5"))
+    assert len(files) == 2
+    data = read_campaign(files[0])
     assert data["attrs"]["status"] == "completed"
     alone = run_campaign(tiny_config, build(tiny_config.instrument), 3)
     np.testing.assert_array_equal(data["points"]["value"], [p.value for p in alone.state.points])
