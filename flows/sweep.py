@@ -17,6 +17,7 @@ from prefect.exceptions import PrefectHTTPStatusError
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows.campaign import campaign, campaign_path, resolve_config, resume
+from flows.reporting import report_sweep
 from noisebo.config import CampaignConfig
 from view.report import write_summary
 
@@ -60,8 +61,8 @@ def campaign_on_workers(deployment: str, config: CampaignConfig, seed: int, out_
     policy = config.acquisition.policy
     # One flow run per campaign even when a loaded server makes the client repeat its request.
     key = f"{flow_run.id}:{deployment}:{policy}:{seed}"
-    run = run_deployment(deployment, parameters={"seed": seed, "policy": policy, "out_dir": out_dir}, timeout=None,
-                         idempotency_key=key)
+    run = run_deployment(deployment, parameters={"seed": seed, "policy": policy, "out_dir": out_dir,
+                                                 "per_run_dir": False}, timeout=None, idempotency_key=key)
     if not run.state.is_completed():
         raise RuntimeError(f"{deployment} seed {seed} ({policy}) ended {run.state.name}: {run.state.message}")
     return str(campaign_path(config, seed, out_dir))
@@ -104,6 +105,7 @@ def sweep(
         else:
             paths.append(outcome)
     table = write_summary(paths, out_dir)[0] if paths else None
+    report_sweep(base.name, table, out_dir, len(futures), failures)
     if failures:
         raise SweepError(f"{len(failures)} of {len(futures)} campaigns failed (summary of the rest: {table}): "
                          + "; ".join(failures))
