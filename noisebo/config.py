@@ -19,6 +19,8 @@ import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from noisebo import registry
+
 SCHEMA_VERSION = 2
 MIN_T_DRAWS = 16  # posterior draws of the optimal t for its 95 % interval
 
@@ -60,6 +62,21 @@ def _strict(expected: str):
             raise PydanticCustomError("strict_number", problem)
         return value
     return check
+
+
+def _installed(group: str):
+    def check(value: Any) -> Any:
+        try:
+            return registry.checked(group, value)
+        except ValueError as error:  # not installed, or broken: one line naming what is installed
+            raise PydanticCustomError("not_installed", "{reason}", {"reason": str(error)}) from None
+    return check
+
+
+PolicyName = Annotated[str, BeforeValidator(_installed(registry.POLICIES))]
+"""The name of an installed policy (``noisebo.registry``, group ``noisebo.policies``)."""
+NoiseLawName = Annotated[str, BeforeValidator(_installed(registry.NOISE_LAWS))]
+"""The name of an installed noise law (``noisebo.registry``, group ``noisebo.noise_laws``)."""
 
 
 def _flag(value: Any) -> Any:
@@ -339,14 +356,16 @@ class RewardConfig(FrozenModel):
 class AcquisitionConfig(FrozenModel):
     """Policy and acquisition functions.
 
-    ``policy``: "reward" (acq_x * Norm(R)^gamma), "double" ((Norm(acq_t) + Norm(acq_x)) / 2), or
-    "info_rate": the point (x, t and, once the noise model has converged, its number of shots)
-    that lowers the integrated posterior variance of f most per second of instrument time
-    (``noisebo.information``); it needs no reward and ignores ``f_acquisition``.
+    ``policy``: the name of an installed policy (``noisebo policies`` lists them; a package adds
+    one by entry point, ``noisebo.registry``). Built in: "reward" (acq_x * Norm(R)^gamma),
+    "double" ((Norm(acq_t) + Norm(acq_x)) / 2), or "info_rate": the point (x, t and, once the
+    noise model has converged, its number of shots) that lowers the integrated posterior
+    variance of f most per second of instrument time (``noisebo.information``); it needs no
+    reward and ignores ``f_acquisition``.
     ``f_acquisition``: UE, EI or UCB on f; ``maximize`` sets EI/UCB's direction.
     """
 
-    policy: Literal["reward", "double", "info_rate"] = "reward"
+    policy: PolicyName = "reward"
     f_acquisition: Literal["ue", "ei", "ucb"] = "ue"
     t_acquisition: Literal["ei"] = "ei"
     maximize: Flag = True
@@ -401,9 +420,10 @@ class NoiseFieldConfig(FrozenModel):
 class NoiseModelConfig(FrozenModel):
     """Structured GP for the single-shot noise standard deviation Noise(t).
 
-    ``mean``: "inv_sqrt" is the paper's A1/sqrt(t) + A0; "power" is A1/t^p + A0 with p inferred;
-    "quadrature" is sqrt(A1^2/t + A0^2), for a shot-noise source and an independent
-    time-independent one whose variances add.
+    ``mean``: the name of an installed noise law (``noisebo.noise_laws``; ``noisebo policies``
+    lists them, a package adds one by entry point). Built in: "inv_sqrt" is the paper's
+    A1/sqrt(t) + A0; "power" is A1/t^p + A0 with p inferred; "quadrature" is sqrt(A1^2/t + A0^2),
+    for a shot-noise source and an independent time-independent one whose variances add.
     Priors on A0 and A1 are Uniform in the units of the measured value.
     ``learn_after_convergence``: also train on the few-shot noise estimates taken after convergence
     (weighted by their larger sampling error) instead of freezing the noise model's data.
@@ -412,7 +432,7 @@ class NoiseModelConfig(FrozenModel):
     time-dependent one) varies over x (``noisebo.noise_field``): the optimal time becomes t*(x).
     """
 
-    mean: Literal["inv_sqrt", "power", "quadrature"] = "inv_sqrt"
+    mean: NoiseLawName = "inv_sqrt"
     a0_prior: UniformPrior = UniformPrior()
     a1_prior: UniformPrior = UniformPrior()
     p_prior: UniformPrior = UniformPrior(low=0.1, high=1.5)

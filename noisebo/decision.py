@@ -24,7 +24,7 @@ from noisebo.config import (
 )
 from noisebo.inputs import capacity_for, group_ids
 from noisebo.keys import FIT, PROPOSE, jax_key
-from noisebo.policies import NoiseRows, Posterior, acquisition_map, argmax_2d, point_scores
+from noisebo.policies import NoiseRows, Posterior, acquisition_map, argmax_2d, point_scores, policy_of
 from noisebo.reward import optimal_index, reward
 from noisebo.schedule import converged, converged_map, shots_for, t_interval
 from noisebo.search import STARTS, reference_points, reference_spacing, refine
@@ -259,7 +259,7 @@ def _t_draws(kind: str, fitted: Fitted, s: SpaceConfig, rew: RewardConfig) -> tu
 
 def _predict_program(config: CampaignConfig):
     return _predict_compiled(config.space, config.reward, config.noise_model.mean, config.noise_model.field is not None,
-                             config.acquisition.policy == "info_rate", config.schedule.convergence == "posterior")
+                             policy_of(config.acquisition).uses_spread, config.schedule.convergence == "posterior")
 
 
 def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray) -> decision_field.FieldRows:
@@ -382,6 +382,7 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
     xi = jnp.asarray(integration_points(space))
     spacing = reference_spacing(space)
     n_t = g.t.size
+    uses_spread = policy_of(acq).uses_spread
 
     def propose(post: Posterior, shots, fitted: Fitted, key, allowed):
         values = jnp.where(allowed[None, :], acquisition_map(post, shots, acq, rew, overhead_s), -jnp.inf)
@@ -405,7 +406,7 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
             if field_kind is not None:
                 rows = noise_rows(flat)
                 noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t))
-            q = None if acq.policy != "info_rate" else spread(fitted, flat, xi, primary_first).reshape(k, p)
+            q = spread(fitted, flat, xi, primary_first).reshape(k, p) if uses_spread else None
             return point_scores(post, raw_mean.reshape(k, p), raw_var.reshape(k, p),
                                 jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew, noise, q, overhead_s)
 
@@ -547,7 +548,7 @@ def acquire(
     new_state = state.with_t_opt(t_opt, now_converged, t_map if t_map.size else None)
     key = propose_key(0, step) if key is None else key
     options = [shots_for(now_converged, sched)]
-    if config.acquisition.policy == "info_rate" and now_converged:
+    if policy_of(config.acquisition).chooses_shots and now_converged:
         options = list(information.shot_options(sched.shots_before, sched.shots_after))
     best = None
     for wanted in options:

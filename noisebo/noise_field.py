@@ -2,8 +2,8 @@
 
 Model
 -----
-Noise(x, t) = law(t; A0(x), A1(x)[, p]) + r(t), the laws of ``noise_model.mean_law`` ("inv_sqrt"
-A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature" sqrt(A1^2/t + A0^2)), with
+Noise(x, t) = law(t; A0(x), A1(x)[, p]) + r(t), the laws of ``noisebo.noise_laws`` ("inv_sqrt"
+A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature" sqrt(A1^2/t + A0^2), or an installed one), with
 
     log A0(x) = log a0 + g0(x)        and, with ``varies="a0_a1"``,   log A1(x) = log a1 + g1(x),
 
@@ -120,7 +120,7 @@ import numpyro
 import numpyro.distributions as dist
 from scipy import optimize
 
-from noisebo import inference
+from noisebo import inference, registry
 from noisebo.config import NoiseFieldConfig, NoiseModelConfig
 from noisebo.inputs import Grouped, capacity_for, group_ids, merge
 from noisebo.kernels import JITTER, matern52
@@ -332,19 +332,20 @@ def _log_likelihood(r: _Residual) -> jnp.ndarray:
 def make_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
     """The numpyro model ``model(data: FieldData)`` for this law, field and number of x axes.
 
-    Sites: a0, a1 (Uniform within ``data.bounds``), p ("power" only), amplitude and length (the
-    residual GP over t, as in ``noise_model``), and g0_z (and g1_z for "a0_a1"): (M,) ~ N(0, I),
+    Sites: a0, a1 (Uniform within ``data.bounds``), p (a law that infers it only, e.g. "power"),
+    amplitude and length (the residual GP over t, as in ``noise_model``), and g0_z (and g1_z for "a0_a1"): (M,) ~ N(0, I),
     the whitened basis weights of each field. The fields' amplitude and lengths are not sites:
     they are read from ``data`` (``estimate_field``, ``set_field``). ``dimensions`` only checks
     the data's."""
     prefixes = field_names(field)
+    law = registry.noise_law(cfg.mean)
 
     def noise_field_model(data: FieldData) -> None:
         if data.freq.shape[1] != dimensions or data.field_amplitude.shape[0] != len(prefixes):
             raise ValueError("noise-field data prepared for another dimension or field")
         a0 = numpyro.sample("a0", dist.Uniform(data.bounds[0, 0], data.bounds[0, 1]))
         a1 = numpyro.sample("a1", dist.Uniform(data.bounds[1, 0], data.bounds[1, 1]))
-        p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if cfg.mean == "power" else 0.5
+        p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if law.infers_exponent else 0.5
         amplitude = numpyro.sample(
             "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
         )
@@ -352,7 +353,7 @@ def make_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
         white = dist.Normal(0.0, 1.0).expand([data.freq.shape[0]]).to_event(1)
         params = {prefix + "_z": numpyro.sample(prefix + "_z", white) for prefix in prefixes}
         g0, g1 = log_fields(params, data, data.phi)
-        m = mean_law(cfg.mean, data.t, a0 * _exp(g0), a1 * _exp(g1), p)
+        m = law.mean(data.t, a0 * _exp(g0), a1 * _exp(g1), p)
         numpyro.factor("y", _log_likelihood(_residual(m, amplitude, length, data)))
         numpyro.factor("within_groups", group_log_factor(m, data))
 
@@ -498,12 +499,9 @@ def _evidence_terms(kind: str, f: int, g, ev: _Evidence, data: FieldData, p):
     its position (Gc,) each, with the law's other parameters fixed and the residual left out."""
     value = ev.base * _exp(g[ev.pos])
     shot, a0 = (ev.other, value) if f == 0 else (value * data.t ** (-p), ev.other)
-    if kind == "quadrature":
-        m = jnp.sqrt(shot**2 + a0**2)
-        share = (a0 if f == 0 else shot) ** 2 / m**2
-    else:
-        m = shot + a0
-        share = (a0 if f == 0 else shot) / m
+    law = registry.noise_law(kind)
+    m = law.combine(shot, a0)
+    share = law.share(a0 if f == 0 else shot, m)
     m = jnp.where(ev.gmask, m, 1.0)
     y, rel, count, scatter = data.y, jnp.where(ev.gmask, data.rel_var, 1.0), data.count, data.scatter
     loglik = -0.5 * (y - m) ** 2 / (m**2 * rel) - count * jnp.log(m) - 0.5 * scatter / m**2
@@ -652,7 +650,7 @@ def _pseudo_observations(data: FieldData, cfg: NoiseModelConfig, base: dict):
     n_fields = data.field_amplitude.shape[0]
     y = np.maximum(gr.y, max(1e-3 * float(gr.y.max(initial=0.0)), 1e-12))
     p = base.get("p", 0.5)
-    power = 2.0 if cfg.mean == "quadrature" else 1.0
+    power = registry.noise_law(cfg.mean).sources_power
     shot = base["a1"] * gr.t ** (-p)
     out = []
     for f, other in enumerate((shot, np.full_like(y, base["a0"]))[:n_fields]):
@@ -681,9 +679,9 @@ def initial_guess(data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfi
        the law ``base`` (a0, a1, p, amplitude, length; e.g. a previous fit's), which is then kept
        (its a0, a1 are the levels in 2, and no step 4): a start in another basin when the
        least-squares law is a poor one.
-    2. Each group's A0 (A1) given that law's A1 (A0): from y^2 - shot^2 (y^2 - A0^2) under
-       "quadrature", y - shot (y - A0) otherwise, floored at 5 % of y, with the variance of its
-       log by the delta method (large where the other source dominates: such a group says little).
+    2. Each group's A0 (A1) given that law's A1 (A0): from y^k - shot^k (y^k - A0^k), k the law's
+       ``sources_power`` (2 for "quadrature", 1 for the laws whose sources add), floored at 5 %
+       of y, with the variance of its log by the delta method (large where the other source dominates: such a group says little).
        Their precision-weighted mean log is the level log a0 (log a1).
     3. Each field's weights z by ridge regression of the groups' log(A0 / a0) on its weighted
        basis (the whitened prior is the ridge).

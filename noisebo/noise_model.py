@@ -1,7 +1,7 @@
 """The noise model: a structured GP for the single-shot noise standard deviation Noise(t).
 
-Its mean is a physical law (the paper's A1/sqrt(t) + A0, A1/t^p + A0, or sqrt(A1^2/t + A0^2) for
-independent sources whose variances add), its residual a small
+Its mean is a physical law (``noisebo.noise_laws``: the paper's A1/sqrt(t) + A0, A1/t^p + A0, or
+sqrt(A1^2/t + A0^2) for independent sources whose variances add; a package can add one), its residual a small
 Matern 5/2 GP over t scaled to [0, 1]. It is trained on each point's measured noise: the sample
 standard deviation s of n shots, divided by c4(n) so it is unbiased. The sampling variance of that
 estimate is known, Var[s/c4] = Noise(t)^2 (1 - c4^2) / c4^2 (about Noise^2 / (2(n-1))), and sits
@@ -22,6 +22,7 @@ import numpyro.distributions as dist
 from scipy import optimize
 from scipy.special import gammaln
 
+from noisebo import registry
 from noisebo.config import NoiseModelConfig
 from noisebo.inputs import Grouped, capacity_for, merge
 from noisebo.kernels import masked_covariance, matern52
@@ -61,29 +62,25 @@ def sampling_rel_var(n: np.ndarray) -> np.ndarray:
 
 
 def mean_law(kind: str, t: jnp.ndarray, a0, a1, p=0.5) -> jnp.ndarray:
-    """Noise(t) for the named law: "inv_sqrt" A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature"
-    sqrt(A1^2/t + A0^2) (a shot-noise source and a time-independent one, independent of each other)."""
-    if kind == "inv_sqrt":
-        return a1 / jnp.sqrt(t) + a0
-    if kind == "quadrature":
-        return jnp.sqrt(a1**2 / t + a0**2)
-    if kind == "power":
-        return a1 * t ** (-p) + a0
-    raise ValueError(f"unknown noise law {kind!r}")
+    """Noise(t) under the noise law named ``kind`` (``noisebo.noise_laws``; e.g. "inv_sqrt"
+    A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature" sqrt(A1^2/t + A0^2))."""
+    return registry.noise_law(kind).mean(t, a0, a1, p)
 
 
 def make_model(cfg: NoiseModelConfig):
     """The numpyro noise model for this configuration: ``model(data: NoiseData)``."""
 
+    law = registry.noise_law(cfg.mean)
+
     def noise_model(data: NoiseData) -> None:
         a0 = numpyro.sample("a0", dist.Uniform(data.bounds[0, 0], data.bounds[0, 1]))
         a1 = numpyro.sample("a1", dist.Uniform(data.bounds[1, 0], data.bounds[1, 1]))
-        p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if cfg.mean == "power" else 0.5
+        p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if law.infers_exponent else 0.5
         amplitude = numpyro.sample(
             "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
         )
         length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
-        m = mean_law(cfg.mean, data.t, a0, a1, p)
+        m = law.mean(data.t, a0, a1, p)
         cov = masked_covariance(matern52(data.ts, data.ts, amplitude**2, length), m**2 * data.rel_var, data.mask)
         numpyro.sample("y", dist.MultivariateNormal(jnp.where(data.mask, m, 0.0), covariance_matrix=cov), obs=data.y)
         # What merging a group's points into their mean left out of the likelihood: the spread of
@@ -139,15 +136,16 @@ def prepare(
 
 def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
     """A data-driven starting point for the MAP fit: the law fitted by non-negative least squares
-    (over a grid of exponents for "power"; on the squared law for "quadrature"), residual GP at its
-    prior median. Scaled units."""
+    (over a grid of exponents for a law that infers p; on the law's ``sources_power``, e.g. squared
+    for "quadrature"), residual GP at its prior median. Scaled units."""
+    law = registry.noise_law(cfg.mean)
     mask = np.asarray(data.mask)
     t, y = np.asarray(data.t)[mask], np.asarray(data.y)[mask]
     weight = np.sqrt(np.asarray(data.count)[mask])  # a group stands for its points
     bounds = np.asarray(data.bounds)
-    exponents = np.linspace(bounds[2, 0], bounds[2, 1], 29) if cfg.mean == "power" else np.array([0.5])
+    exponents = np.linspace(bounds[2, 0], bounds[2, 1], 29) if law.infers_exponent else np.array([0.5])
     best = None
-    power = 2.0 if cfg.mean == "quadrature" else 1.0
+    power = law.sources_power
     # Readings with no shot-to-shot scatter (a quantised or saturated sensor) measure a noise of 0:
     # weigh them as a thousandth of the largest measured noise rather than infinitely.
     y = np.maximum(y, max(1e-3 * float(y.max(initial=0.0)), 1e-12))
@@ -164,7 +162,7 @@ def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
         "amplitude": float(np.exp(cfg.residual_amplitude_loc)),
         "length": float(np.exp(RESIDUAL_LENGTH_LOC)),
     }
-    if cfg.mean == "power":
+    if law.infers_exponent:
         guess["p"] = float(np.clip(p, bounds[2, 0] + eps, bounds[2, 1] - eps))
     return guess
 

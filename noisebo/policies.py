@@ -1,4 +1,7 @@
-"""The two policies that fold the reward into the acquisition (section 2.2).
+"""The policies: the paper's two that fold the reward into the acquisition (section 2.2), and the
+information rate. One class per policy (``Policy``), each registered in the entry-point group
+``noisebo.policies`` under the name a config's ``acquisition.policy`` uses (``noisebo.registry``);
+a package adds a policy the same way.
 
 Shapes: x grid (n_x,) (or m reference points in d > 1), t grid (n_t,); the acquisition map is
 (n_x, n_t). Variances are in the squared units of f; noise is the single-shot standard
@@ -24,7 +27,7 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
-from noisebo import information
+from noisebo import information, registry
 from noisebo.acquisition import expected_improvement, f_acquisition
 from noisebo.config import AcquisitionConfig, RewardConfig
 from noisebo.reward import normalise, reward
@@ -146,15 +149,109 @@ def double_acquisition(post: Posterior, shots: int, acq: AcquisitionConfig, rew:
     return 0.5 * (acq_x[:, None] + (acq_t if _field(post) else acq_t[None, :]))
 
 
+class Policy:
+    """What a policy is (``noisebo.registry``: one class per policy in the entry-point group
+    ``noisebo.policies``, made once with no arguments). Its methods are pure functions of
+    arrays traced inside jitted programs; its attributes are fixed.
+
+    ``acquisition_map(post, shots, acq, rew, overhead_s)``: the score over the (x, t) grid,
+    (n_x, n_t) (n_x: the reference points), for points of ``shots`` shots with ``overhead_s``
+    seconds per point; the proposal is its largest entry among the allowed t.
+    ``point_scores(post, mean, var, j, shots, acq, rew, noise, spread, overhead_s)``: the score
+    at points off the grid (d > 1 axes): latent f ``mean`` and ``var`` (any shape), each paired
+    with the t-grid index ``j`` (same shape), ``noise`` (``NoiseRows``) there for a noise field,
+    ``spread`` there when ``uses_spread``; at a grid point it equals the map's entry.
+    ``uses_spread``: the posterior carries ``f_spread`` (and the scores ``spread``), the mean
+    squared posterior covariance of f with the integration points (``noisebo.information``).
+    ``chooses_shots``: once the noise model has converged, each shot count of
+    ``information.shot_options`` is scored and the best kept (otherwise the schedule's).
+    ``paper``: one of the paper's two policies (a sweep's ``both``)."""
+
+    uses_spread: bool = False
+    chooses_shots: bool = False
+    paper: bool = False
+
+    def acquisition_map(self, post: Posterior, shots, acq: AcquisitionConfig, rew: RewardConfig,
+                        overhead_s: float = 0.0) -> jnp.ndarray:
+        raise NotImplementedError
+
+    def point_scores(self, post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.ndarray, shots,
+                     acq: AcquisitionConfig, rew: RewardConfig, noise: NoiseRows | None = None,
+                     spread: jnp.ndarray | None = None, overhead_s: float = 0.0) -> jnp.ndarray:
+        raise NotImplementedError
+
+
+class RewardDriven(Policy):
+    """The "reward" policy: acq_x * Norm(R)^gamma (Eq. 6)."""
+
+    paper = True
+
+    def acquisition_map(self, post, shots, acq, rew, overhead_s=0.0):
+        return reward_driven(post, shots, acq, rew)
+
+    def point_scores(self, post, mean, var, j, shots, acq, rew, noise=None, spread=None, overhead_s=0.0):
+        grid_noise = typical_noise(post)
+        grid_var = post.f_var[:, None] + (grid_noise**2)[None, :] / shots
+        shift = jnp.minimum(jnp.min(_acq_x(post, grid_var, post.f_mean[:, None], acq)), 0.0)
+        if acq.fixed_t is not None:  # as in reward_driven: no reward weight when t is fixed
+            weight = 1.0
+        elif _field(post):
+            weight = _at(reward_weight(post.t, noise.mean, rew), j)
+        else:
+            weight = reward_weight(post.t, post.noise_mean, rew)[j]
+        return (_acq_x(post, var + grid_noise[j] ** 2 / shots, mean, acq) - shift) * weight
+
+
+class DoubleAcquisition(Policy):
+    """The "double" policy: (Norm(acq_t) + Norm(acq_x)) / 2 (section 2.2.4)."""
+
+    paper = True
+
+    def acquisition_map(self, post, shots, acq, rew, overhead_s=0.0):
+        return double_acquisition(post, shots, acq, rew)
+
+    def point_scores(self, post, mean, var, j, shots, acq, rew, noise=None, spread=None, overhead_s=0.0):
+        at_t_opt = typical_noise_at_t_opt(post)
+        grid = _acq_x(post, post.f_var + at_t_opt**2 / shots, post.f_mean, acq)
+        lo, span = jnp.min(grid), jnp.max(grid) - jnp.min(grid)
+        here = _acq_x(post, var + at_t_opt**2 / shots, mean, acq)
+        x_part = jnp.where(span > 0, (here - lo) / jnp.where(span > 0, span, 1.0), 0.0)
+        if not _field(post):
+            return 0.5 * (x_part + normalise(time_acquisition(post, acq, rew))[j])
+        grid_t = time_acquisition(post, acq, rew)
+        t_lo, t_span = jnp.min(grid_t), jnp.max(grid_t) - jnp.min(grid_t)
+        here_t = _at(_time_acquisition(post, noise.mean, noise.var, rew, acq), j)
+        t_part = jnp.where(t_span > 0, (here_t - t_lo) / jnp.where(t_span > 0, t_span, 1.0), 0.0)
+        return 0.5 * (x_part + t_part)
+
+
+class InformationRate(Policy):
+    """The "info_rate" policy: f's integrated variance removed per second of instrument time.
+
+    (``noisebo.information``.) Once the noise model has converged it also chooses the number of
+    shots."""
+
+    uses_spread = True
+    chooses_shots = True
+
+    def acquisition_map(self, post, shots, acq, rew, overhead_s=0.0):
+        return information.rate_map(post.f_spread, post.f_var, post.noise_mean, post.t, shots, overhead_s)
+
+    def point_scores(self, post, mean, var, j, shots, acq, rew, noise=None, spread=None, overhead_s=0.0):
+        sd = _at(noise.mean, j) if _field(post) else post.noise_mean[j]
+        return spread / (var + sd**2 / shots) / (overhead_s + shots * post.t[j])
+
+
+def policy_of(acq: AcquisitionConfig) -> Policy:
+    """The installed policy ``acq.policy`` names (``noisebo.registry``)."""
+    return registry.policy(acq.policy)
+
+
 def acquisition_map(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig,
                     overhead_s: float = 0.0) -> jnp.ndarray:
     """The configured policy's acquisition over the (x, t) grid, (n_x, n_t); for info_rate, the
     rate at ``shots`` shots with ``overhead_s`` per point (f units^2 per s)."""
-    if acq.policy == "reward":
-        return reward_driven(post, shots, acq, rew)
-    if acq.policy == "info_rate":
-        return information.rate_map(post.f_spread, post.f_var, post.noise_mean, post.t, shots, overhead_s)
-    return double_acquisition(post, shots, acq, rew)
+    return policy_of(acq).acquisition_map(post, shots, acq, rew, overhead_s)
 
 
 def _at(rows: jnp.ndarray, j: jnp.ndarray) -> jnp.ndarray:
@@ -167,37 +264,12 @@ def point_scores(post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.nd
                  spread: jnp.ndarray | None = None, overhead_s: float = 0.0) -> jnp.ndarray:
     """The configured policy's score at points off the x grid: latent f ``mean`` and ``var``
     (any shape) at each point, paired with the t-grid index ``j`` (same shape); for a noise
-    field, ``noise`` at the points; for info_rate, ``spread`` (q, same shape) there. Shifts and
-    normalisers are the ones ``acquisition_map`` takes from the grid in ``post``, so at a grid
-    point the score equals its map entry."""
+    field, ``noise`` at the points; for a policy that ``uses_spread``, ``spread`` (q, same
+    shape) there. Shifts and normalisers are the ones ``acquisition_map`` takes from the grid in
+    ``post``, so at a grid point the score equals its map entry."""
     if _field(post) and noise is None:
         raise ValueError("a noise field's scores need the noise at the points")
-    if acq.policy == "info_rate":
-        sd = _at(noise.mean, j) if _field(post) else post.noise_mean[j]
-        return spread / (var + sd**2 / shots) / (overhead_s + shots * post.t[j])
-    if acq.policy == "reward":
-        grid_noise = typical_noise(post)
-        grid_var = post.f_var[:, None] + (grid_noise**2)[None, :] / shots
-        shift = jnp.minimum(jnp.min(_acq_x(post, grid_var, post.f_mean[:, None], acq)), 0.0)
-        if acq.fixed_t is not None:  # as in reward_driven: no reward weight when t is fixed
-            weight = 1.0
-        elif _field(post):
-            weight = _at(reward_weight(post.t, noise.mean, rew), j)
-        else:
-            weight = reward_weight(post.t, post.noise_mean, rew)[j]
-        return (_acq_x(post, var + grid_noise[j] ** 2 / shots, mean, acq) - shift) * weight
-    at_t_opt = typical_noise_at_t_opt(post)
-    grid = _acq_x(post, post.f_var + at_t_opt**2 / shots, post.f_mean, acq)
-    lo, span = jnp.min(grid), jnp.max(grid) - jnp.min(grid)
-    here = _acq_x(post, var + at_t_opt**2 / shots, mean, acq)
-    x_part = jnp.where(span > 0, (here - lo) / jnp.where(span > 0, span, 1.0), 0.0)
-    if not _field(post):
-        return 0.5 * (x_part + normalise(time_acquisition(post, acq, rew))[j])
-    grid_t = time_acquisition(post, acq, rew)
-    t_lo, t_span = jnp.min(grid_t), jnp.max(grid_t) - jnp.min(grid_t)
-    here_t = _at(_time_acquisition(post, noise.mean, noise.var, rew, acq), j)
-    t_part = jnp.where(t_span > 0, (here_t - t_lo) / jnp.where(t_span > 0, t_span, 1.0), 0.0)
-    return 0.5 * (x_part + t_part)
+    return policy_of(acq).point_scores(post, mean, var, j, shots, acq, rew, noise, spread, overhead_s)
 
 
 def argmax_2d(values: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
