@@ -43,15 +43,16 @@ from noisebo.config import load_config  # noqa: E402
 from noisebo.decision import grids  # noqa: E402
 from noisebo.driver import run_campaign  # noqa: E402
 from noisebo.metrics import median_iqr, relative_error, rmse  # noqa: E402
+from noisebo.registry import paper_policies  # noqa: E402
 from noisebo.reward import true_optimal_t  # noqa: E402
 
-DESIGNS = ("reward", "double", "fixed t_min", "fixed t*", "fixed t_max", "info rate")
+DESIGNS = (*paper_policies(), "fixed t_min", "fixed t*", "fixed t_max", "info rate")
 NO_STEP_LIMIT = 1_000_000
 
 
 def design_config(base, name: str, t_star: float):
     s = base.space
-    if name in ("reward", "double"):
+    if name in paper_policies():
         return base.with_overrides(acquisition={"policy": name})
     if name == "info rate":
         return base.with_overrides(acquisition={"policy": "info_rate"})

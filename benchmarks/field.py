@@ -44,6 +44,7 @@ from noisebo.decision import grids  # noqa: E402
 from noisebo.driver import run_campaign  # noqa: E402
 from noisebo.metrics import median_iqr, rmse  # noqa: E402
 from noisebo.reward import reward  # noqa: E402
+from noisebo.registry import noise_law_names  # noqa: E402
 
 N_FINE = 2049
 DEFAULT_FIELD = {"varies": "a0"}
@@ -117,7 +118,7 @@ def main(argv=None) -> int:
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "pfm.yaml"))
     parser.add_argument("--scan", default=None)
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    parser.add_argument("--law", choices=["inv_sqrt", "power", "quadrature"], default=None)
+    parser.add_argument("--law", choices=noise_law_names(), default=None)
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--steps", type=int, default=None)

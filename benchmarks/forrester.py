@@ -33,6 +33,7 @@ from noisebo.decision import grids  # noqa: E402
 from noisebo.diagnostics import compile_count  # noqa: E402
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table  # noqa: E402
 from noisebo.reward import true_optimal_t  # noqa: E402
+from noisebo.registry import chosen_policies, policy_names  # noqa: E402
 
 def with_overrides(config, assignments: list[str]):
     """The config with SECTION.KEY=VALUE overrides (values read as YAML)."""
@@ -90,7 +91,7 @@ def run_one(config, instrument, seed: int) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
-    parser.add_argument("--policy", choices=["reward", "double", "both"], default="both")
+    parser.add_argument("--policy", choices=[*policy_names(), "both", "all"], default="both")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--inference", choices=["map", "nuts"], default=None, help="override the config's mode")
@@ -105,7 +106,7 @@ def main(argv=None) -> int:
         base = base.with_overrides(inference={"mode": args.inference})
     if args.quadrature is not None:
         base = base.with_overrides(inference={"primary_quadrature": args.quadrature})
-    policies = ["reward", "double"] if args.policy == "both" else [args.policy]
+    policies = chosen_policies(args.policy)
     instrument = build(base.instrument)
     s, rew = base.space, base.reward
     t_star = true_optimal_t(instrument.noise_law, s.t_min, s.t_max, rew.alpha, rew.beta)

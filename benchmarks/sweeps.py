@@ -28,6 +28,7 @@ from instruments import build  # noqa: E402
 from noisebo.driver import run_campaign  # noqa: E402
 from cli.main import parse_seeds  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
+from noisebo.registry import chosen_policies, policy_names  # noqa: E402
 from storage.hdf5 import read_campaign  # noqa: E402
 
 ENGINES = {
@@ -62,11 +63,11 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
     parser.add_argument("--seeds", default="0-3")
-    parser.add_argument("--policy", choices=["reward", "double", "both"], default="both")
+    parser.add_argument("--policy", choices=[*policy_names(), "both", "all"], default="both")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
     config, seeds = load_config(args.config), parse_seeds(args.seeds)
-    policies = ["reward", "double"] if args.policy == "both" else [args.policy]
+    policies = chosen_policies(args.policy)
     n = len(seeds) * len(policies)
     rows = []
     with tempfile.TemporaryDirectory(prefix="noisebo-sweeps-") as tmp, local_server(Path(tmp) / "server") as env:

@@ -208,7 +208,7 @@ def _require_server(what: str) -> None:
 def _serve(args) -> int:
     _require_server("serve needs a Prefect server that `prefect deployment run` can reach")
     seeds = parse_seeds(args.sweep_seeds)
-    policies = ["reward", "double"] if args.sweep_policy == "both" else [args.sweep_policy]
+    policies = _policies(args.sweep_policy)
     if args.interval is not None and args.interval <= 0:
         raise UsageError("--interval must be a positive number of seconds")
     for path in args.config:
@@ -234,6 +234,37 @@ def _deploy(args) -> int:
     for path in args.config:
         name = deploy_campaign(path, args.pool, args.out)
         print(f"deployed {name} to work pool {args.pool!r}; start workers with: prefect worker start --pool {args.pool}")
+    return 0
+
+
+def _policy_choices(*more: str) -> list[str]:
+    """The installed policies' names (``noisebo.registry``), then ``more``."""
+    from noisebo.registry import policy_names
+
+    return [*policy_names(), *more]
+
+
+def _policies(choice: str) -> list[str]:
+    """A sweep's policies: "both" the paper's two, "all" every installed policy that loads, or the
+    one named."""
+    from noisebo.registry import chosen_policies
+
+    return list(chosen_policies(choice))
+
+
+def _policies_listed(args) -> int:
+    from noisebo import registry
+
+    for group, title in ((registry.POLICIES, "policies (acquisition.policy)"),
+                         (registry.NOISE_LAWS, "noise laws (noise_model.mean)")):
+        print(f"{title}:")
+        for name, found in registry.installed(group).items():
+            where = f"{found.distribution} {found.distribution_version}"
+            try:
+                doc = (type(registry.load(group, name)).__doc__ or "").strip().splitlines()
+                print(f"  {name:<18} {where}: {doc[0] if doc else ''}".rstrip())
+            except registry.PluginBroken as error:
+                print(f"  {name:<18} {where}: BROKEN: {error}")
     return 0
 
 
@@ -281,7 +312,7 @@ def _report(args) -> int:
 def _sweep(args) -> int:
     seeds = parse_seeds(args.seeds)
     config = _validated(args.config)
-    policies = ["reward", "double"] if args.policy == "both" else [args.policy]
+    policies = _policies(args.policy)
     if args.workers < 1:
         raise UsageError("--workers must be at least 1")
     if args.dask_address and args.runner != "dask":
@@ -520,7 +551,7 @@ def build_parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run one campaign through the Prefect flow")
     run.add_argument("config", help="campaign YAML, e.g. data/configs/forrester.yaml")
     run.add_argument("--seed", type=int, default=0)
-    run.add_argument("--policy", choices=["reward", "double", "info_rate"], default=None)
+    run.add_argument("--policy", choices=_policy_choices(), default=None)
     run.add_argument("--out", type=Path, default=Path("data/runs"))
     _view_options(run)
     run.set_defaults(handler=_run)
@@ -536,7 +567,8 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("config", nargs="+", help="campaign YAML(s); deployments are named after each config's name")
     serve.add_argument("--out", type=Path, default=Path("data/runs"))
     serve.add_argument("--sweep-seeds", default="0-7", help="seeds of the sweep deployment: N, A-B or A,B,C")
-    serve.add_argument("--sweep-policy", choices=["reward", "double", "both"], default="both")
+    serve.add_argument("--sweep-policy", choices=_policy_choices("both", "all"), default="both",
+                       help="an installed policy, both (the paper's two) or all (every installed one)")
     when = serve.add_mutually_exclusive_group()
     when.add_argument("--cron", default=None, help="run the sweep on this cron schedule, e.g. '0 2 * * *'")
     when.add_argument("--interval", type=float, default=None, help="run the sweep every this many seconds")
@@ -562,7 +594,8 @@ def build_parser() -> argparse.ArgumentParser:
     sweep = commands.add_parser("sweep", help="run campaigns over seeds and policies in parallel")
     sweep.add_argument("config")
     sweep.add_argument("--seeds", required=True, help="N, A-B or A,B,C")
-    sweep.add_argument("--policy", choices=["reward", "double", "both"], default="both")
+    sweep.add_argument("--policy", choices=_policy_choices("both", "all"), default="both",
+                       help="an installed policy, both (the paper's two) or all (every installed one)")
     sweep.add_argument("--out", type=Path, default=Path("data/runs/sweep"))
     sweep.add_argument("--workers", type=int, default=2, help="threads, or local Dask worker processes")
     sweep.add_argument("--runner", choices=["threads", "dask", "workers"], default="threads",
@@ -574,7 +607,7 @@ def build_parser() -> argparse.ArgumentParser:
     start = commands.add_parser("start", help="create a campaign's file without running it (to measure by hand)")
     start.add_argument("config", help="campaign YAML, e.g. data/configs/forrester_manual.yaml")
     start.add_argument("--seed", type=int, default=0)
-    start.add_argument("--policy", choices=["reward", "double", "info_rate"], default=None)
+    start.add_argument("--policy", choices=_policy_choices(), default=None)
     start.add_argument("--out", type=Path, default=Path("data/runs"))
     start.set_defaults(handler=_start)
 
@@ -607,6 +640,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     instruments = commands.add_parser("instruments", help="list the installed instrument drivers")
     instruments.set_defaults(handler=_instruments)
+
+    policies = commands.add_parser("policies", help="list the installed policies and noise laws")
+    policies.set_defaults(handler=_policies_listed)
 
     inspect = commands.add_parser("inspect", help="summarise a campaign file")
     inspect.add_argument("file")

@@ -72,12 +72,13 @@ def campaign_on_workers(deployment: str, config: CampaignConfig, seed: int, out_
 def sweep(
     config: str | CampaignConfig = "data/configs/forrester.yaml",
     seeds: list[int] = [0, 1, 2, 3],  # noqa: B006 - Prefect parameters are validated copies
-    policies: list[Literal["reward", "double"]] = ["reward", "double"],  # noqa: B006
+    policies: list[str] | None = None,
     out_dir: str = "data/runs/sweep",
     per_run_dir: bool = False,
     deployment: str | None = None,
 ) -> str:
-    """Run every (seed, policy) campaign and return the path of the summary table.
+    """Run every (seed, policy) campaign and return the path of the summary table. ``policies``:
+    names of installed policies (``noisebo policies``; None: the paper's two, as the registry says).
     ``per_run_dir``: write into OUT_DIR/<scheduled start, UTC> so that scheduled runs of a
     deployment each get their own sweep instead of resuming the last one. ``deployment`` (e.g.
     "campaign/forrester", see ``noisebo deploy``): run every campaign as a run of that deployment,
@@ -91,6 +92,10 @@ def sweep(
         started = flow_run.scheduled_start_time.astimezone(timezone.utc)
         out_dir = str(Path(out_dir) / started.strftime("%Y%m%dT%H%M%SZ"))
     Path(out_dir).mkdir(parents=True, exist_ok=True)
+    if policies is None:
+        from noisebo.registry import paper_policies
+
+        policies = list(paper_policies())
     configs = [(base.with_overrides(acquisition={"policy": policy}), seed) for policy in policies for seed in seeds]
     if deployment:
         out_dir = str(Path(out_dir).resolve())

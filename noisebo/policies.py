@@ -165,11 +165,12 @@ class Policy:
     squared posterior covariance of f with the integration points (``noisebo.information``).
     ``chooses_shots``: once the noise model has converged, each shot count of
     ``information.shot_options`` is scored and the best kept (otherwise the schedule's).
-    ``paper``: one of the paper's two policies (a sweep's ``both``)."""
+    ``paper``: 0, or the rank of one of the paper's two policies (1 reward-driven, 2 double: a
+    sweep's ``both`` runs them in that order)."""
 
     uses_spread: bool = False
     chooses_shots: bool = False
-    paper: bool = False
+    paper: int = 0
 
     def acquisition_map(self, post: Posterior, shots, acq: AcquisitionConfig, rew: RewardConfig,
                         overhead_s: float = 0.0) -> jnp.ndarray:
@@ -184,7 +185,7 @@ class Policy:
 class RewardDriven(Policy):
     """The "reward" policy: acq_x * Norm(R)^gamma (Eq. 6)."""
 
-    paper = True
+    paper = 1
 
     def acquisition_map(self, post, shots, acq, rew, overhead_s=0.0):
         return reward_driven(post, shots, acq, rew)
@@ -205,7 +206,7 @@ class RewardDriven(Policy):
 class DoubleAcquisition(Policy):
     """The "double" policy: (Norm(acq_t) + Norm(acq_x)) / 2 (section 2.2.4)."""
 
-    paper = True
+    paper = 2
 
     def acquisition_map(self, post, shots, acq, rew, overhead_s=0.0):
         return double_acquisition(post, shots, acq, rew)

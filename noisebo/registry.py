@@ -129,29 +129,28 @@ def noise_law_names() -> tuple[str, ...]:
     return names(NOISE_LAWS)
 
 
-def paper_policies() -> tuple[str, ...]:
-    """The installed policies that are the paper's (a sweep's ``both``): those whose class says
-    ``paper = True``; broken ones are left out."""
+def _loadable_policies() -> list[tuple[str, object]]:
     out = []
     for name in policy_names():
         try:
-            if policy(name).paper:
-                out.append(name)
+            out.append((name, policy(name)))
         except PluginBroken:
             continue
-    return tuple(out)
+    return out
+
+
+def paper_policies() -> tuple[str, ...]:
+    """The installed policies that are the paper's (a sweep's ``both``): those whose class gives
+    ``paper`` a rank (1: reward, 2: double), in that order; broken ones are left out."""
+    ranked = sorted((int(p.paper), name) for name, p in _loadable_policies() if p.paper)
+    return tuple(name for _, name in ranked)
 
 
 def working_policies() -> tuple[str, ...]:
-    """Every installed policy that loads (a sweep's ``all``)."""
-    out = []
-    for name in policy_names():
-        try:
-            policy(name)
-        except PluginBroken:
-            continue
-        out.append(name)
-    return tuple(out)
+    """Every installed policy that loads (a sweep's ``all``): the paper's first, then the others
+    by name."""
+    paper = paper_policies()
+    return paper + tuple(name for name, _ in _loadable_policies() if name not in paper)
 
 
 def checked(group: str, name: object) -> str:
