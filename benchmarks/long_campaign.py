@@ -2,6 +2,7 @@
 it grows.
 
     python benchmarks/long_campaign.py [--points 1000] [--config PATH] [--window 100] [--no-rrd] [--json PATH]
+                                       [--reports on|off|both]
 
 Runs `noisebo run` (the Prefect flow with its temporary server, the journal, the HDF5 file and
 the Rerun recording, exactly as a user runs it) on the config with as many BO steps as make
@@ -10,7 +11,9 @@ between its line and the previous one is the decision (its ``latency_s`` in the 
 instrument (the simulator's shots, measured here on their own) plus everything else: Prefect's
 tasks, the engine, the journal (one fsync per shot), the HDF5 append and the live recording.
 The table gives, per window of points, the median and maximum of that last part and the median
-decision, and the file's bytes per point.
+decision, and the file's bytes per point. ``--reports both`` runs the campaign twice, back to
+back: without the flow run's Prefect reports (NOISEBO_PREFECT_REPORTS=0: no run name, tags, log
+lines, artifacts or events) and with them, and prints a table for each.
 """
 
 from __future__ import annotations
@@ -68,7 +71,21 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-rrd", action="store_true", help="without the Rerun recording")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--reports", choices=["on", "off", "both"], default="on",
+                        help="the flow run's Prefect reports (names, logs, artifacts, events)")
     args = parser.parse_args(argv)
+    results = {}
+    for mode in (["off", "on"] if args.reports == "both" else [args.reports]):
+        print(f"\nPrefect reports {mode}:")
+        results[mode] = one_run(args, mode)
+        if results[mode] is None:
+            return 1
+    if args.json:
+        args.json.write_text(json.dumps(results if args.reports == "both" else results[args.reports], indent=1))
+    return 0
+
+
+def one_run(args, reports: str) -> dict | None:
 
     from noisebo.config import load_config
     from storage.hdf5 import read_campaign
@@ -78,13 +95,13 @@ def main(argv=None) -> int:
     work = Path(tempfile.mkdtemp(prefix="noisebo-long-"))
     config_path = work / "long.yaml"
     config_path.write_text(yaml.safe_dump(config.model_dump(mode="json")))
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "NOISEBO_PREFECT_REPORTS": "1" if reports == "on" else "0"}
     env.pop("PREFECT_API_URL", None)
     lines, code = timed_lines([sys.executable, "-m", "cli.main", "run", str(config_path), "--seed", str(args.seed),
                                "--out", str(work), *(["--no-rrd"] if args.no_rrd else [])], env)
     if code != 0:
         print(f"noisebo run failed (exit {code}); last lines:\n" + "\n".join(line for _, line in lines[-5:]))
-        return 1
+        return None
     path = next(work.glob("*.h5"))
     file = read_campaign(path)
     at = {int(m.group(1)): t for t, line in lines if (m := STEP_LINE.match(line))}
@@ -115,10 +132,8 @@ def main(argv=None) -> int:
         summary.append(row)
         print(f"{row['points']:>11} {row['decision_s']:>8.3f}s {1e3 * row['other_median_s']:>12.1f}ms "
               f"{1e3 * row['other_max_s']:>9.1f}ms {row['gap_median_s']:>11.3f}s")
-    if args.json:
-        args.json.write_text(json.dumps({"summary": summary, "points": rows}, indent=1))
     os.environ.get("KEEP") or __import__("shutil").rmtree(work, ignore_errors=True)
-    return 0
+    return {"summary": summary, "points": rows}
 
 
 if __name__ == "__main__":

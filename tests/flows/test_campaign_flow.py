@@ -110,6 +110,13 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
             assert len(shots["value"]) == sum(p.n_shots for p in pure.state.points)
     summary = json.loads((tmp_path / "sweep_summary.json").read_text())
     assert len(summary["records"]) == 6
+    from prefect import get_client
+    from prefect.client.schemas.filters import ArtifactFilter, ArtifactFilterKey
+
+    with get_client(sync_client=True) as client:  # the sweep's summary as an artifact of its flow run
+        artifact = client.read_artifacts(artifact_filter=ArtifactFilter(key=ArtifactFilterKey(any_=["sweep-tiny-summary"])))[-1]
+    assert artifact.data.startswith(f"# sweep tiny\n\n6 of 6 campaigns finished; files in `{tmp_path}`\n")
+    assert "| reward | 3 |" in artifact.data
     assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000
     # `noisebo report DIR` redraws the same from the files alone
     from view.report import report
