@@ -13,7 +13,7 @@ a report that cannot be sent never stops the campaign.
 
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Literal, Sequence
+from typing import Callable, Sequence
 
 from prefect import flow
 from prefect.utilities.annotations import quote
@@ -173,7 +173,7 @@ def _viewed(recorder: Recorder, instrument, record_rrd: bool, live: str | None, 
 def campaign(
     config: str | CampaignConfig = "data/configs/forrester.yaml",
     seed: int = 0,
-    policy: Literal["reward", "double", "info_rate"] | None = None,
+    policy: str | None = None,
     out_dir: str = "data/runs",
     show_progress: bool = True,
     record_rrd: bool = True,
