@@ -34,4 +34,6 @@ def test_a_deployment_run_serves_its_instrument_through_the_bridge(prefect_serve
         stop(server)
     assert run.returncode == 0, watched + serve_log.read_text()[-3000:]
     assert client.returncode == 0 and served.strip() == "completed", err
-    assert_same_campaign(out / f"killed_reward_s{SEED:04d}.h5", reference(SEED))
+    files = sorted(out.glob(f"killed-reward-s{SEED}-*/killed_reward_s{SEED:04d}.h5"))  # the run's own folder
+    assert len(files) == 1, sorted(out.rglob("*"))
+    assert_same_campaign(files[0], reference(SEED))
