@@ -11,6 +11,7 @@ artifacts, an event per status change) is sent by ``flows.reporting.RunReport`` 
 a report that cannot be sent never stops the campaign.
 """
 
+import logging
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Sequence
@@ -90,8 +91,11 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
 
     def decide(state):
         if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
-            say(f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
-                "(about 10 s, or 1-3 s with the compilation cache of an earlier run)")
+            line = (f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
+                    "(about 10 s, or 1-3 s with the compilation cache of an earlier run)")
+            say(line)
+            if report is not None:
+                report.log([(logging.INFO, line)])
             _COMPILED.append(True)
         return ops.decide(quote(state))
 

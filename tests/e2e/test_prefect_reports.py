@@ -82,6 +82,7 @@ def test_a_campaign_is_named_tagged_logged_summarised_and_announced(prefect_serv
     assert sum(line.startswith("seed point: ") for line in lines) == 3
     assert sum(line.startswith("step ") for line in lines) == 4  # one line per point
     assert "campaign completed" in lines
+    assert sum("the first decision in a process compiles the models" in line for line in lines) == 1
 
     artifacts = api.read_artifacts(artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[flow_run.id])))
     by_key = {a.key: a for a in artifacts if a.key}
