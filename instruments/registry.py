@@ -18,7 +18,6 @@ pyproject.toml.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
 
 from pydantic import BaseModel, ValidationError
@@ -26,6 +25,8 @@ from pydantic import BaseModel, ValidationError
 from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
 from noisebo.events import DriverInfo
 from noisebo.reduction import register_reduction
+from noisebo.registry import Installed
+from noisebo.registry import installed as installed_in
 
 GROUP = "noisebo.instruments"
 
@@ -38,24 +39,9 @@ class DriverBroken(ConfigError):
     """An installed driver that cannot be loaded or does not provide what a driver must."""
 
 
-@dataclass(frozen=True)
-class Installed:
-    """One installed driver: its name, the object path its entry point names, and the
-    distribution (package) that provides it."""
-
-    name: str
-    target: str
-    distribution: str
-    distribution_version: str
-
-
 def installed() -> dict[str, Installed]:
     """Every installed driver by name."""
-    out = {}
-    for ep in entry_points(group=GROUP):
-        dist = getattr(ep, "dist", None)
-        out[ep.name] = Installed(ep.name, ep.value, dist.name if dist else "?", dist.version if dist else "?")
-    return dict(sorted(out.items()))
+    return installed_in(GROUP)
 
 
 def _entry_point(kind: str) -> EntryPoint:

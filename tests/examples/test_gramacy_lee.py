@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from instruments.registry import settings_of
 from noisebo.config import ConfigError, InstrumentConfig, lax_fields
 from noisebo.driver import run_campaign
 from storage import journal
 from storage.hdf5 import read_campaign
+from tests.examples import packages
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "gramacy_lee"
@@ -29,22 +29,13 @@ SEED = 3
 @pytest.fixture(scope="module")
 def target(tmp_path_factory):
     """The example package installed with pip into a folder that only PYTHONPATH points at."""
-    folder = tmp_path_factory.mktemp("site")
-    isolation = [] if importlib.util.find_spec("setuptools") is None else ["--no-build-isolation"]
-    subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--disable-pip-version-check", "--no-deps",
-                    *isolation, "--target", str(folder), str(EXAMPLE)], check=True, capture_output=True, timeout=300)
-    return folder
+    return packages.install(EXAMPLE, tmp_path_factory.mktemp("site"))
 
 
 @pytest.fixture
 def config_path(tmp_path):
     """The example's config, made small so that the test is quick."""
-    data = yaml.safe_load((EXAMPLE / "config.yaml").read_text())
-    data["space"] |= {"n_x": 40, "n_t": 30}
-    data["schedule"] |= {"n_steps": 4, "shots_before": 10}
-    path = tmp_path / "gramacy-lee.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path
+    return packages.small_config(EXAMPLE, tmp_path / "gramacy-lee.yaml")
 
 
 def noisebo(args, env, **kwargs):
