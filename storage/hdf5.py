@@ -601,17 +601,31 @@ def read_summary(f: h5py.File) -> dict | None:
 
 def read_spectra(path: Path, point: int) -> np.ndarray:
     """The raw sweeps of one point, (n_shots, 3, N): rows frequency Hz, amplitude pm, phase deg."""
+    with spectra_reader(path) as spectra:
+        return spectra(point)
+
+
+@contextlib.contextmanager
+def spectra_reader(path: Path):
+    """``read_spectra`` for many points of one file: a function point -> its raw sweeps, over the
+    file opened (and its checksums of structure checked) once."""
     from storage import live
 
     with _campaign(path) as (f, attrs):
-        if _is_live(attrs):
-            found = live.read_spectra(f, path, point)
-        else:
-            name = f"spectra/point_{point:04d}"
-            found = f[name][()] if name in f else None
-    if found is None:
-        raise CampaignFileError(f"{path}: no spectra for point {point}")
-    return found
+        appending = _is_live(attrs)
+
+        def spectra(point: int) -> np.ndarray:
+            with reading(path):
+                if appending:
+                    found = live.read_spectra(f, path, point)
+                else:
+                    name = f"spectra/point_{point:04d}"
+                    found = f[name][()] if name in f else None
+            if found is None:
+                raise CampaignFileError(f"{path}: no spectra for point {point}")
+            return found
+
+        yield spectra
 
 
 def read_shot_fits(path: Path) -> dict | None:

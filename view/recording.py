@@ -150,19 +150,19 @@ def _latest_sweep(frame: Frame, state) -> tuple[np.ndarray | None, dict | None]:
     return np.asarray(entry.shots[-1].reading.spectrum), None if fit is None else {k: float(getattr(fit, k)) for k in FIT_KEYS}
 
 
-def last_sweep(h5_path: Path, data: dict, fits: dict, point: int) -> tuple[np.ndarray, dict | None]:
-    """The last raw sweep (3, N) of ``point`` in a campaign file and its fit (every column of
-    ``/shots/fit`` at that shot; None if the point has no shot rows)."""
-    from storage.hdf5 import read_spectra
-
+def last_sweep(spectra: Callable[[int], np.ndarray], data: dict, fits: dict, point: int,
+               ) -> tuple[np.ndarray, dict | None]:
+    """The last raw sweep (3, N) of ``point`` (``spectra``: point -> its sweeps, from
+    ``storage.hdf5.spectra_reader``) and its fit (every column of ``/shots/fit`` at that shot;
+    None if the point has no shot rows)."""
     mine = np.flatnonzero(np.asarray(data["shots"]["point"]) == point)
     fit = {k: float(v[mine[-1]]) for k, v in fits.items()} if mine.size else None
-    return read_spectra(h5_path, point)[-1], fit
+    return spectra(point)[-1], fit
 
 
 def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], None] = print) -> Path:
     """Rebuild a campaign's recording from its HDF5 file alone; returns the .rrd path."""
-    from storage.hdf5 import read_campaign, read_shot_fits
+    from storage.hdf5 import read_campaign, read_shot_fits, spectra_reader
 
     h5_path = Path(h5_path)
     data = read_campaign(h5_path)
@@ -174,11 +174,12 @@ def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], No
     all_frames = frames(data, config)
     view.fit_ranges(all_frames)
     fits = read_shot_fits(h5_path)
-    for frame in all_frames:
-        spectrum, fit = None, None
-        if fits is not None and frame.latest_point is not None:
-            spectrum, fit = last_sweep(h5_path, data, fits, frame.latest_point)
-        view.log(frame, spectrum, fit)
+    with spectra_reader(h5_path) as spectra:
+        for frame in all_frames:
+            spectrum, fit = None, None
+            if fits is not None and frame.latest_point is not None:
+                spectrum, fit = last_sweep(spectra, data, fits, frame.latest_point)
+            view.log(frame, spectrum, fit)
     view.close()
     if not view.enabled:
         raise RuntimeError(f"could not write the recording {rrd_path}")

@@ -19,7 +19,7 @@ from noisebo.config import CampaignConfig, parse_config
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
 from noisebo.reward import true_optimal_t
 from noisebo.state import format_position
-from storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits
+from storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits, read_spectra
 from view.area import axis_labels, draw_image
 from view.recording import instrument_curves, last_sweep, true_optimal_map
 from view.style import step_colours
@@ -262,7 +262,7 @@ def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
     from noisebo.sho import sho_amplitude
 
     last = len(data["points"]["x"]) - 1
-    spectrum, fit = last_sweep(path, data, fits, last)
+    spectrum, fit = last_sweep(lambda point: read_spectra(path, point), data, fits, last)
     freq, amp = spectrum[0].astype(np.float64), spectrum[1].astype(np.float64)
     fig = Figure(figsize=(7, 4.2), layout="constrained")
     ax = fig.subplots()
