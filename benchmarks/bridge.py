@@ -29,9 +29,9 @@ sys.path.insert(0, str(ROOT))
 from bridge.client import Spectrum, serve_instrument
 from instruments import build
 from instruments.registry import driver_info, validated
+from noisebo.campaign.driver import drive, now_utc
+from noisebo.campaign.engine import new_campaign
 from noisebo.config import load_config
-from noisebo.driver import drive, now_utc
-from noisebo.engine import new_campaign
 from noisebo.events import DriverInfo, ShotTaken
 from noisebo.keys import MEASURE, numpy_rng
 from noisebo.reduction import Reading

@@ -10,7 +10,7 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
 - "fixed t_min", "fixed t*", "fixed t_max": the reward-driven policy with every point at one t
   (t* from the simulator's own noise law and the configured reward) and ``shots_after`` shots
   (at least 2) from the first point on: with no t to learn, no point needs the 30 shots;
-- "info rate": ``acquisition.policy: info_rate`` (``noisebo.information``).
+- "info rate": ``acquisition.policy: info_rate`` (``noisebo.acquisition.information``).
 
 After every decision it scores the model that decision was made with (the GP mean on the x grid,
 interpolated to 200 evenly spaced positions for one axis) against the simulator's truth, beside
@@ -39,12 +39,12 @@ sys.path.insert(0, str(ROOT))
 
 from instruments import build  # noqa: E402
 from instruments.registry import validated  # noqa: E402
+from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
-from noisebo.decision import grids  # noqa: E402
-from noisebo.driver import run_campaign  # noqa: E402
 from noisebo.metrics import median_iqr, relative_error, rmse  # noqa: E402
+from noisebo.models.grids import grids  # noqa: E402
+from noisebo.models.reward import true_optimal_t  # noqa: E402
 from noisebo.registry import paper_policies  # noqa: E402
-from noisebo.reward import true_optimal_t  # noqa: E402
 
 DESIGNS = (*paper_policies(), "fixed t_min", "fixed t*", "fixed t_max", "info rate")
 NO_STEP_LIMIT = 1_000_000

@@ -22,8 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from instruments import build  # noqa: E402
+from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import CampaignConfig, load_config  # noqa: E402
-from noisebo.driver import run_campaign  # noqa: E402
 
 CONFIGS = ROOT / "data" / "configs"
 

@@ -39,11 +39,11 @@ from pfm2d import on_scan  # noqa: E402
 
 from instruments import build  # noqa: E402
 from instruments.registry import validated  # noqa: E402
+from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import ConfigError, load_config  # noqa: E402
-from noisebo.decision import grids  # noqa: E402
-from noisebo.driver import run_campaign  # noqa: E402
 from noisebo.metrics import median_iqr, rmse  # noqa: E402
-from noisebo.reward import reward  # noqa: E402
+from noisebo.models.grids import grids  # noqa: E402
+from noisebo.models.reward import reward  # noqa: E402
 from noisebo.registry import noise_law_names  # noqa: E402
 
 N_FINE = 2049

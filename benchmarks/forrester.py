@@ -27,13 +27,14 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from instruments import build  # noqa: E402
-from noisebo.driver import run_campaign  # noqa: E402
+from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
-from noisebo.decision import grids  # noqa: E402
 from noisebo.diagnostics import compile_count  # noqa: E402
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table  # noqa: E402
-from noisebo.reward import true_optimal_t  # noqa: E402
+from noisebo.models.grids import grids  # noqa: E402
+from noisebo.models.reward import true_optimal_t  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402
+
 
 def with_overrides(config, assignments: list[str]):
     """The config with SECTION.KEY=VALUE overrides (values read as YAML)."""

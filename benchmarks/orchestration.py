@@ -2,7 +2,7 @@
 
     python benchmarks/orchestration.py [--config PATH] [--seeds N] [--policy reward|double|both]
 
-For each campaign it runs the pure core loop (noisebo.campaign.run_campaign) and the campaign
+For each campaign it runs the pure core loop (noisebo.campaign.driver.run_campaign) and the campaign
 flow (Prefect tasks, journal, an HDF5 snapshot per point) in this process, after a warm-up flow
 run that absorbs the temporary Prefect server's start and XLA compilation. It prints, per BO
 step: the flow's wall time minus the pure loop's (everything the pipeline adds), and the flow's
@@ -38,7 +38,7 @@ import h5py  # noqa: E402
 from flows.campaign import campaign  # noqa: E402
 from flows.local import flow_settings  # noqa: E402
 from instruments import build  # noqa: E402
-from noisebo.driver import run_campaign  # noqa: E402
+from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402
 

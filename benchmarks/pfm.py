@@ -30,8 +30,8 @@ from forrester import run_one  # noqa: E402
 from instruments import build  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 from noisebo.metrics import summarise_campaigns, summary_table  # noqa: E402
+from noisebo.models.reward import true_optimal_t  # noqa: E402
 from noisebo.reduction import shot_value  # noqa: E402
-from noisebo.reward import true_optimal_t  # noqa: E402
 
 BASELINES = {"fixed 2 s": 2.0, "fixed 0.1 s": 0.1}
 

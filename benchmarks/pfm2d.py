@@ -31,11 +31,11 @@ sys.path.insert(0, str(ROOT))
 
 from instruments import build  # noqa: E402
 from instruments.registry import validated  # noqa: E402
+from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
-from noisebo.decision import grids  # noqa: E402
-from noisebo.driver import run_campaign  # noqa: E402
 from noisebo.metrics import median_iqr, relative_error, rmse  # noqa: E402
-from noisebo.reward import true_optimal_t  # noqa: E402
+from noisebo.models.grids import grids  # noqa: E402
+from noisebo.models.reward import true_optimal_t  # noqa: E402
 
 DESIGNS = {"t optimised": None, "fixed 0.1 s": 0.1, "fixed 2 s": 2.0}
 BUDGETS_S = (30, 60, 120, 240, 480, 960)

@@ -4,7 +4,7 @@
                                  [--design grid|distinct] [--config PATH] [--json PATH]
 
 For each n, a fresh process builds a campaign state of n Forrester points (30 shots each, noise
-drawn from the simulator's law) and calls ``noisebo.decision.decide`` on it: the first call (it
+drawn from the simulator's law) and calls ``noisebo.campaign.decision.decide`` on it: the first call (it
 compiles; a multi-start fit), then ``--repeats`` warm calls (steps that start from the previous
 fit, as 7 steps in 8 do once the noise model has converged; the state says it has) and one
 multi-start call (every ``inference.restart_every``-th step, and every step before convergence). It prints the first call's time, the median warm call, the multi-start call, the XLA
@@ -54,7 +54,7 @@ def state_of(config, n: int, design: str = "grid", seed: int = 0):
 
     from instruments import build
     from instruments.registry import validated
-    from noisebo.decision import grids
+    from noisebo.models.grids import grids
     from noisebo.state import CampaignState, Point
 
     simulator = build(validated(config).instrument)
@@ -97,8 +97,8 @@ def _timed(fn, *args):
 
 def one_size(config_path: str, n: int, repeats: int, mode: str, design: str) -> dict:
     """The figures of one n, in this process."""
+    from noisebo.campaign.decision import decide
     from noisebo.config import load_config
-    from noisebo.decision import decide
 
     compiles = _compile_counter()
     config = load_config(config_path).with_overrides(inference={"mode": mode})
@@ -118,8 +118,9 @@ def one_size(config_path: str, n: int, repeats: int, mode: str, design: str) -> 
 
 def crossing(config_path: str) -> dict:
     """Seconds of the decision that crosses capacity 32 -> 64, in line and compiled ahead."""
+    from noisebo.campaign.compile_ahead import capacities_ahead, compile_ahead
+    from noisebo.campaign.decision import decide
     from noisebo.config import load_config
-    from noisebo.decision import capacities_ahead, compile_ahead, decide
 
     compiles = _compile_counter()
     out = {}

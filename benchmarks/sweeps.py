@@ -23,10 +23,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from cli.main import parse_seeds  # noqa: E402
 from flows.processes import BIN, local_server, start, stop, wait_for  # noqa: E402
 from instruments import build  # noqa: E402
-from noisebo.driver import run_campaign  # noqa: E402
-from cli.main import parse_seeds  # noqa: E402
+from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402
 from storage.hdf5 import read_campaign  # noqa: E402

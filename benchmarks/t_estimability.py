@@ -24,9 +24,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from instruments import build  # noqa: E402
-from noisebo.campaign import seed_points  # noqa: E402
+from noisebo.campaign.steps import seed_points  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
-from noisebo.reward import true_optimal_t  # noqa: E402
+from noisebo.models.reward import true_optimal_t  # noqa: E402
 
 N_BEFORE_CONVERGENCE = 3  # BO points measured with shots_before: converged at step 2, the earliest
 

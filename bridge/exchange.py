@@ -24,8 +24,8 @@ from bridge.wire import (
     outcome_of,
     request_json,
 )
-from noisebo import engine
-from noisebo.engine import EngineState
+from noisebo.campaign import engine
+from noisebo.campaign.engine import EngineState
 from noisebo.events import Done, Request, ShotError
 from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
 from noisebo.reduction import Reading

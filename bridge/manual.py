@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from bridge.wire import ReadingShape, WireError, campaign_id, request_json, spectrum_of
-from noisebo import engine
-from noisebo.engine import EngineState
+from noisebo.campaign import engine
+from noisebo.campaign.engine import EngineState
 from noisebo.events import DecisionDue, Done, Event, Request, ShotError
 from noisebo.reduction import Reading
 from storage.recorder import Recorder

@@ -16,8 +16,8 @@ import noisebo
 from bridge.exchange import Exchange
 from bridge.server import BridgeServer
 from bridge.wire import ReadingShape
+from noisebo.campaign.engine import EngineState
 from noisebo.config import Count, FrozenModel, Number
-from noisebo.engine import EngineState
 from noisebo.failures import InstrumentUnavailable
 from noisebo.reduction import Reading
 

@@ -26,11 +26,19 @@ import math
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import ConfigDict, Discriminator, Field, Strict, Tag, ValidationError, model_validator
+from pydantic import (
+    ConfigDict,
+    Discriminator,
+    Field,
+    Strict,
+    Tag,
+    ValidationError,
+    model_validator,
+)
 
 from noisebo import config
+from noisebo.campaign.engine import EngineState
 from noisebo.config import FrozenModel
-from noisebo.engine import EngineState
 from noisebo.events import Request, ShotError
 from noisebo.reduction import Reading
 

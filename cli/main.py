@@ -436,8 +436,8 @@ def _inspect(args) -> int:
 def _start(args) -> int:
     from bridge import manual
     from instruments.registry import driver_info
-    from noisebo import engine
-    from noisebo.driver import now_utc
+    from noisebo.campaign import engine
+    from noisebo.campaign.driver import now_utc
     from storage.recorder import Recorder, campaign_path, package_versions
 
     config = _validated(args.config)

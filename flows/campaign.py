@@ -1,4 +1,4 @@
-"""The campaign flow: the engine's loop (``noisebo.driver.drive``) with each point's shots a
+"""The campaign flow: the engine's loop (``noisebo.campaign.driver.drive``) with each point's shots a
 ``measure point`` task, each decision a ``decide`` task, and every event journaled before it counts.
 
 The journal is the campaign's memory: the flow starts from the state the recorder replayed, so
@@ -22,10 +22,17 @@ from prefect.utilities.annotations import quote
 from flows import abort
 from flows.reporting import RunReport, run_name
 from instruments import build, registry
+from noisebo.campaign.driver import drive, now_utc
+from noisebo.campaign.engine import KEEP_BUDGET, EngineState, ask, new_campaign
 from noisebo.config import CampaignConfig, load_config
-from noisebo.driver import drive, now_utc
-from noisebo.engine import KEEP_BUDGET, EngineState, ask, new_campaign
-from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status, StatusChanged
+from noisebo.events import (
+    Decided,
+    Event,
+    MoreShots,
+    PointCommitted,
+    Status,
+    StatusChanged,
+)
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
 from noisebo.state import format_position
 from storage.recorder import Recorder, campaign_path, package_versions, read_started

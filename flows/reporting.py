@@ -23,8 +23,8 @@ import time
 from pathlib import Path
 from typing import Callable, Sequence
 
-from noisebo.engine import EngineState
-from noisebo.events import Event, PointCommitted, ShotFailed, Status, StatusChanged
+from noisebo.campaign.engine import EngineState
+from noisebo.events import Event, ShotFailed, Status, StatusChanged
 from noisebo.state import format_position
 
 PROGRESS_INTERVAL_S = 1.0

@@ -17,7 +17,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from noisebo.driver import simulates
+from noisebo.campaign.driver import simulates
 from noisebo.reduction import Reading
 
 
@@ -46,7 +46,7 @@ class Simulator(Protocol):
 @runtime_checkable
 class Follower(Protocol):
     def committed(self, state) -> None:
-        """Sees the campaign (``noisebo.engine.EngineState``) when the loop starts and after
+        """Sees the campaign (``noisebo.campaign.engine.EngineState``) when the loop starts and after
         every commit, once its events are journaled: the network bridge serves the shot the
         state wants next and acknowledges a reading once the state holds it."""
 

@@ -360,7 +360,7 @@ class AcquisitionConfig(FrozenModel):
     one by entry point, ``noisebo.registry``). Built in: "reward" (acq_x * Norm(R)^gamma),
     "double" ((Norm(acq_t) + Norm(acq_x)) / 2), or "info_rate": the point (x, t and, once the
     noise model has converged, its number of shots) that lowers the integrated posterior
-    variance of f most per second of instrument time (``noisebo.information``); it needs no
+    variance of f most per second of instrument time (``noisebo.acquisition.information``); it needs no
     reward and ignores ``f_acquisition``.
     ``f_acquisition``: UE, EI or UCB on f; ``maximize`` sets EI/UCB's direction.
     """
@@ -420,7 +420,7 @@ class NoiseFieldConfig(FrozenModel):
 class NoiseModelConfig(FrozenModel):
     """Structured GP for the single-shot noise standard deviation Noise(t).
 
-    ``mean``: the name of an installed noise law (``noisebo.noise_laws``; ``noisebo policies``
+    ``mean``: the name of an installed noise law (``noisebo.models.noise_laws``; ``noisebo policies``
     lists them, a package adds one by entry point). Built in: "inv_sqrt" is the paper's
     A1/sqrt(t) + A0; "power" is A1/t^p + A0 with p inferred; "quadrature" is sqrt(A1^2/t + A0^2),
     for a shot-noise source and an independent time-independent one whose variances add.
@@ -429,7 +429,7 @@ class NoiseModelConfig(FrozenModel):
     (weighted by their larger sampling error) instead of freezing the noise model's data.
     ``field``: None (default) for noise that does not depend on x, as the paper assumes; a
     ``NoiseFieldConfig`` to learn how the law's time-independent part (and optionally the
-    time-dependent one) varies over x (``noisebo.noise_field``): the optimal time becomes t*(x).
+    time-dependent one) varies over x (``noisebo.models.noise_field``): the optimal time becomes t*(x).
     """
 
     mean: NoiseLawName = "inv_sqrt"

@@ -1,7 +1,7 @@
 """What a campaign is made of: typed events (the journal's records, from the core to the file),
 and what the engine asks for next.
 
-A campaign is the fold of its events (``noisebo.engine.apply``), in the order written:
+A campaign is the fold of its events (``noisebo.campaign.engine.apply``), in the order written:
 
     Started        config, seed, the driver, versions, start time (first, once)
     Decided        one BO step's proposal and model outputs (before the point's shots)
@@ -21,8 +21,8 @@ from typing import Union
 
 import numpy as np
 
+from noisebo.acquisition.records import Decision
 from noisebo.config import CampaignConfig
-from noisebo.decision import Decision
 from noisebo.reduction import Reading, ShotValue
 from noisebo.state import Point
 

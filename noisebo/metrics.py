@@ -47,11 +47,11 @@ def campaign_figures(
     final f prediction (interpolated from the x grid) with the truth at 200 evenly spaced x (for d > 1 axes, at the reference points). Either
     is None when the instrument does not know its truth. ``converged_step``: the first step at
     which the campaign's own convergence rule held (None if it never did)."""
-    from noisebo.reward import true_optimal_t
+    from noisebo.models.reward import true_optimal_t
 
     s, rew = config.space, config.reward
     t_star = None
-    from noisebo.driver import simulates
+    from noisebo.campaign.driver import simulates
 
     simulator = simulates(instrument)
     if simulator:

@@ -140,3 +140,22 @@ def usable(values: Sequence[ShotValue], needed: int) -> np.ndarray:
         raise NoUsableShots(f"{good.size} of {len(values)} shots usable, {needed} needed ({'; '.join(reasons)})",
                             needed - good.size, len(values) - good.size)
     return good
+
+
+class Reduced(NamedTuple):
+    """A point from its shots: value = mean; shot_std = sample sd (ddof=1; NaN below 2 shots)."""
+
+    value: float
+    shot_std: float
+    n_shots: int
+
+
+def reduce_shots(values: Sequence[float]) -> Reduced:
+    """Mean and sample standard deviation of one point's repeated shots."""
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.ndim != 1 or arr.size == 0:
+        raise ValueError(f"need a non-empty 1-D sequence of shot values, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("shot values must be finite")
+    std = float(arr.std(ddof=1)) if arr.size > 1 else float("nan")
+    return Reduced(float(arr.mean()), std, int(arr.size))

@@ -9,8 +9,8 @@ A package adds a policy (or a noise law) by declaring, in its pyproject.toml,
     [project.entry-points."noisebo.noise_laws"]
     my-law = "my_package.law:MyLaw"
 
-where ``MyPolicy`` is a class with the members of ``noisebo.policies.Policy`` (subclass it to
-inherit the defaults) and ``MyLaw`` one with those of ``noisebo.noise_laws.NoiseLaw``. The
+where ``MyPolicy`` is a class with the members of ``noisebo.acquisition.policies.Policy`` (subclass it to
+inherit the defaults) and ``MyLaw`` one with those of ``noisebo.models.noise_laws.NoiseLaw``. The
 entry point's name is what a config's ``acquisition.policy`` (``noise_model.mean``) says. The
 built-in policies and laws register the same way in noisebo's own pyproject.toml.
 

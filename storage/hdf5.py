@@ -28,13 +28,14 @@ from typing import Sequence
 import h5py
 import numpy as np
 
-from noisebo.decision import Decision, grids
-from storage.faults import crash_point
+from noisebo.acquisition.records import Decision
+from noisebo.campaign.engine import EngineState, PointEntry
+from noisebo.events import ShotFailed, ShotTaken
+from noisebo.models.grids import grids
 from storage import manifest
+from storage.faults import crash_point
 from storage.integrity import NO_JOURNAL, CampaignFileError, Opening, examine
 from storage.journal import _fsync_dir
-from noisebo.engine import EngineState, PointEntry
-from noisebo.events import ShotFailed, ShotTaken
 
 SCHEMA = "noisebo.campaign"
 SCHEMA_VERSION = 3

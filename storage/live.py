@@ -42,15 +42,42 @@ import h5py
 import numpy as np
 from h5py import h5s
 
-from noisebo.engine import EngineState
+from noisebo.campaign.engine import EngineState
+from storage import manifest
 from storage.faults import crash_point
 from storage.hdf5 import (
-    ARRAY_COLUMNS, FAILURE_COLUMNS, FAILURE_TEXT, FAILURES_DESCRIPTION, FIT_NOTE, FIT_UNITS, LIBVER, MUTABLE_ATTRS,
-    POINT_COLUMNS, POINT_STEP, SHOT_COLUMNS, SHOT_TEXT, SPECTRA_DESCRIPTION, SPECTRA_ROWS, STEP_COLUMNS,
-    CampaignFileError, array_dtype, array_shapes, column_dtype, failure_rows, fill_grid, fill_summary, fsync_file,
-    hyperparameter_names, point_rows, root_attrs, shot_rows, spectra_of, step_rows, temporary_path, x_tail,
+    ARRAY_COLUMNS,
+    FAILURE_COLUMNS,
+    FAILURE_TEXT,
+    FAILURES_DESCRIPTION,
+    FIT_NOTE,
+    FIT_UNITS,
+    LIBVER,
+    MUTABLE_ATTRS,
+    POINT_COLUMNS,
+    POINT_STEP,
+    SHOT_COLUMNS,
+    SHOT_TEXT,
+    SPECTRA_DESCRIPTION,
+    SPECTRA_ROWS,
+    STEP_COLUMNS,
+    CampaignFileError,
+    array_dtype,
+    array_shapes,
+    column_dtype,
+    failure_rows,
+    fill_grid,
+    fill_summary,
+    fsync_file,
+    hyperparameter_names,
+    point_rows,
+    root_attrs,
+    shot_rows,
+    spectra_of,
+    step_rows,
+    temporary_path,
+    x_tail,
 )
-from storage import manifest
 from storage.journal import _fsync_dir
 
 LAYOUT = "appending"

@@ -19,9 +19,16 @@ import platform
 from pathlib import Path
 from typing import Sequence
 
-from noisebo import engine
-from noisebo.engine import EngineState
-from noisebo.events import Event, PointCommitted, Started, Status, StatusChanged, Summarised
+from noisebo.campaign import engine
+from noisebo.campaign.engine import EngineState
+from noisebo.events import (
+    Event,
+    PointCommitted,
+    Started,
+    Status,
+    StatusChanged,
+    Summarised,
+)
 from storage import journal, records
 from storage.hdf5 import CampaignFileError, stray_temporaries, write_snapshot
 from storage.journal import JournalError, JournalWriter

@@ -12,12 +12,23 @@ from dataclasses import asdict, fields
 
 import numpy as np
 
+from noisebo.acquisition.records import Decision
+from noisebo.campaign.engine import EngineError, EngineState, replay
 from noisebo.config import parse_config
-from noisebo.decision import Decision
-from noisebo.engine import EngineError, EngineState, replay
 from noisebo.events import (
-    BudgetChanged, Decided, DriverInfo, Event, MoreShots, PointCommitted, ShotFailed, ShotTaken, Started, Status,
-    StatusChanged, Summarised, Summary,
+    BudgetChanged,
+    Decided,
+    DriverInfo,
+    Event,
+    MoreShots,
+    PointCommitted,
+    ShotFailed,
+    ShotTaken,
+    Started,
+    Status,
+    StatusChanged,
+    Summarised,
+    Summary,
 )
 from noisebo.reduction import Reading, ShotValue
 from noisebo.sho import SHOFit

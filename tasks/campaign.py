@@ -10,15 +10,15 @@ from typing import Sequence
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
-from noisebo import driver, engine
-from noisebo.engine import EngineState
+from noisebo.campaign import driver, engine
+from noisebo.campaign.engine import EngineState
 from noisebo.events import Event
 
 
 @task(name="measure point", cache_policy=NO_CACHE)
 def measure_point(instrument, state: EngineState, committed: driver.Commit) -> EngineState:
     """The shots of the point under way, each committed (journaled) as it is taken
-    (``noisebo.driver.take_point``): one task per point, not per shot, keeps Prefect's
+    (``noisebo.campaign.driver.take_point``): one task per point, not per shot, keeps Prefect's
     bookkeeping to a few milliseconds per point."""
     return driver.take_point(instrument, state, committed)
 

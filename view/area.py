@@ -1,7 +1,7 @@
 """Pictures of x over two axes: values on the reference grid as images, points as markers.
 
 For a two-axis space the reference points are the display grid, axis 0 varying slowest
-(``noisebo.search.reference_points``), so a per-point array (m,) reshapes to (n0, n1); images
+(``noisebo.models.grids.reference_points``), so a per-point array (m,) reshapes to (n0, n1); images
 are drawn with axis 0 across and axis 1 up.
 """
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from noisebo.config import CampaignConfig
-from noisebo.reward import normalise, reward
+from noisebo.models.reward import normalise, reward
 from noisebo.state import format_position
 
 POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured")

@@ -13,7 +13,7 @@ from typing import Callable
 import numpy as np
 
 from noisebo.config import CampaignConfig, parse_config
-from noisebo.decision import grids
+from noisebo.models.grids import grids
 from view.frames import Frame, frame_at, frames, n_frames
 from view.rerun_view import RerunView
 
@@ -107,7 +107,13 @@ class CampaignRecording:
         needs: the per-step arrays by reference and the shots added point by point, so a frame of
         a long campaign costs what is new, not a copy of everything (the finished campaign's
         summary frame, once, takes the whole tables)."""
-        from storage.hdf5 import array_shapes, campaign_tables, hyperparameter_names, point_rows, step_rows
+        from storage.hdf5 import (
+            array_shapes,
+            campaign_tables,
+            hyperparameter_names,
+            point_rows,
+            step_rows,
+        )
 
         if state.summary is not None:
             return campaign_tables(state)

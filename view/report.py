@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 
 from noisebo.config import CampaignConfig, parse_config
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
-from noisebo.reward import true_optimal_t
+from noisebo.models.reward import true_optimal_t
 from noisebo.state import format_position
 from storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits, read_spectra
 from view.area import axis_labels, draw_image
@@ -177,7 +177,6 @@ def _points_by_value(ax, data: dict, config: CampaignConfig) -> None:
 def _step_colourbar(fig_ax, n_steps: int) -> None:
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
-
     from matplotlib.ticker import MaxNLocator
 
     sm = ScalarMappable(norm=Normalize(1, max(n_steps, 2)), cmap="viridis")

@@ -11,9 +11,9 @@ from pathlib import Path
 from flows import abort
 from instruments import build
 from instruments.registry import driver_info, validated
+from noisebo.campaign.driver import drive, now_utc
+from noisebo.campaign.engine import new_campaign
 from noisebo.config import load_config
-from noisebo.driver import drive, now_utc
-from noisebo.engine import new_campaign
 from storage.recorder import Recorder
 
 

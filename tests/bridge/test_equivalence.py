@@ -9,8 +9,8 @@ import pytest
 
 from instruments import build
 from instruments.registry import validated
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
-from noisebo.driver import run_campaign
 from tests.bridge.conftest import remote_config, served
 
 CASES = {

@@ -4,7 +4,7 @@ import pytest
 
 from bridge.exchange import Exchange
 from bridge.wire import ReadingBody, ReadingShape, WireError
-from noisebo import engine
+from noisebo.campaign import engine
 from noisebo.config import CampaignConfig
 from noisebo.events import DriverInfo, ShotError
 from noisebo.failures import InstrumentError, InstrumentTimeout

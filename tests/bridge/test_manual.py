@@ -9,8 +9,8 @@ import yaml
 from cli.main import main
 from instruments import build
 from instruments.registry import validated
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
-from noisebo.driver import run_campaign
 from noisebo.keys import MEASURE, numpy_rng
 from storage.recorder import Recorder
 

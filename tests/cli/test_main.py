@@ -8,8 +8,8 @@ import pytest
 
 from cli.main import main, parse_seeds
 from flows.campaign import start_campaign
+from noisebo.campaign.engine import new_campaign
 from noisebo.config import CampaignConfig
-from noisebo.engine import new_campaign
 from noisebo.events import DriverInfo
 from storage.recorder import Recorder
 
@@ -218,7 +218,7 @@ def test_a_temporary_server_that_does_not_start_in_time_is_one_line_and_no_file(
 
 def test_a_spent_budget_is_resumed_only_with_a_larger_one(tiny_config, tmp_path, prefect_harness, capsys):
     from instruments.forrester import ForresterInstrument
-    from noisebo.driver import drive
+    from noisebo.campaign.driver import drive
     from storage.hdf5 import read_campaign
 
     config = tiny_config.with_overrides(schedule={"budget_s": 60.0, "n_steps": 100})

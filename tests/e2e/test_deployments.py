@@ -12,7 +12,7 @@ import yaml
 
 from flows.processes import BIN, start, stop, wait_for
 from instruments import build
-from noisebo.driver import run_campaign
+from noisebo.campaign.driver import run_campaign
 from storage.hdf5 import read_campaign
 
 pytestmark = pytest.mark.e2e

@@ -13,8 +13,8 @@ import yaml
 
 from instruments import build
 from instruments.registry import validated
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
-from noisebo.driver import run_campaign
 from storage.hdf5 import read_campaign, read_spectra
 
 pytestmark = pytest.mark.e2e

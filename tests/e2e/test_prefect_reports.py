@@ -5,10 +5,8 @@ state message and the Automation that reacts to it.
 
 Marked e2e: not in the default run (it starts servers), run by `.ci/run`."""
 
-import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest

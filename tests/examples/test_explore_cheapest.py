@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from instruments import build
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import ConfigError, load_config
-from noisebo.decision import grids
-from noisebo.driver import run_campaign
+from noisebo.models.grids import grids
 from storage.hdf5 import read_campaign
 from tests.examples import packages
 

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from instruments.registry import settings_of
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import ConfigError, InstrumentConfig, lax_fields
-from noisebo.driver import run_campaign
 from storage import journal
 from storage.hdf5 import read_campaign
 from tests.examples import packages

@@ -7,12 +7,11 @@ import h5py
 import numpy as np
 import pytest
 
-from flows.campaign import campaign, campaign_path, resume
+from flows.campaign import campaign, campaign_path, resume, start_campaign
 from flows.sweep import sweep, task_runner
 from instruments import build
-from noisebo.driver import run_campaign
+from noisebo.campaign.driver import run_campaign
 from storage.hdf5 import CampaignFileError
-from flows.campaign import start_campaign
 from storage.recorder import Recorder
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from instruments import build
-from noisebo.driver import run_campaign
+from noisebo.campaign.driver import run_campaign
 from storage import journal
 from storage.hdf5 import read_campaign
 

@@ -10,7 +10,7 @@ import pytest
 
 from flows.campaign import campaign, resume
 from instruments import build
-from noisebo.driver import run_campaign
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
 from storage.hdf5 import read_campaign, read_spectra
 

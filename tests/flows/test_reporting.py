@@ -8,8 +8,16 @@ import numpy as np
 import pytest
 
 from flows import reporting
-from noisebo.engine import EngineState, PointEntry
-from noisebo.events import DriverInfo, PointCommitted, ShotFailed, ShotTaken, Status, StatusChanged, Summary
+from noisebo.campaign.engine import EngineState, PointEntry
+from noisebo.events import (
+    DriverInfo,
+    PointCommitted,
+    ShotFailed,
+    ShotTaken,
+    Status,
+    StatusChanged,
+    Summary,
+)
 from noisebo.reduction import Reading
 from noisebo.state import CampaignState, Point
 

@@ -11,7 +11,12 @@ from instruments import build
 from instruments.faults import FaultyInstrument
 from instruments.forrester import ForresterInstrument
 from noisebo.config import FAULT_KINDS, CampaignConfig, FaultsConfig, InstrumentConfig
-from noisebo.failures import FailureBudgetExceeded, InstrumentError, InstrumentTimeout, check_budget
+from noisebo.failures import (
+    FailureBudgetExceeded,
+    InstrumentError,
+    InstrumentTimeout,
+    check_budget,
+)
 from storage.hdf5 import read_campaign
 
 
@@ -79,7 +84,7 @@ def run_flow(config, seed, path, instrument):
 
 
 def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tiny_config, prefect_harness, tmp_path):
-    from noisebo.driver import run_campaign
+    from noisebo.campaign.driver import run_campaign
 
     config = tiny_config.with_overrides(instrument={"timeout_s": 0.2, "faults": {
         "seed": 5, "timeout": 0.05, "exception": 0.15, "nan": 0.05, "inf": 0.05}})
@@ -139,7 +144,7 @@ def test_spectrum_faults_never_give_a_usable_wrong_value_silently(kind, reason):
 
 def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny_config, prefect_harness, tmp_path):
     from flows.campaign import campaign
-    from noisebo.driver import run_campaign
+    from noisebo.campaign.driver import run_campaign
 
     # 70 % of the readings NaN: some points get too few usable shots and must take more
     config = tiny_config.with_overrides(instrument={"faults": {"seed": 4, "nan": 0.7}},
@@ -159,7 +164,7 @@ def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny
 @pytest.mark.slow
 def test_a_200_step_campaign_with_a_quarter_of_faults(prefect_harness, tmp_path):
     from flows.campaign import run, start_campaign
-    from noisebo.reward import true_optimal_t
+    from noisebo.models.reward import true_optimal_t
 
     config = CampaignConfig().with_overrides(
         name="faulty200",

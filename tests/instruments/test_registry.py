@@ -6,7 +6,6 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
-
 import pytest
 
 from flows.campaign import InstrumentUnavailable, campaign, opened
@@ -164,7 +163,7 @@ def test_opened_closes_the_instrument_after_the_campaign_even_on_error(drivers):
 
 
 def test_a_driver_brings_its_own_named_reduction(drivers):
-    from noisebo import driver
+    from noisebo.campaign import driver
     from noisebo.events import Status
 
     config = registry.validated(config_of("counter").with_overrides(schedule={"n_seed": 2, "n_steps": 0,

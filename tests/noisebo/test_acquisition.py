@@ -4,7 +4,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from noisebo.acquisition import expected_improvement, f_acquisition, uncertainty, upper_confidence_bound
+from noisebo.acquisition.functions import (
+    expected_improvement,
+    f_acquisition,
+    uncertainty,
+    upper_confidence_bound,
+)
 
 
 def phi(z):

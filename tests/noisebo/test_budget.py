@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from instruments.forrester import ForresterInstrument
-from noisebo import engine, noise_model
+from noisebo.acquisition.proposal import affordable, cheapest_point_s
+from noisebo.campaign import engine
+from noisebo.campaign.driver import drive, in_memory, run_campaign
 from noisebo.config import CampaignConfig, ConfigError, parse_config
-from noisebo.decision import affordable, cheapest_point_s, grids
-from noisebo.driver import drive, in_memory, run_campaign
 from noisebo.events import BudgetChanged, DriverInfo, Status
+from noisebo.models import noise_model
+from noisebo.models.grids import grids
 from storage.records import decode, encode, rebuild
 
 
@@ -132,9 +134,10 @@ def test_the_posterior_rule_needs_draws():
 def test_adaptive_noise_point_shots_by_hand(rel_sd, expected):
     import jax.numpy as jnp
 
+    from noisebo.acquisition.proposal import noise_point_shots
     from noisebo.config import ScheduleConfig
-    from noisebo.decision import noise_point_shots, space_grids
-    from noisebo.policies import Posterior
+    from noisebo.models.grids import space_grids
+    from noisebo.models.prediction import Posterior
 
     sched = ScheduleConfig(shots_before=20, shots_after=3)
     post = Posterior(f_mean=jnp.zeros(3), f_var=jnp.ones(3), noise_mean=jnp.full(4, 2.0),
@@ -160,19 +163,22 @@ def test_bad_noise_t_settings_say_why(overrides, message):
 
 
 def test_an_informative_noise_point_measures_where_the_rate_on_t_star_peaks(tiny_config):
-    from noisebo import decision, information
+    from noisebo.acquisition import information
+    from noisebo.campaign.decision import decide_on
+    from noisebo.models.fitting import fit_key, fit_models
+    from noisebo.models.prediction import predict
 
     config = tiny_config.with_overrides(schedule={"convergence": "posterior", "t_interval_rel": 1e-6,
                                                   "noise_t": "informative", "n_steps": 1})
     seeds = run_campaign(config.with_overrides(schedule={"n_steps": 0}), ForresterInstrument(), 1).state
-    fitted = decision.fit_models(config, seeds, decision.fit_key(1, 0))
-    chosen, _ = decision.acquire(config, fitted, seeds, 0)
-    prediction = decision.predict(config, fitted, seeds)
+    fitted = fit_models(config, seeds, fit_key(1, 0))
+    chosen, _ = decide_on(config, fitted, seeds, 0)
+    prediction = predict(config, fitted, seeds)
     shots = config.schedule.shots_before
     c4 = noise_model.c4(shots)
     rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws,
-                                             jnp.asarray(decision.grids(config).t), (1 - c4**2) / c4**2, shots, 0.0))
+                                             jnp.asarray(grids(config).t), (1 - c4**2) / c4**2, shots, 0.0))
     assert not chosen.converged and chosen.measure_noise and chosen.shots == shots
-    assert chosen.t == decision.grids(config).t[int(np.argmax(rate))] and rate.max() > 0
-    policy, _ = decision.acquire(config.with_overrides(schedule={"noise_t": "policy"}), fitted, seeds, 0)
+    assert chosen.t == grids(config).t[int(np.argmax(rate))] and rate.max() > 0
+    policy, _ = decide_on(config.with_overrides(schedule={"noise_t": "policy"}), fitted, seeds, 0)
     assert policy.x == chosen.x  # the point keeps the policy's x

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from instruments import build
-from noisebo.campaign import make_point, seed_points
-from noisebo.driver import run_campaign
+from noisebo.campaign.driver import run_campaign
+from noisebo.campaign.steps import make_point, seed_points
 from noisebo.config import CampaignConfig
 from noisebo.diagnostics import compile_count
 from noisebo.reduction import NoUsableShots, Reading
@@ -105,7 +105,7 @@ def test_clipping_ignores_shots_already_rejected_and_the_point_uses_the_rest():
     import math
 
     from instruments.base import Reading
-    from noisebo.campaign import make_point
+    from noisebo.campaign.steps import make_point
     from noisebo.config import ReductionConfig
 
     readings = [Reading(v) for v in (9.5, 10.0, 10.5, 11.0, 16.0, float("nan"))]
@@ -117,7 +117,7 @@ def test_clipping_ignores_shots_already_rejected_and_the_point_uses_the_rest():
 
 
 def test_no_model_is_ever_trained_on_a_non_finite_value(tiny_config):
-    from noisebo.decision import NonFiniteData, fit_models, fit_key
+    from noisebo.models.fitting import NonFiniteData, fit_key, fit_models
     from noisebo.state import CampaignState, Point
 
     state = CampaignState()

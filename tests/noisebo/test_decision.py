@@ -4,10 +4,15 @@ capacity's programs compiled ahead of the crossing."""
 import numpy as np
 import pytest
 
-from noisebo import decision
+from noisebo.acquisition.records import Decision
+from noisebo.campaign.compile_ahead import capacities_ahead, compile_ahead
+from noisebo.campaign.decision import decide, decide_on
 from noisebo.config import CampaignConfig
 from noisebo.diagnostics import compile_count
-from noisebo.inputs import capacity_for
+from noisebo.models.fitting import capacities_needed, fit_key, fit_models
+from noisebo.models.grids import grids
+from noisebo.models.prediction import peak_t
+from noisebo.models.inputs import capacity_for
 from noisebo.state import CampaignState, Point
 
 CONFIG = CampaignConfig().with_overrides(space={"n_x": 60, "n_t": 30})
@@ -16,7 +21,7 @@ CONFIG = CampaignConfig().with_overrides(space={"n_x": 60, "n_t": 30})
 def grid_state(n: int, seed: int = 4) -> CampaignState:
     """n Forrester-like points on the config's grids (as proposals are), 10 shots each."""
     rng = np.random.default_rng(seed)
-    g = decision.grids(CONFIG)
+    g = grids(CONFIG)
     state = CampaignState()
     for x, t in zip(rng.choice(g.x, n), rng.choice(g.t, n)):
         sd = 2.0 / np.sqrt(t) + 0.1
@@ -30,15 +35,15 @@ def grid_state(n: int, seed: int = 4) -> CampaignState:
 def crossing():
     """A state whose x inputs just crossed 32 distinct values: the primary GP pads to 64."""
     state = grid_state(45)
-    fitted = decision.fit_models(CONFIG, state, decision.fit_key(0, 0))
+    fitted = fit_models(CONFIG, state, fit_key(0, 0))
     assert fitted.primary_inputs > 32 and fitted.primary_data.x.shape[0] == 64
     return state
 
 
 def test_padding_changes_no_decision(crossing):
-    plain, _ = decision.decide(CONFIG, crossing, 0, 0)
-    fitted = decision.fit_models(CONFIG, crossing, decision.fit_key(0, 0), capacities=(128, 128))
-    padded, _ = decision.acquire(CONFIG, fitted, crossing, 0)
+    plain, _ = decide(CONFIG, crossing, 0, 0)
+    fitted = fit_models(CONFIG, crossing, fit_key(0, 0), capacities=(128, 128))
+    padded, _ = decide_on(CONFIG, fitted, crossing, 0)
     assert (padded.x, padded.t, padded.shots) == (plain.x, plain.t, plain.shots)
     assert padded.t_opt == pytest.approx(plain.t_opt, abs=1e-12)
     for name, value in plain.hyperparameters.items():
@@ -48,14 +53,14 @@ def test_padding_changes_no_decision(crossing):
 
 
 def test_repeated_inputs_are_merged_and_recorded(crossing):
-    d, _ = decision.decide(CONFIG, crossing, 0, 0)
+    d, _ = decide(CONFIG, crossing, 0, 0)
     x, t = crossing.positions(1)[:, 0], crossing.column("t")
     assert (d.primary_inputs, d.noise_inputs, d.binned) == (np.unique(x).size, np.unique(t).size, False)
 
 
 def test_beyond_max_inputs_the_decision_says_it_binned(crossing):
     config = CONFIG.with_overrides(inference={"max_inputs": 16})
-    d, _ = decision.decide(config, crossing, 0, 0)
+    d, _ = decide(config, crossing, 0, 0)
     assert d.binned and d.primary_inputs <= 16 and d.noise_inputs <= 16
 
 
@@ -67,24 +72,24 @@ def test_beyond_max_inputs_the_decision_says_it_binned(crossing):
     ((200, 250), None),                # both at the largest capacity max_inputs = 256 needs
 ])
 def test_capacities_ahead(inputs, ahead):
-    d = decision.Decision(0, 0.5, 1.0, 0.0, 3, True, 0.1, 1.0, False, {}, np.zeros((1, 1)), np.zeros(1),
+    d = Decision(0, 0.5, 1.0, 0.0, 3, True, 0.1, 1.0, False, {}, np.zeros((1, 1)), np.zeros(1),
                           np.zeros(1), np.zeros(1), np.zeros(1), primary_inputs=inputs[0], noise_inputs=inputs[1])
-    assert decision.capacities_ahead(CONFIG, d) == ahead
+    assert capacities_ahead(CONFIG, d) == ahead
 
 
 def test_compiled_ahead_the_crossing_compiles_nothing():
     # Models of their own, so no other test has compiled their programs at any capacity.
     config = CONFIG.with_overrides(primary_model={"length_scale": 0.6}, noise_model={"residual_amplitude_scale": 0.9})
     before = grid_state(36, seed=9)
-    first, _ = decision.decide(config, before, 0, 0)
+    first, _ = decide(config, before, 0, 0)
     assert 24 <= first.primary_inputs <= 32 and first.noise_inputs < 24  # the primary GP nears 32
-    capacities = decision.capacities_ahead(config, first)
+    capacities = capacities_ahead(config, first)
     assert capacities is not None and capacities[0] == 64
-    decision.compile_ahead(config, before, first.hyperparameters, capacities)
+    compile_ahead(config, before, first.hyperparameters, capacities)
     after = grid_state(80, seed=9)
-    assert decision.capacities_needed(config, after) == capacities
+    assert capacities_needed(config, after) == capacities
     before_count = compile_count()
-    crossed, _ = decision.decide(config, after, 0, 1, first.hyperparameters)
+    crossed, _ = decide(config, after, 0, 1, first.hyperparameters)
     assert (capacity_for(crossed.primary_inputs), capacity_for(crossed.noise_inputs)) == capacities
     assert compile_count() == before_count
 
@@ -96,14 +101,14 @@ def test_two_axes_compiled_ahead_the_first_decision_compiles_nothing():
                             primary_model={"length_scale": 0.55})
     rng = np.random.default_rng(2)
     state = CampaignState()
-    for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(decision.grids(config).t, 5)):
+    for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(grids(config).t, 5)):
         sd = 2.0 / np.sqrt(t) + 0.1
         shots = np.sin(3 * x[0]) * x[1] + sd * rng.standard_normal(10)
         std = float(shots.std(ddof=1))
         state = state.with_point(Point(tuple(x), float(t), float(shots.mean()), std, 10, std, True))
-    decision.compile_ahead(config, state, None, decision.capacities_needed(config, state))
+    compile_ahead(config, state, None, capacities_needed(config, state))
     before_count = compile_count()
-    made, _ = decision.decide(config, state, 0, 0)
+    made, _ = decide(config, state, 0, 0)
     assert compile_count() == before_count and len(made.x) == 2
 
 
@@ -119,11 +124,11 @@ def test_two_axes_compiled_ahead_the_first_decision_compiles_nothing():
 def test_peak_t_refines_between_grid_points(peak, expected):
     t = np.linspace(0.0, 1.0, 11)
     values = -((t - peak) ** 2)[None, :]
-    assert float(decision.peak_t(t, values)[0]) == pytest.approx(expected, abs=1e-12)
+    assert float(peak_t(t, values)[0]) == pytest.approx(expected, abs=1e-12)
 
 
 def test_peak_t_stays_within_half_a_step_of_the_best_point():
     t = np.linspace(0.0, 1.0, 11)
     values = np.array([[0.0, 0.0, 0.0, 1.0, 0.9, -5.0, -5.0, -5.0, -5.0, -5.0, -5.0]])  # not a parabola
-    got = float(decision.peak_t(t, values)[0])
+    got = float(peak_t(t, values)[0])
     assert 0.3 <= got <= 0.35

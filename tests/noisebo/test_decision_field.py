@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from instruments.forrester import ForresterInstrument, ForresterSettings
-from noisebo.campaign import paired_positions, seed_points
+from noisebo.campaign import engine
+from noisebo.campaign.driver import run_campaign
+from noisebo.campaign.steps import paired_positions, seed_points
 from noisebo.config import CampaignConfig, ConfigError, parse_config
-from noisebo import engine
-from noisebo.decision import grids
 from noisebo.events import DriverInfo
-from noisebo.driver import run_campaign
-from noisebo.reward import true_optimal_t
-from noisebo.schedule import converged, converged_map
+from noisebo.models.convergence import converged, converged_map
+from noisebo.models.grids import grids
+from noisebo.models.reward import true_optimal_t
 from storage.hdf5 import read_campaign, write_snapshot
 from storage.records import decode, encode, rebuild
 

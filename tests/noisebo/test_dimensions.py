@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from instruments import build
-from noisebo.campaign import seed_points
+from noisebo.campaign.driver import run_campaign
+from noisebo.campaign.steps import seed_points
 from noisebo.config import CampaignConfig
-from noisebo.driver import run_campaign
+from noisebo.models.grids import reference_points
 from noisebo.reduction import Reading
-from noisebo.search import reference_points
 
 
 class Bumps:

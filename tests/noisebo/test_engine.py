@@ -5,12 +5,22 @@ import numpy as np
 import pytest
 
 from instruments import build
-from noisebo import driver, engine
-from noisebo.campaign import seed_points
+from noisebo.campaign import driver, engine
+from noisebo.campaign.engine import EngineError
+from noisebo.campaign.steps import seed_points
 from noisebo.config import CampaignConfig
-from noisebo.engine import EngineError
 from noisebo.events import (
-    DecisionDue, Decided, Done, DriverInfo, MoreShots, PointCommitted, Request, ShotError, ShotFailed, ShotTaken, Status,
+    Decided,
+    DecisionDue,
+    Done,
+    DriverInfo,
+    MoreShots,
+    PointCommitted,
+    Request,
+    ShotError,
+    ShotFailed,
+    ShotTaken,
+    Status,
     StatusChanged,
 )
 from noisebo.reduction import Reading

@@ -5,9 +5,9 @@ import numpyro
 import numpyro.distributions as dist
 import pytest
 
-from noisebo import inference, noise_model
 from noisebo.config import NoiseModelConfig
-from noisebo.inference import combine
+from noisebo.models import inference, noise_model
+from noisebo.models.inference import combine
 
 
 def test_combine_map_uses_the_map_mean_and_widens_by_the_draws():

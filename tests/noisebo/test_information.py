@@ -3,20 +3,21 @@ time and shots where the answer is known, and a campaign that spends a budget wi
 
 import jax.numpy as jnp
 import numpy as np
-import pytest
 
 from instruments.forrester import ForresterInstrument
-from noisebo import information, primary
+from noisebo.acquisition import information
+from noisebo.acquisition.policies import acquisition_map, point_scores
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import AcquisitionConfig, CampaignConfig, RewardConfig
-from noisebo.decision import integration_points
-from noisebo.driver import run_campaign
 from noisebo.events import Status
-from noisebo.policies import Posterior, acquisition_map, point_scores
+from noisebo.models import primary
+from noisebo.models.grids import integration_points
+from noisebo.models.prediction import Posterior
 
 
 def test_rate_by_hand():
     # q = mean of squared covariances; IVR = q / (V + s^2 / n); rate = IVR / (overhead + n t)
-    q = information.spread_weights(jnp.array([[1.0, 3.0], [2.0, 0.0]]))
+    q = spread_weights(jnp.array([[1.0, 3.0], [2.0, 0.0]]))
     np.testing.assert_allclose(np.asarray(q), [5.0, 2.0])
     rate = information.rate_map(q, jnp.array([1.0, 2.0]), jnp.array([2.0, 1.0]), jnp.array([0.5, 2.0]), 4, 1.0)
     # position 0: 5 / (1 + 4/4) / (1 + 2) and 5 / (1 + 1/4) / (1 + 8); position 1 likewise with 2 and V = 2

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 from numpyro.infer.util import log_density
 
-from noisebo import noise_model, primary
 from noisebo.config import NoiseModelConfig, PrimaryModelConfig
-from noisebo.inputs import capacity_for, group_ids, merge
+from noisebo.models import noise_model, primary
+from noisebo.models.inputs import capacity_for, group_ids, merge
 
 
 @pytest.mark.parametrize("n, capacity", [(0, 32), (1, 32), (32, 32), (33, 64), (64, 64), (65, 128), (1000, 1024)])

@@ -3,7 +3,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from noisebo.kernels import masked_covariance, matern52, xt_matern52
+from noisebo.models.kernels import masked_covariance, matern52, xt_matern52
 
 
 def test_matern52_matches_hand_computed_values():
@@ -31,7 +31,7 @@ def test_masked_covariance_decouples_padding():
 
 
 def test_ard_matern52_is_matern52_of_the_scaled_euclidean_distance():
-    from noisebo.kernels import ard_matern52
+    from noisebo.models.kernels import ard_matern52
 
     a = jnp.array([[0.0, 0.0], [0.3, 0.4]])
     b = jnp.array([[0.0, 0.0], [0.6, 0.8]])
@@ -45,7 +45,7 @@ def test_ard_matern52_is_matern52_of_the_scaled_euclidean_distance():
 def test_ard_matern52_has_a_finite_gradient_on_coincident_inputs():
     import jax
 
-    from noisebo.kernels import ard_matern52
+    from noisebo.models.kernels import ard_matern52
 
     x = jnp.array([[0.2, 0.5], [0.2, 0.5], [0.9, 0.1]])
     grad = jax.grad(lambda lengths: jnp.sum(ard_matern52(x, x, 1.0, lengths)))(jnp.array([0.3, 0.7]))

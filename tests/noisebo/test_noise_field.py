@@ -7,14 +7,14 @@ import time
 
 import jax
 import jax.numpy as jnp
-from jax.flatten_util import ravel_pytree
 import numpy as np
 import pytest
+from jax.flatten_util import ravel_pytree
 
-from noisebo import inference, noise_field, noise_model
 from noisebo.config import NoiseModelConfig
-from noisebo.kernels import JITTER, ard_matern52, matern52
-from noisebo.reward import true_optimal_t
+from noisebo.models import inference, noise_field, noise_model
+from noisebo.models.kernels import JITTER, ard_matern52, matern52
+from noisebo.models.reward import true_optimal_t
 
 T_MIN, T_MAX = 0.2, 10.0
 ALPHA, BETA = 0.1, 2.0

@@ -2,8 +2,8 @@ import jax
 import numpy as np
 import pytest
 
-from noisebo import inference, noise_model
 from noisebo.config import NoiseModelConfig
+from noisebo.models import inference, noise_model
 
 
 def test_c4_known_values():
@@ -87,7 +87,7 @@ def test_points_without_shot_to_shot_scatter_still_give_a_finite_fit(shot_std):
 
 def test_sampling_rel_var_by_hand():
     # c4(2) = sqrt(2 / pi), so (1 - c4^2) / c4^2 = pi / 2 - 1; large n: about 1 / (2 (n - 1))
-    from noisebo.noise_model import sampling_rel_var
+    from noisebo.models.noise_model import sampling_rel_var
 
     assert float(sampling_rel_var(2)) == pytest.approx(np.pi / 2 - 1, rel=1e-12)
     assert float(sampling_rel_var(1001)) == pytest.approx(1 / 2000, rel=1e-3)

@@ -9,9 +9,9 @@ import pytest
 from cli.main import main
 from instruments import build
 from noisebo import registry
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig, ConfigError
-from noisebo.decision import grids
-from noisebo.driver import run_campaign
+from noisebo.models.grids import grids
 
 TINY = CampaignConfig().with_overrides(name="tiny", space={"n_x": 30, "n_t": 20},
                                        schedule={"n_steps": 2, "shots_before": 6, "shots_after": 3})

@@ -2,8 +2,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from noisebo.acquisition.policies import (
+    acquisition_map,
+    argmax_2d,
+    double_acquisition,
+    reward_driven,
+)
 from noisebo.config import AcquisitionConfig, RewardConfig
-from noisebo.policies import Posterior, acquisition_map, argmax_2d, double_acquisition, reward_driven
+from noisebo.models.prediction import Posterior
 
 # Two x points, three t points. R = -0.1 t^2 - Noise = [-3.025, -1.1, -2.4]
 # -> Norm(R) = [0, 1, 0.32468]; V[f, t] = f_var + Noise^2 / shots.
@@ -66,7 +72,7 @@ def test_argmax_2d_takes_the_first_of_ties():
 @pytest.mark.parametrize("policy, f_acquisition", [("reward", "ue"), ("reward", "ucb"), ("double", "ue"),
                                                    ("double", "ei")])
 def test_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
-    from noisebo.policies import point_scores
+    from noisebo.acquisition.policies import point_scores
 
     acq = AcquisitionConfig(policy=policy, f_acquisition=f_acquisition)
     post = POST._replace(f_mean=jnp.array([-1.0, 0.5]))
@@ -126,7 +132,8 @@ def test_double_field_by_hand():
 @pytest.mark.parametrize("policy, f_acquisition", [("reward", "ue"), ("reward", "ucb"), ("double", "ue"),
                                                    ("double", "ei")])
 def test_field_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
-    from noisebo.policies import NoiseRows, point_scores
+    from noisebo.acquisition.policies import point_scores
+    from noisebo.models.prediction import NoiseRows
 
     acq = AcquisitionConfig(policy=policy, f_acquisition=f_acquisition)
     post = FIELD_POST._replace(f_mean=jnp.array([-1.0, 0.5]))

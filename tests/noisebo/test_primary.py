@@ -1,8 +1,8 @@
 import jax
 import numpy as np
 
-from noisebo import inference, primary
 from noisebo.config import PrimaryModelConfig
+from noisebo.models import inference, primary
 
 
 def hand_matern(a, b, amp, length):

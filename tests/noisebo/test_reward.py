@@ -2,7 +2,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from noisebo.reward import normalise, optimal_index, reward, true_optimal_t
+from noisebo.models.reward import normalise, optimal_index, reward, true_optimal_t
 
 
 def paper_noise(t):

@@ -1,11 +1,12 @@
 import math
 
 import numpy as np
-
 import pytest
 
+from noisebo.acquisition.proposal import shots_for
 from noisebo.config import ScheduleConfig
-from noisebo.schedule import converged, first_converged_step, reduce_shots, shots_for
+from noisebo.models.convergence import converged, first_converged_step
+from noisebo.reduction import reduce_shots
 
 RULE = [
     ([], False),
@@ -47,7 +48,7 @@ def test_shots_follow_convergence():
 
 
 def test_t_interval_by_hand():
-    from noisebo.schedule import t_interval
+    from noisebo.models.convergence import t_interval
 
     draws = np.array([1.0, 2.0, 2.0, 3.0])  # sd sqrt(0.5), median 2
     assert t_interval(draws) == pytest.approx(1.96 * np.sqrt(0.5) / 2.0, rel=1e-12)

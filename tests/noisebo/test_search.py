@@ -3,8 +3,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from noisebo.acquisition.search import refine
 from noisebo.config import SpaceConfig
-from noisebo.search import reference_points, reference_spacing, refine
+from noisebo.models.grids import reference_points, reference_spacing
 
 
 def axes(*spec):

@@ -5,7 +5,7 @@ import threading
 import numpy as np
 
 from instruments import build
-from noisebo.driver import run_campaign
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
 
 # Grid sizes no other test uses, and one config per thread (models are built per config): the

@@ -15,11 +15,16 @@ import numpy as np
 import pytest
 
 from benchmarks.storage import point_commits, started
-from noisebo import engine
+from noisebo.campaign import engine
 from noisebo.config import CampaignConfig
 from noisebo.events import Status, StatusChanged
 from storage.hdf5 import (
-    CampaignFileError, read_campaign, read_failures, read_shot_fits, read_spectra, write_snapshot,
+    CampaignFileError,
+    read_campaign,
+    read_failures,
+    read_shot_fits,
+    read_spectra,
+    write_snapshot,
 )
 from storage.recorder import Recorder
 

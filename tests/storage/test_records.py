@@ -3,10 +3,19 @@
 import numpy as np
 import pytest
 
+from noisebo.acquisition.records import Decision
 from noisebo.config import CampaignConfig, ReductionConfig
-from noisebo.decision import Decision
 from noisebo.events import (
-    Decided, DriverInfo, MoreShots, PointCommitted, ShotFailed, ShotTaken, Started, Status, StatusChanged, Summarised,
+    Decided,
+    DriverInfo,
+    MoreShots,
+    PointCommitted,
+    ShotFailed,
+    ShotTaken,
+    Started,
+    Status,
+    StatusChanged,
+    Summarised,
     Summary,
 )
 from noisebo.reduction import Reading, ShotValue, shot_value

@@ -7,7 +7,7 @@ from prefect import flow
 
 from flows.campaign import start_campaign
 from instruments import build
-from noisebo import driver, engine
+from noisebo.campaign import driver, engine
 from noisebo.events import Decided, Request, ShotError, ShotFailed
 from noisebo.failures import InstrumentError
 from noisebo.keys import MEASURE, numpy_rng

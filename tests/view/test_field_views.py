@@ -6,9 +6,9 @@ import pytest
 
 from cli.main import inspect_summary
 from instruments.forrester import ForresterInstrument, ForresterSettings
-from noisebo import engine
+from noisebo.campaign import engine
+from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
-from noisebo.driver import run_campaign
 from noisebo.events import DriverInfo
 from storage.hdf5 import read_campaign, write_snapshot
 from storage.records import encode, rebuild

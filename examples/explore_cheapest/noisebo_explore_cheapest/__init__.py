@@ -4,7 +4,7 @@ Every point goes where the posterior variance of f is largest (uncertainty explo
 reward and no noise model in the score), measured at the shortest exposure on the t grid. It is
 a baseline: as many points as possible for the instrument time, each as noisy as it gets.
 
-The class is the whole plug-in: ``noisebo.policies.Policy``'s two methods, pure functions of
+The class is the whole plug-in: ``noisebo.acquisition.policies.Policy``'s two methods, pure functions of
 arrays that noisebo traces inside its compiled programs, and its entry point in pyproject.toml:
 
     [project.entry-points."noisebo.policies"]
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from noisebo.policies import Policy
+from noisebo.acquisition.policies import Policy
 
 __version__ = "0.1.0"
 

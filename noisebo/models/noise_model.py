@@ -1,6 +1,6 @@
 """The noise model: a structured GP for the single-shot noise standard deviation Noise(t).
 
-Its mean is a physical law (``noisebo.noise_laws``: the paper's A1/sqrt(t) + A0, A1/t^p + A0, or
+Its mean is a physical law (``noisebo.models.noise_laws``: the paper's A1/sqrt(t) + A0, A1/t^p + A0, or
 sqrt(A1^2/t + A0^2) for independent sources whose variances add; a package can add one), its residual a small
 Matern 5/2 GP over t scaled to [0, 1]. It is trained on each point's measured noise: the sample
 standard deviation s of n shots, divided by c4(n) so it is unbiased. The sampling variance of that
@@ -24,15 +24,15 @@ from scipy.special import gammaln
 
 from noisebo import registry
 from noisebo.config import NoiseModelConfig
-from noisebo.inputs import Grouped, capacity_for, merge
-from noisebo.kernels import masked_covariance, matern52
+from noisebo.models.inputs import Grouped, capacity_for, merge
+from noisebo.models.kernels import masked_covariance, matern52
 
 RESIDUAL_LENGTH_LOC = float(np.log(0.3))
 
 
 class NoiseData(NamedTuple):
     """Padded training set of length n: one entry per group of points at the same t (see
-    ``noisebo.inputs``). t: seconds; ts: t scaled to [0, 1]; y: the group's precision-weighted
+    ``noisebo.models.inputs``). t: seconds; ts: t scaled to [0, 1]; y: the group's precision-weighted
     mean of s/c4 over the data scale (0 on padding); rel_var: (1 - c4^2)/c4^2 of that mean, i.e.
     1 / sum over its points of c4^2/(1 - c4^2); count: points in the group; scatter: sum over its
     points of (y_i - y)^2 / rel_var_i; mask: True on real groups; bounds: (3, 2) prior bounds of
@@ -62,7 +62,7 @@ def sampling_rel_var(n: np.ndarray) -> np.ndarray:
 
 
 def mean_law(kind: str, t: jnp.ndarray, a0, a1, p=0.5) -> jnp.ndarray:
-    """Noise(t) under the noise law named ``kind`` (``noisebo.noise_laws``; e.g. "inv_sqrt"
+    """Noise(t) under the noise law named ``kind`` (``noisebo.models.noise_laws``; e.g. "inv_sqrt"
     A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature" sqrt(A1^2/t + A0^2))."""
     return registry.noise_law(kind).mean(t, a0, a1, p)
 

@@ -27,10 +27,6 @@ import jax.numpy as jnp
 SHOT_OPTIONS = (1, 2, 3, 5, 8, 13, 20, 30, 50)
 
 
-def spread_weights(cross: jnp.ndarray) -> jnp.ndarray:
-    """q(x) (m,): the mean over the r integration points of the squared posterior covariance
-    ``cross`` (m, r) between m candidates and them."""
-    return jnp.mean(cross**2, axis=1)
 
 
 def variance_reduction(q: jnp.ndarray, f_var: jnp.ndarray, noise_var: jnp.ndarray) -> jnp.ndarray:

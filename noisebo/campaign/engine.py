@@ -18,12 +18,30 @@ import time
 from dataclasses import dataclass, replace
 from typing import Mapping, NamedTuple, Sequence
 
-from noisebo.campaign import make_point, seed_points, summarize
+from noisebo.acquisition.proposal import cheapest_point_s
+from noisebo.acquisition.records import Decision
+from noisebo.campaign.decision import decide
+from noisebo.campaign.steps import make_point, seed_points, summarize
 from noisebo.config import CampaignConfig
-from noisebo.decision import Decision, cheapest_point_s, decide
 from noisebo.events import (
-    BudgetChanged, DecisionDue, Decided, Done, DriverInfo, Event, MoreShots, Outcome, PointCommitted, Request,
-    ShotError, ShotFailed, ShotTaken, Started, Status, StatusChanged, Summarised, Summary,
+    BudgetChanged,
+    Decided,
+    DecisionDue,
+    Done,
+    DriverInfo,
+    Event,
+    MoreShots,
+    Outcome,
+    PointCommitted,
+    Request,
+    ShotError,
+    ShotFailed,
+    ShotTaken,
+    Started,
+    Status,
+    StatusChanged,
+    Summarised,
+    Summary,
 )
 from noisebo.failures import budget_message
 from noisebo.reduction import NoUsableShots, Reading

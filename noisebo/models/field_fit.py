@@ -15,10 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from noisebo import inference, noise_field
 from noisebo.config import CampaignConfig
-from noisebo.inputs import capacity_for
-from noisebo.reward import reward
+from noisebo.models import inference, noise_field
+from noisebo.models.inputs import capacity_for
+from noisebo.models.reward import reward
 from noisebo.state import CampaignState
 
 # Prior draws of a multi-start field fit besides the data-driven guess: a draw of the field's

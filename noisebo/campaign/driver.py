@@ -8,18 +8,27 @@ are committed (memory, or a journal and an HDF5 file), how a shot is measured an
 from __future__ import annotations
 
 import datetime as dt
-import threading
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 
-from noisebo import engine
+from noisebo.acquisition.records import Decision
+from noisebo.campaign import engine
+from noisebo.campaign.compile_ahead import CompileAhead
+from noisebo.campaign.engine import EngineState
 from noisebo.config import CampaignConfig
-from noisebo.campaign import compile_first_decision
-from noisebo.decision import Decision, capacities_ahead, compile_ahead, programs_key
-from noisebo.engine import EngineState
-from noisebo.events import DecisionDue, Done, DriverInfo, Event, Outcome, Request, ShotError, Status, Summary
+from noisebo.events import (
+    DecisionDue,
+    Done,
+    DriverInfo,
+    Event,
+    Outcome,
+    Request,
+    ShotError,
+    Status,
+    Summary,
+)
 from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
 from noisebo.keys import MEASURE, numpy_rng
 from noisebo.state import CampaignState
@@ -75,59 +84,8 @@ def simulates(instrument) -> bool:
 in_memory: Commit = engine.apply_all  # commit events by applying them, with no journal
 
 
-class CompileAhead:
-    """Compiles the decision programs of the next padding capacity in a background thread once a
-    campaign's training set nears it (``decision.capacities_ahead``), so crossing a capacity costs
-    no compilation in the decision itself (one that comes first waits for the thread rather than
-    compile the same programs again). One thread at a time; each capacity once per process."""
-
-    _done: set = set()
-    _lock = threading.Lock()
-
-    def __init__(self) -> None:
-        self._thread: threading.Thread | None = None
-
-    def after(self, state: EngineState) -> None:
-        """Start compiling ahead if the latest decision says a crossing is near, or, before the
-        first decision, its programs (on stand-in seed points) while the seed points are measured."""
-        config = state.config
-        if config.inference.mode != "map" or self.busy:
-            return
-        if not state.decisions:
-            self._start(config, None, lambda: compile_first_decision(config, state.seed))
-            return
-        capacities = capacities_ahead(config, state.decisions[-1])
-        if capacities is not None:
-            args = (config, state.data, state.decisions[-1].hyperparameters, capacities)
-            self._start(config, capacities, lambda: compile_ahead(*args))
-
-    def _start(self, config, capacities, work) -> None:
-        key = programs_key(config, capacities)
-        with self._lock:
-            if key in self._done:
-                return
-            self._done.add(key)
-        # Not a daemon: a thread inside an XLA compilation as the interpreter exits aborts the
-        # process; ``drive`` joins it before returning.
-        self._thread = threading.Thread(target=_quietly, args=(work,), name="noisebo-compile-ahead")
-        self._thread.start()
-
-    @property
-    def busy(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
-
-    def join(self) -> None:
-        if self._thread is not None:
-            self._thread.join()
 
 
-def _quietly(work) -> None:
-    # Compiling ahead only saves time later: if it fails, the decision compiles in line and any
-    # real problem surfaces there, in the decision itself.
-    try:
-        work()
-    except Exception:  # noqa: BLE001
-        pass
 
 
 def drive(

@@ -1,5 +1,5 @@
 """The campaign's steps as pure functions: seed points, a point from its shots, and the final
-summary. The engine (``noisebo.engine``) sequences them; every random draw is keyed by
+summary. The engine (``noisebo.campaign.engine``) sequences them; every random draw is keyed by
 (campaign seed, point, shot), so one seed always gives one campaign."""
 
 from __future__ import annotations
@@ -8,12 +8,20 @@ from typing import Sequence
 
 import numpy as np
 
+from noisebo.acquisition.policies import policy_of
 from noisebo.config import CampaignConfig, ReductionConfig
-from noisebo.decision import capacities_needed, compile_ahead, fit_key, fit_models, grids, hyperparameters, predict
 from noisebo.events import Summary
 from noisebo.keys import SEED_POINTS, numpy_rng
-from noisebo.reduction import ShotValue, clip_outliers, shot_values, usable
-from noisebo.schedule import reduce_shots
+from noisebo.models.fitting import fit_key, fit_models, hyperparameters
+from noisebo.models.grids import grids
+from noisebo.models.prediction import predict
+from noisebo.reduction import (
+    ShotValue,
+    clip_outliers,
+    reduce_shots,
+    shot_values,
+    usable,
+)
 from noisebo.state import CampaignState, Point, as_position
 
 
@@ -89,7 +97,7 @@ def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summar
     """Fit both models on every point (key for the step after the last decision: ``n_steps``
     unless the instrument-time budget ended the campaign sooner) and summarise them."""
     fitted = fit_models(config, state, fit_key(seed, len(state.t_opt_history)))
-    pred = predict(config, fitted, state)
+    pred = predict(config, fitted, state, policy_of(config.acquisition).uses_spread)
     return Summary(
         f_mean=np.asarray(pred.posterior.f_mean, dtype=np.float64),
         f_var=np.asarray(pred.posterior.f_var, dtype=np.float64),
@@ -104,20 +112,5 @@ def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summar
 
 
 
-def stand_in_seeds(config: CampaignConfig, seed: int) -> CampaignState:
-    """The campaign's seed points with stand-in readings (value = index, noise 1): a state of the
-    shapes its first decision works on, before anything is measured."""
-    shots = config.schedule.shots_before
-    points = tuple(Point(tuple(row[:-1]), float(row[-1]), float(i), 1.0, shots, 1.0, True)
-                   for i, row in enumerate(seed_points(config, seed)))
-    return CampaignState(points=points)
 
 
-def compile_first_decision(config: CampaignConfig, seed: int) -> None:
-    """Compile (or load from the persistent cache) the programs of the campaign's first decision
-    on stand-in seed points, so the real one need not: for a thread started while Prefect and
-    the instrument start up. MAP mode only (NUTS samplers are per thread)."""
-    if config.inference.mode != "map":
-        return
-    state = stand_in_seeds(config, seed)
-    compile_ahead(config, state, None, capacities_needed(config, state))

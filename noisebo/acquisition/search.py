@@ -15,35 +15,14 @@ from typing import Callable
 
 import jax
 import jax.numpy as jnp
-import numpy as np
-from scipy.stats import qmc
-
-from noisebo.config import SpaceConfig
 
 STARTS = 8  # reference points refined per decision
 PER_ROUND = 32  # random neighbours tried around each per round
 ROUNDS = 6  # radii: 2h, h, h/2, ... for reference spacing h
 
 
-def reference_points(space: SpaceConfig) -> np.ndarray:
-    """The reference points in raw units: (n,) the grid for one axis; (n0 * n1, 2) the display
-    grid for two, axis 0 varying slowest (``reshape(n0, n1)`` gives the image); (m, d) for more,
-    the first ``n_candidates`` points of the unscrambled Halton sequence after its origin."""
-    lows, highs = np.asarray(space.lows), np.asarray(space.highs)
-    if space.dimensions == 1:
-        return np.linspace(lows[0], highs[0], space.points_per_axis[0])
-    if space.dimensions == 2:
-        axes = [np.linspace(lo, hi, n) for lo, hi, n in zip(lows, highs, space.points_per_axis)]
-        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)
-    unit = qmc.Halton(space.dimensions, scramble=False).random(space.n_candidates + 1)[1:]
-    return lows + unit * (highs - lows)
 
 
-def reference_spacing(space: SpaceConfig) -> float:
-    """The typical distance between neighbouring reference points in scaled ([0, 1]) units."""
-    if space.dimensions == 2:
-        return 1.0 / (min(space.points_per_axis) - 1)
-    return float(space.n_candidates ** (-1.0 / space.dimensions))
 
 
 def refine(score: Callable[[jnp.ndarray], jnp.ndarray], starts: jnp.ndarray, key: jax.Array,

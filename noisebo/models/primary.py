@@ -5,7 +5,7 @@ Training targets are standardised (zero mean, unit variance) and each axis of x 
 Matern 5/2, one length per axis ("length_0" ... "length_{d-1}", the same prior each). Each
 point's own noise variance (the variance of the value fed, e.g. s^2/n for a mean of n shots)
 sits on the covariance diagonal, in fitting and in prediction. Points at the same x enter as one
-precision-weighted observation (``noisebo.inputs``): the same likelihood up to a constant.
+precision-weighted observation (``noisebo.models.inputs``): the same likelihood up to a constant.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import numpyro
 import numpyro.distributions as dist
 
 from noisebo.config import PrimaryModelConfig
-from noisebo.inputs import Grouped, capacity_for, merge
-from noisebo.kernels import ard_matern52, masked_covariance, matern52
+from noisebo.models.inputs import Grouped, capacity_for, merge
+from noisebo.models.kernels import ard_matern52, masked_covariance, matern52
 
 
 class PrimaryData(NamedTuple):
@@ -86,7 +86,7 @@ def prepare(
 ) -> tuple[PrimaryData, Standardisation, Grouped]:
     """Standardise raw observations (numpy: x (n,) or (n, d) with bounds x_min, x_max (floats
     or (d,)), value (n,), and the variance of each value (n,)), merge those at the same x (see
-    ``noisebo.inputs``) and pad the groups to ``capacity`` (default: the groups' ``capacity_for``).
+    ``noisebo.models.inputs``) and pad the groups to ``capacity`` (default: the groups' ``capacity_for``).
     An x of shape (n, 1) is taken as one axis, (n,).
 
     Returns the model's data, the standardisation (from all n values) and the groups."""

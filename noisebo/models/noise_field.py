@@ -2,7 +2,7 @@
 
 Model
 -----
-Noise(x, t) = law(t; A0(x), A1(x)[, p]) + r(t), the laws of ``noisebo.noise_laws`` ("inv_sqrt"
+Noise(x, t) = law(t; A0(x), A1(x)[, p]) + r(t), the laws of ``noisebo.models.noise_laws`` ("inv_sqrt"
 A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature" sqrt(A1^2/t + A0^2), or an installed one), with
 
     log A0(x) = log a0 + g0(x)        and, with ``varies="a0_a1"``,   log A1(x) = log a1 + g1(x),
@@ -13,7 +13,7 @@ r(t) is the x-independent model's residual GP over t, unchanged (its priors and 
 "amplitude" and "length"), shared by all x. The training data are the x-independent model's: per
 point the unbiased sample sd s/c4(n) over the data scale, its sampling variance
 Noise^2 (1 - c4^2)/c4^2 on the diagonal; points at the same (x, t) merged exactly
-(``noisebo.inputs``), with the within-group factor ``noise_model.group_log_factor``.
+(``noisebo.models.inputs``), with the within-group factor ``noise_model.group_log_factor``.
 
 Why log A0(x), not a GP added to the variance
     The case this is for: a domain wall with 24 pm of time-independent noise against 0.84 pm
@@ -120,13 +120,20 @@ import numpyro
 import numpyro.distributions as dist
 from scipy import optimize
 
-from noisebo import inference, registry
+from noisebo import registry
 from noisebo.config import NoiseFieldConfig, NoiseModelConfig
-from noisebo.inputs import Grouped, capacity_for, group_ids, merge
-from noisebo.kernels import JITTER, matern52
-from noisebo.noise_model import RESIDUAL_LENGTH_LOC, c4, group_log_factor, mean_law, sampling_rel_var
-from noisebo.noise_model import initial_guess as law_guess
-from noisebo.reward import reward
+from noisebo.models import inference
+from noisebo.models.inputs import Grouped, capacity_for, group_ids, merge
+from noisebo.models.kernels import JITTER, matern52
+from noisebo.models.noise_model import (
+    RESIDUAL_LENGTH_LOC,
+    c4,
+    group_log_factor,
+    mean_law,
+    sampling_rel_var,
+)
+from noisebo.models.noise_model import initial_guess as law_guess
+from noisebo.models.reward import reward
 
 NU = 2.5  # Matern 5/2
 DEFAULT_BASIS_PER_AXIS = {1: 96, 2: 24, 3: 10, 4: 7}

@@ -23,45 +23,14 @@ policy is the paper's.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import jax.numpy as jnp
 
-from noisebo import information, registry
-from noisebo.acquisition import expected_improvement, f_acquisition
+from noisebo import registry
+from noisebo.acquisition import information
+from noisebo.acquisition.functions import expected_improvement, f_acquisition
 from noisebo.config import AcquisitionConfig, RewardConfig
-from noisebo.reward import normalise, reward
-
-
-class Posterior(NamedTuple):
-    """What the policies see. f_mean, f_var: (n_x,) latent f; noise_mean, noise_var: single-shot
-    noise sd and its variance, (n_t,) for noise that does not depend on x, (n_x, n_t) for a
-    noise field; t: (n_t,) seconds; t_opt: the predicted optimal t (for a field, the one t that
-    maximises the reward averaged over x); noise_at_t_opt: Noise(t_opt) (for a field (n_x,),
-    Noise(x, t*(x)) at each x); f_best: incumbent f; reward_best: incumbent normalised reward;
-    t_opt_map: (n_x,) t*(x) for a field, None otherwise; f_spread: (n_x,) for the info_rate
-    policy, the mean squared posterior covariance of f between each x and the integration
-    points (``noisebo.information``), None otherwise."""
-
-    f_mean: jnp.ndarray
-    f_var: jnp.ndarray
-    noise_mean: jnp.ndarray
-    noise_var: jnp.ndarray
-    t: jnp.ndarray
-    t_opt: jnp.ndarray
-    noise_at_t_opt: jnp.ndarray
-    f_best: jnp.ndarray
-    reward_best: jnp.ndarray
-    t_opt_map: jnp.ndarray | None = None
-    f_spread: jnp.ndarray | None = None
-
-
-class NoiseRows(NamedTuple):
-    """A noise field at positions off the grid (any leading shape ...): ``mean``, ``var``
-    (..., n_t) on the t grid."""
-
-    mean: jnp.ndarray
-    var: jnp.ndarray
+from noisebo.models.prediction import NoiseRows, Posterior
+from noisebo.models.reward import normalise, reward
 
 
 def _nonnegative(a: jnp.ndarray) -> jnp.ndarray:
@@ -162,7 +131,7 @@ class Policy:
     with the t-grid index ``j`` (same shape), ``noise`` (``NoiseRows``) there for a noise field,
     ``spread`` there when ``uses_spread``; at a grid point it equals the map's entry.
     ``uses_spread``: the posterior carries ``f_spread`` (and the scores ``spread``), the mean
-    squared posterior covariance of f with the integration points (``noisebo.information``).
+    squared posterior covariance of f with the integration points (``noisebo.acquisition.information``).
     ``chooses_shots``: once the noise model has converged, each shot count of
     ``information.shot_options`` is scored and the best kept (otherwise the schedule's).
     ``paper``: 0, or the rank of one of the paper's two policies (1 reward-driven, 2 double: a
@@ -229,7 +198,7 @@ class DoubleAcquisition(Policy):
 class InformationRate(Policy):
     """The "info_rate" policy: f's integrated variance removed per second of instrument time.
 
-    (``noisebo.information``.) Once the noise model has converged it also chooses the number of
+    (``noisebo.acquisition.information``.) Once the noise model has converged it also chooses the number of
     shots."""
 
     uses_spread = True

@@ -1,0 +1,267 @@
+"""The acquire stage: from the posterior, the policy's proposal of the next point (x, t and
+its shots) among the times and shot counts the instrument-time budget affords."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from noisebo.acquisition import information
+from noisebo.acquisition.policies import (
+    acquisition_map,
+    argmax_2d,
+    point_scores,
+    policy_of,
+)
+from noisebo.acquisition.records import Decision
+from noisebo.acquisition.search import STARTS, refine
+from noisebo.config import (
+    AcquisitionConfig,
+    CampaignConfig,
+    RewardConfig,
+    ScheduleConfig,
+    SpaceConfig,
+)
+from noisebo.keys import PROPOSE, jax_key
+from noisebo.models import inference, noise_model, primary
+from noisebo.models.convergence import Convergence
+from noisebo.models.fitting import Fitted, hyperparameters
+from noisebo.models.grids import (
+    Grids,
+    grids,
+    integration_points,
+    reference_spacing,
+    scaled,
+    space_grids,
+)
+from noisebo.models.prediction import (
+    NoiseRows,
+    Posterior,
+    Prediction,
+    field_rows,
+    spread,
+)
+
+
+def shots_for(is_converged: bool, schedule: ScheduleConfig) -> int:
+    """Shots the next point gets: ``shots_before`` until convergence, ``shots_after`` from then."""
+    return schedule.shots_after if is_converged else schedule.shots_before
+
+
+def _propose_program(config: CampaignConfig):
+    return _propose_compiled(config.acquisition, config.reward, config.space, config.schedule.point_overhead_s)
+
+
+@lru_cache(maxsize=None)
+def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, overhead_s: float = 0.0):
+    def propose(post: Posterior, shots, allowed):
+        values = acquisition_map(post, shots, acq, rew, overhead_s)
+        i, j = argmax_2d(jnp.where(allowed[None, :], values, -jnp.inf))
+        return values, i, j
+
+    return jax.jit(propose)
+
+
+@lru_cache(maxsize=None)
+def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, primary_first: bool,
+                         field_kind: str | None = None, overhead_s: float = 0.0):
+    """For d > 1: the policy's map on the reference points, then ``search.refine`` from its best
+    ``STARTS`` entries (each keeps its t); with a noise field (its law ``field_kind``) each
+    candidate is scored with the noise predicted where it lies. Returns the map's maximum over t
+    at each reference point (m,), the proposal's scaled x (d,), its t index, score and the
+    noise there at that t."""
+    g = space_grids(space)
+    xs = jnp.asarray(scaled(space, g.x))
+    xi = jnp.asarray(integration_points(space))
+    spacing = reference_spacing(space)
+    n_t = g.t.size
+    uses_spread = policy_of(acq).uses_spread
+
+    def propose(post: Posterior, shots, fitted: Fitted, key, allowed):
+        values = jnp.where(allowed[None, :], acquisition_map(post, shots, acq, rew, overhead_s), -jnp.inf)
+        _, flat = jax.lax.top_k(values.ravel(), STARTS)
+        i, j = flat // n_t, flat % n_t
+        std = fitted.standardisation
+
+        def noise_rows(flat):  # (n, d) scaled -> NoiseRows (n, n_t)
+            rows = field_rows(field_kind, space, rew, fitted, flat)
+            return NoiseRows(rows.mean, rows.var)
+
+        def score(candidates):  # (K, P, d) scaled -> (K, P)
+            k, p, d = candidates.shape
+            flat = candidates.reshape(k * p, d)
+            mean, var = inference.combine(
+                *primary.predict_samples(fitted.primary.params, fitted.primary_data, flat),
+                primary_first, fitted.primary.weights,
+            )
+            raw_mean, raw_var = std.mean + std.scale * mean, std.scale**2 * var
+            noise = None
+            if field_kind is not None:
+                rows = noise_rows(flat)
+                noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t))
+            q = spread(fitted, flat, xi, primary_first).reshape(k, p) if uses_spread else None
+            return point_scores(post, raw_mean.reshape(k, p), raw_var.reshape(k, p),
+                                jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew, noise, q, overhead_s)
+
+        best_x, best_s = refine(score, xs[i], key, spacing)
+        best = jnp.argmax(best_s)
+        if field_kind is None:
+            noise_at = post.noise_mean[j[best]]
+        else:
+            noise_at = noise_rows(best_x[best][None, :]).mean[0, j[best]]
+        return jnp.max(values, axis=1), best_x[best], j[best], best_s[best], noise_at
+
+    return jax.jit(propose)
+
+
+def _allowed_t(acq: AcquisitionConfig, t_grid: np.ndarray) -> np.ndarray:
+    """Which t-grid entries a proposal may use: all, or the one nearest ``fixed_t``. (n_t,) bool"""
+    if acq.fixed_t is None:
+        return np.ones(t_grid.size, dtype=bool)
+    return np.arange(t_grid.size) == int(np.argmin(np.abs(t_grid - acq.fixed_t)))
+
+
+def cheapest_point_s(config: CampaignConfig) -> float:
+    """The instrument time (s) of the cheapest point a decision can propose: the overhead and
+    ``shots_after`` shots at the shortest t it may use."""
+    g, sched = grids(config), config.schedule
+    return sched.point_overhead_s + sched.shots_after * float(g.t[_allowed_t(config.acquisition, g.t)].min())
+
+
+def affordable(config: CampaignConfig, shots: int, left: float | None) -> tuple[np.ndarray, int]:
+    """The t-grid entries (n_t,) bool a proposal may use and its shots, within ``left`` seconds
+    of budget (None: no budget): the times at which ``shots`` shots and the point's overhead fit;
+    if none does, as many shots as fit at the shortest time (at least ``shots_after``, which
+    the engine checked fits: ``cheapest_point_s``)."""
+    g, sched = grids(config), config.schedule
+    allowed = _allowed_t(config.acquisition, g.t)
+    if left is None:
+        return allowed, shots
+    room = left - sched.point_overhead_s + 1e-9
+    fits = allowed & (shots * g.t <= room)
+    if fits.any():
+        return fits, shots
+    shortest = float(g.t[allowed].min())
+    fewer = int(max(sched.shots_after, min(shots, np.floor(room / shortest))))
+    return allowed & (fewer * g.t <= room), fewer
+
+
+def acquire(
+    config: CampaignConfig, fitted: Fitted, prediction: Prediction, convergence: Convergence, step: int,
+    key: jax.Array | None = None, budget_left: float | None = None,
+) -> Decision:
+    """The acquire stage: the policy's proposal of BO step ``step`` from the posterior
+    (``prediction``) and where the noise model stands (``convergence``), among the times (and
+    shot counts) that fit ``budget_left`` seconds (``affordable``; None: no budget); with d > 1
+    axes the local refinement draws from ``key`` (default ``propose_key(0, step)``)."""
+    post = prediction.posterior
+    sched = config.schedule
+    t_opt, t_map, spread_t, now_converged = convergence
+    key = propose_key(0, step) if key is None else key
+    options = [shots_for(now_converged, sched)]
+    if policy_of(config.acquisition).chooses_shots and now_converged:
+        options = list(information.shot_options(sched.shots_before, sched.shots_after))
+    best = None
+    for wanted in options:
+        allowed, shots = affordable(config, wanted, budget_left)
+        if shots != wanted and len(options) > 1 and shots in options:
+            continue  # the budget's cut to this count is tried as itself
+        found = _propose(config, fitted, post, key, shots, jnp.asarray(allowed))
+        if best is None or found[2] > best[2]:
+            best = found + (shots,)
+    x, j, acq_value, acq_map, noise_at_t, shots = best
+    g = grids(config)
+    if sched.noise_t == "informative" and not now_converged and shots >= 2:
+        j = informative_t(prediction, j, shots, config, budget_left)
+        noise_at_t = float(np.asarray(post.noise_mean)[j])
+    if sched.adaptive_shots and not now_converged:
+        shots = min(shots, noise_point_shots(post, j, x, g, sched))
+    decision = Decision(
+        step=step,
+        x=x,
+        t=float(g.t[j]),
+        acq_value=acq_value,
+        shots=shots,
+        measure_noise=not now_converged and shots >= 2,
+        noise_at_t=noise_at_t,
+        t_opt=t_opt,
+        converged=now_converged,
+        hyperparameters=hyperparameters(fitted),
+        acq_map=np.asarray(acq_map, dtype=np.float32),
+        f_mean=np.asarray(post.f_mean, dtype=np.float64),
+        f_var=np.asarray(post.f_var, dtype=np.float64),
+        noise_mean=_over_x(post.noise_mean),
+        noise_var=_over_x(post.noise_var),
+        primary_inputs=int(fitted.primary_inputs),
+        noise_inputs=int(fitted.noise_inputs),
+        binned=bool(fitted.binned),
+        t_opt_map=t_map,
+        t_opt_interval=spread_t,
+    )
+    return decision
+
+
+def _propose(config: CampaignConfig, fitted: Fitted, post: Posterior, key, shots: int, allowed) -> tuple:
+    """The policy's proposal for points of ``shots`` shots at the allowed t: x (a tuple), its t
+    index, acquisition value, the acquisition map, and the noise model's sd there."""
+    g, s = grids(config), config.space
+    noise_grid = np.asarray(post.noise_mean)
+    if s.dimensions == 1:
+        values, i, j = _propose_program(config)(post, float(shots), allowed)
+        i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
+        noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
+        return (float(g.x[i]),), j, float(acq_map[i, j]), acq_map, noise_at_t
+    acq_map, x_scaled, j, acq_value, noise_at = _propose_nd_program(config, fitted)(post, float(shots), fitted, key,
+                                                                                  allowed)
+    lows, highs = np.asarray(s.lows), np.asarray(s.highs)
+    x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
+    return x, int(j), float(acq_value), acq_map, float(noise_at)
+
+
+def informative_t(prediction: Prediction, j: int, shots: int, config: CampaignConfig, budget_left) -> int:
+    """``schedule.noise_t: informative``: the index of the affordable t on the t grid whose
+    noise measurement of ``shots`` shots narrows the posterior of the optimal t most per second
+    (``information.t_opt_rate``); the policy's index j when no draw disagrees about t*."""
+    allowed, _ = affordable(config, shots, budget_left)
+    t = grids(config).t
+    rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws, jnp.asarray(t),
+                                             float(noise_model.sampling_rel_var(shots)), shots,
+                                             config.schedule.point_overhead_s))
+    rate = np.where(np.asarray(allowed), rate, -np.inf)
+    best = int(np.argmax(rate))
+    return best if rate[best] > 0 else j
+
+
+def noise_point_shots(post: Posterior, j: int, x: tuple, g: Grids, sched) -> int:
+    """``schedule.adaptive_shots``: the shots of a point whose noise is measured, as many as
+    make its noise estimate as precise as the noise model already is at its t: the sample sd
+    of n shots has a relative standard error of about 1/sqrt(2 (n - 1)), so n = 1 + 1 / (2 r^2)
+    for the model's relative sd r = sd(Noise) / Noise there (a field: at the proposal's nearest
+    reference point); at least max(2, shots_after), at most shots_before."""
+    mean, var = np.asarray(post.noise_mean), np.asarray(post.noise_var)
+    if mean.ndim == 2:
+        i = int(np.argmin(np.sum((np.asarray(g.x).reshape(len(mean), -1) - np.asarray(x)) ** 2, axis=1)))
+        mean, var = mean[i], var[i]
+    r = float(np.sqrt(max(var[j], 0.0)) / max(mean[j], 1e-300))
+    wanted = 1 + int(np.ceil(1.0 / (2.0 * max(r, 1e-6) ** 2)))
+    return int(np.clip(wanted, max(2, sched.shots_after), sched.shots_before))
+
+
+def _over_x(curves) -> np.ndarray:
+    """A noise curve (n_t,) as it is; curves per position (m, n_t) averaged over the positions."""
+    curves = np.asarray(curves, dtype=np.float64)
+    return curves if curves.ndim == 1 else curves.mean(axis=0)
+
+
+def _propose_nd_program(config: CampaignConfig, fitted: Fitted):
+    nm = config.noise_model
+    return _propose_nd_compiled(config.acquisition, config.reward, config.space, fitted.primary.map_first,
+                                None if nm.field is None else nm.mean, config.schedule.point_overhead_s)
+
+
+def propose_key(seed: int, step: int) -> jax.Array:
+    """The key of BO step ``step``'s local refinement (d > 1 axes)."""
+    return jax_key(seed, PROPOSE, step)

@@ -1,0 +1,113 @@
+"""One BO decision as the composition of its stages, the way BoTorch separates model,
+posterior and acquisition:
+
+    fit_noise_model(points, key, previous)      -> NoiseFit     (noisebo.models.fitting)
+    fit_gp(points, NoiseFit, key, previous)     -> PrimaryFit   (noisebo.models.fitting)
+    predict(PrimaryFit + NoiseFit, points)      -> Prediction   (noisebo.models.prediction)
+    assess(schedule, Prediction, points)        -> Convergence  (noisebo.models.convergence)
+    acquire(Prediction, Convergence, budget)    -> Decision     (noisebo.acquisition.proposal)
+
+Each is a pure function of typed inputs returning a frozen record. ``Stages`` names the
+functions a campaign runs them with: the plain ones here, or the Prefect tasks around them
+(``tasks/campaign.py``), which show each stage in the flow run.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import jax
+
+from noisebo.acquisition.policies import policy_of
+from noisebo.acquisition.proposal import acquire, propose_key
+from noisebo.acquisition.records import Decision
+from noisebo.campaign.compile_ahead import wait_for_compilation
+from noisebo.config import CampaignConfig
+from noisebo.models.convergence import assess
+from noisebo.models.fitting import Fitted, NoiseFit, PrimaryFit, combined, fit_gp, fit_key, fit_noise_model, warm_step
+from noisebo.models.prediction import predict
+from noisebo.state import CampaignState
+
+
+class StepInputs(NamedTuple):
+    """What BO step ``step`` (0-based index) decides from: the config, the points so far, the
+    campaign's seed (the keys are (seed, step)), the previous step's hyperparameters (None at
+    the first) and the instrument time the budget has left (s; None: no budget)."""
+
+    config: CampaignConfig
+    points: CampaignState
+    seed: int
+    step: int
+    previous: dict | None
+    budget_left: float | None
+
+    @property
+    def warm(self) -> bool:
+        return warm_step(self.config, self.step, self.previous, self.points.is_converged)
+
+    @property
+    def fit_key(self) -> jax.Array:
+        return fit_key(self.seed, self.step)
+
+    @property
+    def propose_key(self) -> jax.Array:
+        return propose_key(self.seed, self.step)
+
+
+def noise_stage(step: StepInputs) -> NoiseFit:
+    return fit_noise_model(step.config, step.points, step.fit_key, step.previous, step.warm)
+
+
+def gp_stage(step: StepInputs, noise: NoiseFit) -> PrimaryFit:
+    return fit_gp(step.config, step.points, noise, step.fit_key, step.previous)
+
+
+def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision:
+    decision, _ = decide_on(step.config, combined(gp, noise), step.points, step.step, step.propose_key,
+                            step.budget_left)
+    return decision
+
+
+class Stages(NamedTuple):
+    """The functions a BO step's stages run with (each takes and returns the records above)."""
+
+    fit_noise_model: Callable[[StepInputs], NoiseFit] = noise_stage
+    fit_gp: Callable[[StepInputs, NoiseFit], PrimaryFit] = gp_stage
+    acquire: Callable[[StepInputs, PrimaryFit, NoiseFit], Decision] = acquire_stage
+
+
+PLAIN = Stages()
+
+
+def decide_on(
+    config: CampaignConfig, fitted: Fitted, state: CampaignState, step: int, key: jax.Array | None = None,
+    budget_left: float | None = None,
+) -> tuple[Decision, CampaignState]:
+    """From fitted models: predict, assess convergence and acquire. Returns the decision and
+    ``state`` with this step's predicted optimal t recorded."""
+    prediction = predict(config, fitted, state, policy_of(config.acquisition).uses_spread)
+    convergence = assess(config.schedule, prediction, state)
+    decision = acquire(config, fitted, prediction, convergence, step, key, budget_left)
+    return decision, convergence.recorded(state)
+
+
+def run_stages(step: StepInputs, stages: Stages = PLAIN) -> Decision:
+    """One whole BO decision through ``stages``: fit the noise model, fit the GP, then predict,
+    assess and acquire. Waits first for programs being compiled ahead that it needs."""
+    wait_for_compilation(step.config, step.points)
+    noise = stages.fit_noise_model(step)
+    gp = stages.fit_gp(step, noise)
+    return stages.acquire(step, gp, noise)
+
+
+def decide(
+    config: CampaignConfig, state: CampaignState, seed: int, step: int, previous: dict | None = None,
+    budget_left: float | None = None,
+) -> tuple[Decision, CampaignState]:
+    """One whole BO decision: fit both models (key (seed, step); from ``previous``, the previous
+    step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then predict, assess
+    convergence and acquire within ``budget_left`` seconds of instrument time (None: no budget).
+    Returns the decision and ``state`` with its predicted optimal t recorded."""
+    inputs = StepInputs(config, state, seed, step, previous, budget_left)
+    decision = run_stages(inputs)
+    return decision, state.with_t_opt(decision.t_opt, decision.converged, decision.t_opt_map if decision.t_opt_map.size else None)

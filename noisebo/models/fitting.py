@@ -1,0 +1,239 @@
+"""The decision's fit stages: ``fit_noise_model`` (the noise law or noise field on its training
+points) and ``fit_gp`` (the primary GP on every point, with each point's measured or modelled
+noise), each a pure function of the campaign's points, a key and the previous fit, returning a
+frozen record; ``Fitted`` is the two together, what the prediction takes.
+
+Training sets are padded to a fixed capacity (32, then doubling) so a campaign compiles its
+programs once per capacity; points measured at the same input are merged first
+(``noisebo.models.inputs``).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+from noisebo.config import (
+    CampaignConfig,
+    NoiseModelConfig,
+    PrimaryModelConfig,
+    SpaceConfig,
+)
+from noisebo.keys import FIT, jax_key
+from noisebo.models import field_fit, inference, noise_field, noise_model, primary
+from noisebo.models.grids import scaled
+from noisebo.models.inputs import capacity_for, group_ids
+from noisebo.state import CampaignState
+
+
+class Fitted(NamedTuple):
+    """Both fitted models with the data they were fitted on (``noise_data`` a
+    ``noise_field.FieldData`` when the noise depends on x). ``primary_inputs`` and
+    ``noise_inputs``: how many merged inputs each saw ((x, t) groups for a noise field);
+    ``binned``: whether either were bins (the approximation beyond ``inference.max_inputs``
+    distinct inputs)."""
+
+    primary: inference.Samples
+    primary_data: primary.PrimaryData
+    standardisation: primary.Standardisation
+    noise: inference.Samples
+    noise_data: noise_model.NoiseData | noise_field.FieldData
+    noise_scale: float
+    primary_inputs: int = 0
+    noise_inputs: int = 0
+    binned: bool = False
+
+
+def _models(config: CampaignConfig):
+    return _models_for(config.primary_model, config.noise_model, config.space.dimensions)
+
+
+@lru_cache(maxsize=None)
+def _models_for(primary_config: PrimaryModelConfig, noise_config: NoiseModelConfig, dimensions: int):
+    return primary.make_model(primary_config, dimensions), noise_model.make_model(noise_config)
+
+
+def _fit_one(config: CampaignConfig, model, data, key, guesses: list, laplace: int, quadrature: int,
+             warm: bool) -> inference.Samples:
+    inf = config.inference
+    if inf.mode == "nuts":
+        return inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.predict_samples)
+    return inference.fit_map(model, data, key, inf.restarts, laplace, guesses, quadrature, draws=not warm)
+
+
+def _previous_guesses(previous: dict | None, prefix: str, scale: float, bounds=None) -> list[dict]:
+    """The previous decision's fitted hyperparameters of one model (``hyperparameters`` keys,
+    A0/A1 in value units) as a starting point in model units: none if any is missing or not
+    finite. A0/A1/p are kept inside the prior's bounds, which move with the data scale."""
+    if not previous:
+        return []
+    names = {k.split(".", 1)[1]: v for k, v in previous.items() if k.startswith(prefix + ".")}
+    if not names or not all(np.isfinite(v) and v > 0 for v in names.values()):
+        return []
+    guess = {k: v / scale if k in ("a0", "a1") else v for k, v in names.items()}
+    if bounds is not None:
+        for row, name in enumerate(("a0", "a1", "p")):
+            if name in guess:
+                lo, hi = float(bounds[row, 0]), float(bounds[row, 1])
+                eps = 1e-6 * (hi - lo)
+                guess[name] = float(np.clip(guess[name], lo + eps, hi - eps))
+    return [guess]
+
+
+class NonFiniteData(ValueError):
+    """A model was about to be trained on a NaN or infinite number: a bug upstream, never data."""
+
+
+def _check_finite(**columns: np.ndarray) -> None:
+    for name, column in columns.items():
+        bad = np.flatnonzero(~np.isfinite(np.asarray(column, dtype=np.float64)))
+        if bad.size:
+            raise NonFiniteData(f"point(s) {bad.tolist()} have a non-finite {name}; no model is trained on it")
+
+
+def warm_step(config: CampaignConfig, step: int, previous: dict | None, noise_converged: bool) -> bool:
+    """Whether BO step ``step`` fits from the previous step's hyperparameters alone: once the
+    noise model has converged, every step but each ``restart_every``-th. Until then (few points,
+    a posterior that may have several modes, and the steps that decide when the campaign
+    converges), and on those steps, fits start from data-driven guesses, the previous fit and
+    ``restarts`` prior draws."""
+    return bool(previous) and noise_converged and step % config.inference.restart_every != 0
+
+
+class NoiseFit(NamedTuple):
+    """The fit noise model stage's record: the noise law's (or the noise field's) posterior
+    ``samples`` over its training ``data`` (model units: noise divided by ``scale``, in the
+    value's units), how many merged ``inputs`` it saw, whether they were ``binned``, and whether
+    the step fitted ``warm`` (from the previous step's hyperparameters alone)."""
+
+    samples: inference.Samples
+    data: noise_model.NoiseData | noise_field.FieldData
+    scale: float
+    inputs: int
+    binned: bool
+    warm: bool
+
+
+class PrimaryFit(NamedTuple):
+    """The fit GP stage's record: the primary GP's posterior ``samples`` over its (standardised)
+    training ``data``, the ``standardisation`` back to the value's units, how many merged
+    ``inputs`` it saw and whether they were ``binned``."""
+
+    samples: inference.Samples
+    data: primary.PrimaryData
+    standardisation: primary.Standardisation
+    inputs: int
+    binned: bool
+
+
+def combined(gp: PrimaryFit, noise: NoiseFit) -> Fitted:
+    """The two fits as the prediction takes them."""
+    return Fitted(gp.samples, gp.data, gp.standardisation, noise.samples, noise.data, noise.scale, gp.inputs,
+                  noise.inputs, gp.binned or noise.binned)
+
+
+def _columns(config: CampaignConfig, state: CampaignState):
+    x, t, value = state.positions(config.space.dimensions), state.column("t"), state.column("value")
+    n_shots, noise = state.column("n_shots"), state.column("noise")
+    _check_finite(x=x, t=t, value=value, noise=noise)
+    return x, t, value, n_shots, noise
+
+
+def fit_noise_model(
+    config: CampaignConfig, state: CampaignState, key: jax.Array, previous: dict | None = None, warm: bool = False,
+    capacity: int | None = None,
+) -> NoiseFit:
+    """Fit the noise model (or the noise field, when ``noise_model.field`` is set) on its
+    training points, from the second half of ``key`` (the step's fit key; the GP takes the
+    first). ``previous``: the previous step's ``hyperparameters``, an extra start; ``warm``: start
+    from them alone, when both models' are all there (the record says whether it did).
+    ``capacity``: the padded size of the training set (default the smallest that fits; padding
+    changes no result, only which compiled program runs)."""
+    s, inf = config.space, config.inference
+    x, t, _, n_shots, _ = _columns(config, state)
+    k_noise = jax.random.split(key)[1]
+    warm = warm and bool(_previous_guesses(previous, "primary", 1.0))
+    if config.noise_model.field is not None:
+        samples, data, scale, inputs, binned = field_fit.fit_field(config, state, scaled(s, x), k_noise, previous, warm,
+                                                                   capacity)
+        return NoiseFit(samples, data, scale, inputs, binned, warm)
+    train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
+    data, scale, groups = noise_model.prepare(t[train], state.column("shot_std")[train], n_shots[train],
+                                              config.noise_model, s.t_min, s.t_max, inf.max_inputs, capacity)
+    n_warm = _previous_guesses(previous, "noise", scale, np.asarray(data.bounds))
+    warm = warm and bool(n_warm)
+    guesses = n_warm if warm else [noise_model.initial_guess(data, config.noise_model)] + n_warm
+    samples = _fit_one(config, _models(config)[1], data, k_noise, guesses, inf.laplace_samples, 0, warm)
+    return NoiseFit(samples, data, scale, groups.count.size, groups.binned, warm)
+
+
+def fit_gp(
+    config: CampaignConfig, state: CampaignState, noise: NoiseFit, key: jax.Array, previous: dict | None = None,
+    capacity: int | None = None,
+) -> PrimaryFit:
+    """Fit the primary GP of f on every point, each with its measurement variance noise^2 /
+    shots (measured, or the noise model's where it stood when the point was taken), from the
+    first half of ``key``; warm when the noise model's fit was (``noise.warm``)."""
+    s, inf = config.space, config.inference
+    x, _, value, n_shots, point_noise = _columns(config, state)
+    data, std, groups = primary.prepare(x, value, point_noise**2 / n_shots, s.lows, s.highs, inf.max_inputs, capacity)
+    k_primary = jax.random.split(key)[0]
+    p_warm = _previous_guesses(previous, "primary", 1.0)
+    guesses = p_warm if noise.warm else [primary.prior_median(config.primary_model, s.dimensions)] + p_warm
+    samples = _fit_one(config, _models(config)[0], data, k_primary, guesses, 0, inf.primary_quadrature, noise.warm)
+    return PrimaryFit(samples, data, std, groups.count.size, groups.binned)
+
+
+def fit_models(
+    config: CampaignConfig, state: CampaignState, key: jax.Array, previous: dict | None = None, warm: bool = False,
+    capacities: tuple[int, int] | None = None,
+) -> Fitted:
+    """Both fit stages in turn (``fit_noise_model``, then ``fit_gp``) on one key, as the
+    prediction takes them. ``capacities``: the padded (primary, noise) training-set sizes."""
+    cap_primary, cap_noise = capacities or (None, None)
+    noise = fit_noise_model(config, state, key, previous, warm, cap_noise)
+    return combined(fit_gp(config, state, noise, key, previous, cap_primary), noise)
+
+
+def hyperparameters(fitted: Fitted) -> dict[str, float]:
+    """Point summaries of the fitted hyperparameters (MAP, or the posterior or quadrature mean),
+    A0/A1 in value units."""
+    out = {}
+    for prefix, samples in (("primary", fitted.primary), ("noise", fitted.noise)):
+        if prefix == "noise" and isinstance(fitted.noise_data, noise_field.FieldData):
+            field_summary = field_fit.hyperparameters(samples, fitted.noise_data, fitted.noise_scale)
+            out |= {f"noise.{name}": value for name, value in field_summary.items()}
+            continue
+        weights = None if samples.weights is None else np.asarray(samples.weights)
+        for name, values in samples.params.items():
+            v = np.asarray(values)
+            est = float(v[0] if samples.map_first else np.average(v, weights=weights))
+            if prefix == "noise" and name in ("a0", "a1"):
+                est *= fitted.noise_scale
+            out[f"{prefix}.{name}"] = est
+    return out
+
+
+def fit_key(seed: int, step: int) -> jax.Array:
+    """The key of BO step ``step``'s fits (step ``n_steps`` is the final summary's)."""
+    return jax_key(seed, FIT, step)
+
+
+def _primary_x(state: CampaignState, s: SpaceConfig) -> np.ndarray:
+    x = state.positions(s.dimensions)
+    return x[:, 0] if s.dimensions == 1 else x
+
+
+def capacities_needed(config: CampaignConfig, state: CampaignState) -> tuple[int, int]:
+    """The (primary, noise) capacities a decision on ``state`` pads to (see ``fit_models``)."""
+    s, limit = config.space, config.inference.max_inputs
+    primary_count = int(group_ids(scaled(s, _primary_x(state, s)), 0.0, 1.0, limit)[0].max(initial=-1)) + 1
+    if config.noise_model.field is not None:
+        noise_count = field_fit.groups_needed(config, state, scaled(s, state.positions(s.dimensions)))
+    else:
+        train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
+        noise_count = int(group_ids(state.column("t")[train], s.t_min, s.t_max, limit)[0].max(initial=-1)) + 1
+    return capacity_for(primary_count), capacity_for(noise_count)
