@@ -1,5 +1,6 @@
-"""The campaign flow: the engine's loop (``noisebo.campaign.driver.drive``) with each point's shots a
-``measure point`` task, each decision a ``decide`` task, and every event journaled before it counts.
+"""The campaign flow: the engine's loop (``noisebo.campaign.driver.drive``) with each of the method's
+stages a Prefect task (``tasks/campaign.py``): seed design, measure (a point's shots), fit SHO (its
+sweeps), fit noise model, fit GP, acquire, and summarise; every event is journaled before it counts.
 
 The journal is the campaign's memory: the flow starts from the state the recorder replayed, so
 the same code starts a new campaign and resumes a killed one, and a resumed campaign proposes and
@@ -23,7 +24,7 @@ from flows import abort
 from flows.reporting import RunReport, run_name
 from instruments import build, registry
 from noisebo.campaign.driver import drive, now_utc
-from noisebo.campaign.engine import KEEP_BUDGET, EngineState, ask, new_campaign
+from noisebo.campaign.engine import KEEP_BUDGET, EngineState, advance, ask, new_campaign
 from noisebo.config import CampaignConfig, load_config
 from noisebo.events import (
     Decided,
@@ -72,9 +73,10 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
 
 def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda state: None,
         instrument=None, report: RunReport | None = None) -> Path:
-    """Drive a campaign from wherever its journal stands to the end: each point's shots are a
-    ``measure point`` task, each decision a ``decide`` task, every event journaled (shot by shot)
-    before it counts. ``observe``
+    """Drive a campaign from wherever its journal stands to the end, the method's loop with each
+    stage a task: the seed design (once), then per point a ``measure`` task (its shots), for
+    sweeps a ``fit SHO`` task, and per BO step ``fit noise model``, ``fit GP`` and ``acquire``;
+    at the end ``summarise``. Every event is journaled (shot by shot) before it counts. ``observe``
     sees the campaign after every committed point and at the end (the live view). Past the
     failure budget the campaign records the status "failed" with the reason and raises
     ``FailureBudgetExceeded``; on a signal it finishes the point, records "aborted" and raises
@@ -93,8 +95,8 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
             observe(new)
         return new
 
-    def measure_point(instrument, state, committed):
-        return ops.measure_point(quote(instrument), quote(state), quote(committed))
+    def measure(instrument, state, committed):
+        return ops.measure(quote(instrument), quote(state), quote(committed), reduce=False)
 
     def decide(state):
         if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
@@ -104,16 +106,19 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
             if report is not None:
                 report.log([(logging.INFO, line)])
             _COMPILED.append(True)
-        return ops.decide(quote(state))
+        return advance(state, ops.TASKS)
 
     def stop_requested() -> str | None:
         name = abort.requested()
         return None if name is None else f"{name} received"
 
-    observe(recorder.state)
+    state = recorder.state
+    observe(state)
     if report is not None:
-        report.start(recorder.state)
-    final = drive(recorder.state, instrument, commit, measure_point, decide, stop_requested)
+        report.start(state)
+    if len(state.points) < state.config.schedule.n_seed:
+        ops.seed_design(quote(state.config), state.seed)
+    final = drive(state, instrument, commit, measure, decide, stop_requested)
     observe(final)
     if report is not None:
         report.finish(final)

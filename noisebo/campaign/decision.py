@@ -7,14 +7,14 @@ posterior and acquisition:
     assess(schedule, Prediction, points)        -> Convergence  (noisebo.models.convergence)
     acquire(Prediction, Convergence, budget)    -> Decision     (noisebo.acquisition.proposal)
 
-Each is a pure function of typed inputs returning a frozen record. ``Stages`` names the
-functions a campaign runs them with: the plain ones here, or the Prefect tasks around them
-(``tasks/campaign.py``), which show each stage in the flow run.
+Each is a pure function of typed inputs returning a frozen record. ``noisebo.campaign.stages``
+names the functions a campaign runs them with: the plain ones here, or the Prefect tasks around
+them (``tasks/campaign.py``), which show each stage in the flow run.
 """
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import jax
 
@@ -68,17 +68,6 @@ def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision
     return decision
 
 
-class Stages(NamedTuple):
-    """The functions a BO step's stages run with (each takes and returns the records above)."""
-
-    fit_noise_model: Callable[[StepInputs], NoiseFit] = noise_stage
-    fit_gp: Callable[[StepInputs, NoiseFit], PrimaryFit] = gp_stage
-    acquire: Callable[[StepInputs, PrimaryFit, NoiseFit], Decision] = acquire_stage
-
-
-PLAIN = Stages()
-
-
 def decide_on(
     config: CampaignConfig, fitted: Fitted, state: CampaignState, step: int, key: jax.Array | None = None,
     budget_left: float | None = None,
@@ -91,15 +80,6 @@ def decide_on(
     return decision, convergence.recorded(state)
 
 
-def run_stages(step: StepInputs, stages: Stages = PLAIN) -> Decision:
-    """One whole BO decision through ``stages``: fit the noise model, fit the GP, then predict,
-    assess and acquire. Waits first for programs being compiled ahead that it needs."""
-    wait_for_compilation(step.config, step.points)
-    noise = stages.fit_noise_model(step)
-    gp = stages.fit_gp(step, noise)
-    return stages.acquire(step, gp, noise)
-
-
 def decide(
     config: CampaignConfig, state: CampaignState, seed: int, step: int, previous: dict | None = None,
     budget_left: float | None = None,
@@ -109,5 +89,6 @@ def decide(
     convergence and acquire within ``budget_left`` seconds of instrument time (None: no budget).
     Returns the decision and ``state`` with its predicted optimal t recorded."""
     inputs = StepInputs(config, state, seed, step, previous, budget_left)
-    decision = run_stages(inputs)
-    return decision, state.with_t_opt(decision.t_opt, decision.converged, decision.t_opt_map if decision.t_opt_map.size else None)
+    wait_for_compilation(config, state)
+    noise = noise_stage(inputs)
+    return decide_on(config, combined(gp_stage(inputs, noise), noise), state, step, inputs.propose_key, budget_left)

@@ -54,18 +54,21 @@ def take_shot(instrument, seed: int, request: Request) -> Outcome:
         return ShotError(kind, str(error))
 
 
-def take_point(instrument, state: EngineState, committed: Commit, measure: Measure = take_shot) -> EngineState:
+def take_point(instrument, state: EngineState, committed: Commit, measure: Measure = take_shot,
+               reduce: bool = True) -> EngineState:
     """The shots of the point under way, each committed as it is taken (a failed attempt too, and
     tried again), until the engine wants something else: a decision, the next point, or nothing
-    more. Returns the state after the last commit. An instrument that stops waiting because the
-    campaign was asked to stop (``MeasurementStopped``) ends it as aborted."""
+    more. Returns the state after the last commit. With ``reduce`` False the point's reduction
+    is left to the next decision (``engine.advance``), a stage of its own. An instrument that
+    stops waiting because the campaign was asked to stop (``MeasurementStopped``) ends it as
+    aborted."""
     step = engine.ask(state)
     while isinstance(step, Request):
         try:
             outcome = measure(instrument, state.seed, step)
         except MeasurementStopped as stopped:
             return committed(state, engine.stop(state, Status.ABORTED, str(stopped)))
-        state = committed(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
+        state = committed(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False, reduce=reduce).events)
         point, step = step.point, engine.ask(state)
         if isinstance(step, Request) and step.point != point:
             break
@@ -122,13 +125,13 @@ def _loop(state, instrument, committed, measure_point, decide, stop_requested, a
         step = engine.ask(state)
         if isinstance(step, Done):
             return state
+        before = len(state.points)
         if isinstance(step, DecisionDue):
             state = committed(state, decide(state))
             ahead.after(state)
-            continue
-        before = len(state.points)
-        state = measure_point(instrument, state, committed)
-        if len(state.points) > before:
+        else:
+            state = measure_point(instrument, state, committed)
+        if len(state.points) > before:  # a point was committed, by its last shot or its reduction
             reason = stop_requested()
             if reason is not None:
                 state = committed(state, engine.stop(state, Status.ABORTED, reason))

@@ -20,8 +20,9 @@ from typing import Mapping, NamedTuple, Sequence
 
 from noisebo.acquisition.proposal import cheapest_point_s
 from noisebo.acquisition.records import Decision
-from noisebo.campaign.decision import decide
-from noisebo.campaign.steps import make_point, seed_points, summarize
+from noisebo.campaign.decision import StepInputs
+from noisebo.campaign.stages import PLAIN, Stages, run_decision
+from noisebo.campaign.steps import make_point, seed_points
 from noisebo.config import CampaignConfig
 from noisebo.events import (
     BudgetChanged,
@@ -240,11 +241,14 @@ def _point_under_way(state: EngineState) -> Request | None:
                    noise)
 
 
-def tell(state: EngineState, request: Request, outcomes: Mapping[int, Outcome], decide_next: bool = True) -> Transition:
+def tell(state: EngineState, request: Request, outcomes: Mapping[int, Outcome], decide_next: bool = True,
+         reduce: bool = True) -> Transition:
     """Record readings (or failed attempts) for ``request``, shot by shot in shot order; a point
     whose wanted shots are all in is reduced and committed (or asks for more shots when too few
     are usable); the failure budget is checked after each. With ``decide_next``, a decision that
-    falls due is made too. Raise ``EngineError`` for a stale request or a shot not wanted now."""
+    falls due is made too; with ``reduce`` False a point whose shots are all in waits for
+    ``advance`` to reduce it (a driver that shows the reduction as a stage of its own). Raise
+    ``EngineError`` for a stale request or a shot not wanted now."""
     events: list[Event] = []
     for shot in sorted(outcomes):
         current = ask(state)
@@ -253,7 +257,7 @@ def tell(state: EngineState, request: Request, outcomes: Mapping[int, Outcome], 
                               + (f" (point {current.point} is)" if isinstance(current, Request) else ""))
         if shot != current.taken:
             raise EngineError(f"shot {shot} of point {request.point} is not wanted now; shot {current.taken} is next")
-        for event in _record(state, current, shot, outcomes[shot]):
+        for event in _record(state, current, shot, outcomes[shot], reduce):
             state = apply(state, event)
             events.append(event)
     if decide_next and isinstance(ask(state), DecisionDue):
@@ -263,7 +267,7 @@ def tell(state: EngineState, request: Request, outcomes: Mapping[int, Outcome], 
     return Transition(state, tuple(events))
 
 
-def _record(state: EngineState, request: Request, shot: int, outcome: Outcome) -> list[Event]:
+def _record(state: EngineState, request: Request, shot: int, outcome: Outcome, reduce: bool = True) -> list[Event]:
     x, t = request.x, request.t
     if isinstance(outcome, ShotError):
         events: list[Event] = [ShotFailed(request.point, shot, x, t, outcome.kind, outcome.reason)]
@@ -272,16 +276,16 @@ def _record(state: EngineState, request: Request, shot: int, outcome: Outcome) -
         raise EngineError(f"a shot's outcome is a Reading or a ShotError, not {type(outcome).__name__}")
     taken = ShotTaken(request.point, shot, x, t, outcome)
     state = apply(state, taken)
-    return [taken] if len(state.taken) < request.wanted else [taken, *_reduce(state, request)]
+    return [taken] if len(state.taken) < request.wanted or not reduce else [taken, *_reduce(state, request)]
 
 
-def _reduce(state: EngineState, request: Request) -> list[Event]:
+def _reduce(state: EngineState, request: Request, make=make_point) -> list[Event]:
     """The events of a point whose wanted shots are all in: committed from its shots, or more
     shots wanted when too few are usable; then the failure budget."""
     cfg = state.config
     readings = [s.reading for s in state.taken]
     try:
-        point, values = make_point(request.x, request.t, readings, request.model_noise, cfg.reduction,
+        point, values = make(request.x, request.t, readings, request.model_noise, cfg.reduction,
                                    cfg.schedule.clip_sd)
     except NoUsableShots as short:
         more = MoreShots(request.point, len(readings) + short.missing, short.rejected, str(short))
@@ -299,24 +303,31 @@ def _budget(state: EngineState) -> list[Event]:
     return [] if message is None else [StatusChanged(Status.FAILED, message)]
 
 
-def advance(state: EngineState) -> tuple[Event, ...]:
+def advance(state: EngineState, stages: Stages = PLAIN) -> tuple[Event, ...]:
     """The events of the decision that is due: the next BO step (fits, prediction, acquisition;
     key (seed, step)), or after the last step the final summary and the status "completed", or
-    the reduction of a point whose shots are all in. Nothing when no decision is due."""
+    the reduction of a point whose shots are all in. Nothing when no decision is due. Each
+    stage runs through ``stages`` (``noisebo.campaign.stages``; default plain calls)."""
     due = ask(state)
     if not isinstance(due, DecisionDue):
         return ()
     if due.reduce:
-        return tuple(_reduce(state, _point_under_way(state)))
+        return tuple(_reduce(state, _point_under_way(state), stages.reduce))
     if due.final:
         status = StatusChanged(Status.BUDGET_SPENT if due.budget else Status.COMPLETED, due.budget)
         if len(state.points) < MIN_POINTS_TO_SUMMARISE:  # a budget that paid for less has no models to give
             return (status,)
-        return Summarised(summarize(state.config, state.data, state.seed)), status
+        return Summarised(stages.summarise(state.config, state.data, state.seed)), status
     started = time.perf_counter()
-    previous = state.decisions[-1].hyperparameters if state.decisions else None
-    decision, _ = decide(state.config, state.data, state.seed, due.step, previous, budget_left(state))
+    decision = run_decision(step_inputs(state), stages)
     return (Decided(replace(decision, latency_s=time.perf_counter() - started)),)
+
+
+def step_inputs(state: EngineState) -> StepInputs:
+    """What the due BO step decides from: the points, the keys' seed and step, the previous
+    step's hyperparameters and the budget left."""
+    previous = state.decisions[-1].hyperparameters if state.decisions else None
+    return StepInputs(state.config, state.data, state.seed, len(state.decisions), previous, budget_left(state))
 
 
 def stop(state: EngineState, status: Status, reason: str) -> tuple[Event, ...]:

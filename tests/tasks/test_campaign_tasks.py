@@ -1,5 +1,5 @@
-"""The campaign's tasks through ``.fn`` (no server) and under Prefect: one point's shots, one
-decision, no retries."""
+"""The campaign's stages as tasks, each called through ``.fn`` on a hand-made state (no server)
+and under Prefect: seed design, measure, fit SHO, fit noise model, fit GP, acquire, summarise."""
 
 import numpy as np
 import pytest
@@ -7,10 +7,12 @@ from prefect import flow
 
 from flows.campaign import start_campaign
 from instruments import build
-from noisebo.campaign import driver, engine
-from noisebo.events import Decided, Request, ShotError, ShotFailed
+from noisebo import sho
+from noisebo.campaign import driver, engine, steps
+from noisebo.events import Decided, DecisionDue, Request, ShotError, ShotFailed
 from noisebo.failures import InstrumentError
 from noisebo.keys import MEASURE, numpy_rng
+from noisebo.models.fitting import NoiseFit, PrimaryFit
 from noisebo.reduction import Reading
 from storage import journal
 from tasks import campaign as ops
@@ -56,10 +58,10 @@ def test_measure_takes_the_next_shot_with_its_own_key(tiny_config):
     assert reading == expected
 
 
-def test_measure_point_commits_every_shot_as_it_is_taken(tiny_config):
+def test_measure_commits_every_shot_as_it_is_taken(tiny_config):
     inst = build(tiny_config.instrument)
     commit, seen = commits()
-    state = ops.measure_point.fn(inst, started(tiny_config), commit)
+    state = ops.measure.fn(inst, started(tiny_config), commit)
     wanted = tiny_config.schedule.shots_before
     assert len(seen) == wanted and len(state.points) == 1  # one commit per shot, the last reduces
     point = state.points[0].committed.point
@@ -94,19 +96,9 @@ def test_an_instrument_error_is_a_shot_error_not_an_exception(tiny_config):
 def test_a_failed_shot_is_committed_and_taken_again_within_the_point(tiny_config):
     inst = Flaky(tiny_config, 1, InstrumentError("link dropped"))
     commit, seen = commits()
-    state = ops.measure_point.fn(inst, started(tiny_config), commit)
+    state = ops.measure.fn(inst, started(tiny_config), commit)
     assert isinstance(seen[0][0], ShotFailed) and len(state.failures) == 1
     assert inst.calls == tiny_config.schedule.shots_before + 1 and len(state.points) == 1
-
-
-def test_decide_is_the_engines_next_decision(tiny_config):
-    seeded = driver.run_campaign(tiny_config.with_overrides(schedule={"n_steps": 0}), build(tiny_config.instrument), 3)
-    state = engine.start(engine.new_campaign(tiny_config, 3, seeded.final.driver, {}, "now"))
-    for entry in seeded.final.points:
-        state = driver.in_memory(state, [*entry.shots, entry.committed])
-    events = ops.decide.fn(state)
-    assert len(events) == 1 and isinstance(events[0], Decided) and events[0].decision.step == 0
-    assert events[0].decision.x == engine.advance(state)[0].decision.x
 
 
 def test_under_prefect_a_failed_shot_is_not_retried_by_prefect(tiny_config, prefect_harness):
@@ -115,7 +107,7 @@ def test_under_prefect_a_failed_shot_is_not_retried_by_prefect(tiny_config, pref
 
     @flow
     def one_point():
-        return ops.measure_point(inst, started(tiny_config), commit)
+        return ops.measure(inst, started(tiny_config), commit)
 
     state = one_point()
     assert len(state.failures) == 1 and inst.calls == tiny_config.schedule.shots_before + 1
@@ -126,7 +118,7 @@ def test_other_errors_fail_the_task(tiny_config, prefect_harness):
 
     @flow
     def one_point():
-        return ops.measure_point(inst, started(tiny_config), driver.in_memory)
+        return ops.measure(inst, started(tiny_config), driver.in_memory)
 
     with pytest.raises(ValueError, match="bad coordinate"):
         one_point()
@@ -142,3 +134,113 @@ def test_the_recorder_journals_each_event_before_applying_it(tiny_config, tmp_pa
     found, _ = journal.read(path.with_suffix(".journal"))
     assert [r.type for r in found] == ["campaign", "shot"]
     assert state.n_shots == 1 and np.isclose(found[1].fields["value"], reading.value)
+
+
+def seeded(config, seed=3):
+    """The engine state of a campaign whose seed points are measured, its first BO step due."""
+    run = driver.run_campaign(config.with_overrides(schedule={"n_steps": 0}), build(config.instrument), seed)
+    state = engine.start(engine.new_campaign(config, seed, run.final.driver, {}, "now"))
+    for entry in run.final.points:
+        state = driver.in_memory(state, [*entry.shots, entry.committed])
+    return state
+
+
+def test_seed_design_is_the_engines_seed_points(tiny_config):
+    design = ops.seed_design.fn(tiny_config, 5)
+    s = tiny_config.space
+    assert design.shape == (tiny_config.schedule.n_seed, 2)
+    assert np.all((design[:, 1] >= s.t_min) & (design[:, 1] <= s.t_max))
+    assert np.array_equal(design, steps.seed_points(tiny_config, 5))
+    first = engine.ask(started(tiny_config, 5))
+    assert (first.x[0], first.t) == (design[0, 0], design[0, 1])
+
+
+def test_measure_without_reduction_leaves_the_point_to_the_reduce_stage(tiny_config):
+    inst = build(tiny_config.instrument)
+    commit, seen = commits()
+    state = ops.measure.fn(inst, started(tiny_config), commit, reduce=False)
+    assert len(seen) == tiny_config.schedule.shots_before and not state.points
+    due = engine.ask(state)
+    assert isinstance(due, DecisionDue) and due.reduce
+    reduced = driver.in_memory(state, engine.advance(state))
+    at_once = ops.measure.fn(inst, started(tiny_config), driver.in_memory)
+    assert reduced.points[0].committed == at_once.points[0].committed
+
+
+@pytest.mark.parametrize(
+    ("step", "model_noise", "taken", "expected"),
+    [
+        (-1, None, 0, "measure x=0.3 t=2 s 5 shots (seed point 3/3)"),
+        (4, None, 0, "measure x=0.3 t=2 s 5 shots (noise model not converged: noise measured)"),
+        (4, 0.2, 2, "measure x=0.3 t=2 s 5 shots (noise model converged, from shot 3)"),
+    ],
+)
+def test_a_measure_task_is_named_by_where_how_long_and_why(tiny_config, monkeypatch, step, model_noise, taken,
+                                                            expected):
+    request = Request(point=2, step=step, x=(0.3,), t=2.0, wanted=5, taken=taken, model_noise=model_noise)
+    monkeypatch.setattr(engine, "ask", lambda state: request)
+    assert ops.measure_name(started(tiny_config)) == expected
+
+
+def sweep(amplitude: float, resonance: float = 300e3, q: float = 100.0, n: int = 64, noise: float = 0.0, seed=0):
+    freq = np.linspace(resonance * 0.97, resonance * 1.03, n)
+    amp = sho.sho_amplitude(freq, amplitude, resonance, q) + np.random.default_rng(seed).normal(0, noise, n)
+    return np.vstack([freq, amp, sho.sho_phase(freq, resonance, q)])
+
+
+def test_fit_sho_turns_sweeps_into_a_point_with_their_spread(tiny_config):
+    amplitudes = [10.0, 12.0, 14.0]
+    readings = [Reading(None, sweep(a)) for a in amplitudes]
+    point, values = ops.fit_sho.fn((0.4,), 1.5, readings, None, tiny_config.reduction, None)
+    assert [v.ok for v in values] == [True] * 3
+    np.testing.assert_allclose([abs(v.value) for v in values], amplitudes, rtol=1e-6)
+    assert abs(point.value) == pytest.approx(12.0, rel=1e-6)
+    assert point.shot_std == pytest.approx(2.0, rel=1e-5) and point.noise == point.shot_std  # sd of 10, 12, 14
+    assert point.n_shots == 3 and point.t == 1.5 and point.x == (0.4,)
+
+
+def test_fit_sho_keeps_a_failed_sweep_as_rejected_with_its_reason(tiny_config):
+    readings = [Reading(None, sweep(10.0)), Reading(None, sweep(12.0)), Reading(None, np.zeros((3, 2)))]
+    point, values = ops.fit_sho.fn((0.4,), 1.5, readings, None, tiny_config.reduction, None)
+    assert [v.ok for v in values] == [True, True, False] and values[2].reason
+    assert abs(point.value) == pytest.approx(11.0, rel=1e-6) and point.n_shots == 2
+
+
+def test_scalar_readings_are_reduced_without_a_task(tiny_config):
+    point, values = ops.reduce_point((0.4,), 1.5, [Reading(1.0), Reading(3.0)], None, tiny_config.reduction, None)
+    assert point.value == 2.0 and point.shot_std == pytest.approx(np.sqrt(2.0)) and len(values) == 2
+
+
+def test_the_fit_stages_give_the_engines_decision(tiny_config):
+    state = seeded(tiny_config)
+    step = engine.step_inputs(state)
+    assert (step.step, step.previous, step.budget_left) == (0, None, None)
+    noise = ops.fit_noise_model.fn(step)
+    n_seed = tiny_config.schedule.n_seed
+    assert isinstance(noise, NoiseFit) and not noise.warm and noise.inputs == n_seed  # three distinct t
+    gp = ops.fit_gp.fn(step, noise)
+    assert isinstance(gp, PrimaryFit) and gp.inputs == n_seed
+    made = ops.acquire.fn(step, gp, noise)
+    expected = engine.advance(state)[0].decision
+    assert made.step == 0 and (made.x, made.t, made.shots) == (expected.x, expected.t, expected.shots)
+    assert made.acq_value == expected.acq_value and made.t_opt == expected.t_opt
+
+
+def test_summarise_is_the_engines_summary(tiny_config):
+    state = seeded(tiny_config)
+    summary = ops.summarise.fn(tiny_config, state.data, state.seed)
+    assert summary.t_opt == steps.summarize(tiny_config, state.data, state.seed).t_opt
+    assert tiny_config.space.t_min <= summary.t_opt <= tiny_config.space.t_max
+
+
+def test_under_prefect_the_staged_decision_equals_the_plain_one(tiny_config, prefect_harness):
+    state = seeded(tiny_config)
+
+    @flow
+    def one_step():
+        return engine.advance(state, ops.TASKS)
+
+    (decided,) = one_step()
+    plain = engine.advance(state)[0].decision
+    assert isinstance(decided, Decided)
+    assert (decided.decision.x, decided.decision.t, decided.decision.acq_value) == (plain.x, plain.t, plain.acq_value)
