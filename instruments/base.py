@@ -56,10 +56,3 @@ def is_simulator(instrument) -> bool:
     ``Simulator``: the same check the campaign loop makes before drawing a shot."""
     return simulates(instrument)
 
-
-def build(config):
-    """The driver of a validated instrument config (``noisebo.config.InstrumentConfig``), inside
-    the fault injector if ``faults`` is set, inside the timeout guard if ``timeout_s`` is."""
-    from instruments.registry import build as build_driver
-
-    return build_driver(config)

@@ -22,6 +22,8 @@ from importlib.metadata import EntryPoint, entry_points
 
 from pydantic import BaseModel, ValidationError
 
+from instruments.faults import FaultyInstrument
+from instruments.guard import TimeoutGuard
 from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
 from noisebo.events import DriverInfo
 from noisebo.reduction import register_reduction
@@ -130,9 +132,6 @@ def driver_info(config: InstrumentConfig) -> DriverInfo:
 def build(config: InstrumentConfig):
     """The driver of ``config``, inside the fault injector if ``faults`` is set and the timeout
     guard if ``timeout_s`` is."""
-    from instruments.faults import FaultyInstrument
-    from instruments.guard import TimeoutGuard
-
     cls = driver_class(config.kind)
     instrument = cls(settings_of(config, cls))
     if config.faults is not None:

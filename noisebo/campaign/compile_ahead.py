@@ -7,7 +7,6 @@ same programs at the same time."""
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -21,9 +20,6 @@ from noisebo.models.fitting import capacities_needed, fit_key, fit_models
 from noisebo.models.inputs import capacity_for
 from noisebo.models.prediction import predict
 from noisebo.state import CampaignState, Point
-
-if TYPE_CHECKING:
-    from noisebo.campaign.engine import EngineState
 
 
 def stand_in_seeds(config: CampaignConfig, seed: int) -> CampaignState:
@@ -122,9 +118,10 @@ class CompileAhead:
     def __init__(self) -> None:
         self._thread: threading.Thread | None = None
 
-    def after(self, state: EngineState) -> None:
-        """Start compiling ahead if the latest decision says a crossing is near, or, before the
-        first decision, its programs (on stand-in seed points) while the seed points are measured."""
+    def after(self, state) -> None:
+        """Start compiling ahead for ``state`` (the engine's ``EngineState``) if its latest decision
+        says a crossing is near, or, before the first decision, that decision's programs (on
+        stand-in seed points) while the seed points are measured."""
         config = state.config
         if config.inference.mode != "map" or self.busy:
             return
