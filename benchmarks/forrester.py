@@ -4,8 +4,8 @@
                                    [--first-seed S] [--set SECTION.KEY=VALUE ...] [--json PATH]
 
 Prints one table row per policy. Convergence is the paper's rule (variance of the predicted
-optimal t over the last `window` BO steps below `threshold`); "within 10" counts campaigns whose
-first converged BO step (0-based) is at most 9. t* is computed numerically from the instrument's
+optimal t over the last `window` BO steps below `threshold`); steps count from 1 (step 1 is the
+first BO step) and "converged <= step 9" counts campaigns whose first converged BO step is at most 9. t* is computed numerically from the instrument's
 true noise law and the configured reward. Latency is the decision time per BO step (both fits,
 prediction and acquisition). "recompiles" counts XLA compilations after each campaign's first BO
 step: with fixed-capacity padding it must be 0. ``--set`` overrides config keys (values read as
@@ -30,10 +30,12 @@ from instruments import build  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 from noisebo.diagnostics import compile_count  # noqa: E402
-from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table  # noqa: E402
+from noisebo.metrics import campaign_figures, summarise_campaigns  # noqa: E402
 from noisebo.models.grids import grids  # noqa: E402
 from noisebo.models.reward import true_optimal_t  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402
+from storage.steps import shown as shown_step  # noqa: E402
+from view.report import benchmark_table  # noqa: E402
 
 
 def with_overrides(config, assignments: list[str]):
@@ -75,7 +77,7 @@ def run_one(config, instrument, seed: int) -> dict:
     record = campaign_figures(
         config, instrument, result.state.t_opt_history, result.summary.t_opt, grids(config).x,
         result.summary.f_mean, [p.t for p in points for _ in range(p.n_shots)], result.latencies_s,
-        result.state.converged_step,
+        shown_step(result.state.converged_step),
     )
     after_first = compiles["after_first"]
     record["regret"] = regret(config, instrument, result.summary.f_mean)
@@ -133,7 +135,7 @@ def main(argv=None) -> int:
     print(f"\nt* = {t_star:.4f} s   inference = {base.inference.mode}   "
           f"primary quadrature = {base.inference.primary_quadrature}   f acquisition = {base.acquisition.f_acquisition}   "
           f"shots {base.schedule.shots_before} / {base.schedule.shots_after}   (median [IQR])")
-    print(summary_table(rows))
+    print(benchmark_table(rows))
     if base.acquisition.f_acquisition != "ue":  # EI and UCB look for the optimum; UE explores
         best = "maximum" if base.acquisition.maximize else "minimum"
         print(f"regret of the final model's {best} (|f(x_hat) - f*| on the grid), median: "

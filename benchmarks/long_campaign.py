@@ -55,7 +55,7 @@ def shot_seconds(config, file: dict) -> np.ndarray:
     instrument = build(config.instrument)
     shots, points = file["shots"], file["points"]
     out = []
-    for i in np.flatnonzero(points["step"] >= 0):
+    for i in np.flatnonzero(points["step"] >= 1):  # BO points (seed points: step 0)
         started = time.perf_counter()
         for k in range(int(np.sum(shots["point"] == i))):
             instrument.simulate(np.array([points["x"][i]]), float(points["t"][i]), numpy_rng(0, MEASURE, int(i), k))

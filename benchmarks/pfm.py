@@ -29,9 +29,10 @@ from forrester import run_one  # noqa: E402
 
 from instruments import build  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
-from noisebo.metrics import summarise_campaigns, summary_table  # noqa: E402
+from noisebo.metrics import summarise_campaigns  # noqa: E402
 from noisebo.models.reward import true_optimal_t  # noqa: E402
 from noisebo.reduction import shot_value  # noqa: E402
+from view.report import benchmark_table  # noqa: E402
 
 BASELINES = {"fixed 2 s": 2.0, "fixed 0.1 s": 0.1}
 
@@ -97,7 +98,7 @@ def main(argv=None) -> int:
         within[name] = sum(r["t_opt_rel_error"] <= 0.10 for r in mine) / len(mine)
 
     print(f"\nt* = {t_star:.4f} s from the simulator's noise law   (median [IQR], RMSE in pm)")
-    print(summary_table(rows))
+    print(benchmark_table(rows))
     print("\nfinal predicted optimal t within 10 % of t*: "
           + ", ".join(f"{k} {100 * v:.0f} %" for k, v in within.items() if "optimised" in k))
     print("\n| campaign | final RMSE of the profile (pm) | total measurement time (s) |\n|---|---|---|")

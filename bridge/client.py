@@ -34,7 +34,8 @@ __all__ = ["CampaignRefused", "ShotRequest", "Spectrum", "serve_instrument"]
 
 class ShotRequest(NamedTuple):
     """One wanted shot: measure at ``x`` (coordinates) for ``t`` seconds. ``point`` and ``shot``
-    number it (shot ``shot`` of ``wanted`` at the point); ``seed``, ``point``, ``shot`` also key
+    number it (shot ``shot`` of ``wanted`` at the point); ``step``: the BO step it belongs to,
+    counted from 1 (0: a seed point); ``seed``, ``point``, ``shot`` also key
     a simulator's random draws; ``reading``: "scalar" or "spectrum"."""
 
     campaign: str

@@ -29,6 +29,7 @@ from noisebo.campaign.engine import EngineState
 from noisebo.events import Done, Request, ShotError
 from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
 from noisebo.reduction import Reading
+from storage.steps import shown as shown_step
 
 Clock = Callable[[], float]
 StopRequested = Callable[[], "str | None"]  # the name of a signal that asked the campaign to stop, or None
@@ -250,7 +251,8 @@ class Exchange:
         step = engine.ask(state)
         current = None
         if isinstance(step, Request):
-            current = {"point": step.point, "shot": step.taken, "shots_wanted": step.wanted, "x": list(step.x), "t": step.t}
+            current = {"point": step.point, "step": shown_step(step.step), "shot": step.taken, "shots_wanted": step.wanted,
+                       "x": list(step.x), "t": step.t}
         last_point = None
         if state.points:
             p = state.points[-1].committed.point

@@ -78,7 +78,8 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
     @app.get("/next", dependencies=[Depends(authorised)], summary="The next wanted shot (long poll)")
     async def next_shot(wait: float = Query(25.0, ge=0.0, le=MAX_WAIT_S, description="seconds to wait for one")):
         """`{"kind": "shot", "campaign", "point", "shot", "step", "x", "t", "wanted", "attempt", "seed",
-        "reading"}`: measure at x for t seconds and post to /shots/{point}/{shot}. `{"kind": "wait"}`:
+        "reading"}`: measure at x for t seconds and post to /shots/{point}/{shot} ("step": the BO step,
+        counted from 1; 0 for a seed point). `{"kind": "wait"}`:
         nothing wanted yet (ask again). `{"kind": "done", "status", "reason"}`: the campaign has ended."""
         return await run_in_threadpool(exchange.next_shot, wait)
 

@@ -3,8 +3,10 @@ checked before anything is recorded.
 
 A shot request (``GET /next``):
 
-    {"kind": "shot", "campaign": ID, "point": 3, "shot": 1, "step": 0, "x": [0.41], "t": 0.5,
+    {"kind": "shot", "campaign": ID, "point": 3, "shot": 1, "step": 1, "x": [0.41], "t": 0.5,
      "wanted": 3, "attempt": 0, "seed": 0, "reading": "spectrum"}
+
+"step" is the BO step the point belongs to, counted from 1; 0 for a seed point (``storage.steps``).
 
 A reading (``POST /shots/{point}/{shot}``), one of
 
@@ -41,6 +43,7 @@ from noisebo.campaign.engine import EngineState
 from noisebo.config import FrozenModel
 from noisebo.events import Request, ShotError
 from noisebo.reduction import Reading
+from storage.steps import shown as shown_step
 
 
 class WireError(ValueError):
@@ -139,7 +142,7 @@ def attempts_at(state: EngineState, point: int, shot: int) -> int:
 def request_json(state: EngineState, request: Request, shape: ReadingShape) -> dict:
     """The shot request for the next wanted shot of ``request``."""
     return {"kind": "shot", "campaign": campaign_id(state), "point": request.point, "shot": request.taken,
-            "step": request.step, "x": list(request.x), "t": request.t, "wanted": request.wanted,
+            "step": shown_step(request.step), "x": list(request.x), "t": request.t, "wanted": request.wanted,
             "attempt": attempts_at(state, request.point, request.taken), "seed": state.seed, "reading": shape.reading}
 
 

@@ -348,10 +348,10 @@ def inspect_summary(path: Path) -> dict:
     t_opt = {int(s): float(v) for s, v in zip(steps["step"], steps["t_opt"], strict=True)}
     rows = []
     for i in range(len(points["x"])):
-        step = int(points["step"][i])
+        step = int(points["step"][i])  # 0: a seed point; BO steps from 1 (storage.steps)
         rows.append({
             "point": i,
-            "step": None if step < 0 else step,
+            "step": step,
             "x": list(as_position(points["x"][i])) if np.ndim(points["x"][i]) else float(points["x"][i]),
             "t": float(points["t"][i]),
             "n_shots": int(points["n_shots"][i]),
@@ -378,7 +378,7 @@ def inspect_summary(path: Path) -> dict:
         "driver": attrs["driver"],
         "schema_version": int(attrs["schema_version"]),
         "config": attrs["config"],
-        "first_converged_step": None if converged < 0 else converged,
+        "first_converged_step": None if converged < 1 else converged,
         "final_t_opt": None if data["summary"] is None else data["summary"]["t_opt"],
         "noise_field": field,
         "n_shots": int(attrs["n_shots"]),
@@ -412,7 +412,7 @@ def _inspect(args) -> int:
           f"status {summary['status']}{' (' + summary['status_reason'] + ')' if summary['status_reason'] else ''}")
     print(f"  instrument {driver['name']} {driver['version']}")
     print(f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
-          f"noise model {'not converged' if conv is None else f'converged at step {conv + 1}'}; "
+          f"noise model {'not converged' if conv is None else f'converged at step {conv}'}; "
           f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s")
     if summary["budget_s"] is not None:
         print(f"  instrument-time budget {summary['budget_s']:.4g} s, {summary['spent_s']:.4g} s spent "
@@ -425,7 +425,7 @@ def _inspect(args) -> int:
               f"{field['noise_at_t_opt_max']:.3g}")
     print(f"  {'step':>5} {'x':>{x_width}} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
     for row in summary["points"]:
-        step = "seed" if row["step"] is None else str(row["step"] + 1)
+        step = "seed" if row["step"] == 0 else str(row["step"])
         t_opt = "" if row["t_opt"] is None else f"{row['t_opt']:.4f}"
         print(f"  {step:>5} {format_position(row['x']):>{x_width}} {row['t']:>8.4g} {row['n_shots']:>5} {row['value']:>10.4g} "
               f"{row['noise']:>8.3g}{'' if row['noise_measured'] else '*'} {t_opt:>9}")

@@ -26,6 +26,7 @@ from typing import Callable, Sequence
 from noisebo.campaign.engine import EngineState
 from noisebo.events import Event, ShotFailed, Status, StatusChanged
 from noisebo.state import format_position
+from storage.steps import shown as shown_step
 
 PROGRESS_INTERVAL_S = 1.0
 EVENT_PREFIX = "noisebo.campaign"
@@ -95,7 +96,7 @@ def summary_markdown(state: EngineState, path: str | Path, resumed: bool = False
         ("shots", str(n_shots)),
         ("instrument time", f"{seconds:.4g} s{budget}"),
         ("predicted optimal t", "none yet" if t_opt is None else f"{t_opt:.4g} s"),
-        ("noise model converged", "not yet" if converged is None else f"at BO step {converged + 1}"),
+        ("noise model converged", "not yet" if converged is None else f"at BO step {shown_step(converged)}"),
         ("file", f"`{path}`"),
     ]
     lines = [f"# {run_name_of(state, resumed)}", "", "| | |", "|---|---|"]
@@ -106,12 +107,13 @@ def summary_markdown(state: EngineState, path: str | Path, resumed: bool = False
 
 
 def points_table(state: EngineState) -> list[dict]:
-    """One row per committed point: point, step ("seed" or the BO step counted from 1), x, t (s),
-    shots, value, noise and whether the noise was measured from the shots."""
+    """One row per committed point: point, step (the BO step counted from 1; 0 for a seed point,
+    as in the file and ``noisebo inspect --json``), x, t (s), shots, value, noise and whether the
+    noise was measured from the shots."""
     rows = []
     for entry in state.points:
         c, p = entry.committed, entry.committed.point
-        rows.append({"point": c.index, "step": "seed" if c.step < 0 else c.step + 1, "x": format_position(p.x),
+        rows.append({"point": c.index, "step": shown_step(c.step), "x": format_position(p.x),
                      "t_s": float(f"{p.t:.6g}"), "shots": p.n_shots, "value": float(f"{p.value:.6g}"),
                      "noise": float(f"{p.noise:.6g}"), "noise_measured": bool(p.noise_measured)})
     return rows

@@ -5,8 +5,10 @@ committed point appends only its new rows). When the run ends (any status but ru
 ``write_snapshot`` writes the whole campaign once more in the finished layout: a new file beside
 the old one, fsynced and atomically renamed over it, so a finished campaign is a plain, compact
 HDF5 file (spectra compressed) that ``h5py.File(path, "r")`` opens. Layout (schema
-"noisebo.campaign", version 2) is documented in the README; every dataset carries "units" and
-"description" attributes.
+"noisebo.campaign", version 4) is documented in the README; every dataset carries "units" and
+"description" attributes. Steps are stored as a user sees them (``storage.steps``: seed points
+step 0, BO steps 1..n_steps); the readers convert a file of schema 1-3 (0-based BO steps, seed
+points -1) to the same numbers.
 
 The readers (``read_campaign``, ``read_spectra``, ``read_shot_fits``, ``read_failures``) read
 both a finished file and a running or killed one (opened with ``swmr=True``, every table cut to
@@ -33,18 +35,20 @@ from noisebo.campaign.engine import EngineState, PointEntry
 from noisebo.events import ShotFailed, ShotTaken
 from noisebo.models.grids import grids
 from storage import manifest
+from storage import steps as numbering
 from storage.faults import crash_point
 from storage.integrity import NO_JOURNAL, CampaignFileError, Opening, examine
 from storage.journal import _fsync_dir
 
 SCHEMA = "noisebo.campaign"
-SCHEMA_VERSION = 3
-# version 1: no driver record (its config is migrated when parsed); 1 and 2: no checksums
-READABLE_VERSIONS = (1, 2, 3)
+SCHEMA_VERSION = 4
+# version 1: no driver record (its config is migrated when parsed); 1 and 2: no checksums;
+# 1-3: steps 0-based (seed points -1), converted when read (storage.steps.from_schema)
+READABLE_VERSIONS = (1, 2, 3, 4)
 CHECKSUMMED_FROM = 3
 LIBVER = ("v110", "v114")
 STEP_COLUMNS = {
-    "step": ("1", "0-based BO step"),
+    "step": ("1", "BO step, counted from 1"),
     "x": ("x units", "proposed x"),
     "t": ("s", "proposed exposure time"),
     "acq_value": ("1", "acquisition value at the proposal"),
@@ -68,7 +72,7 @@ POINT_COLUMNS = {
     "noise": ("f units", "single-shot noise sd used by the GP (diagonal = noise^2 / n_shots)"),
     "noise_measured": ("bool", "True: noise = shot_std; False: noise-model prediction"),
 }
-POINT_STEP = ("1", "BO step that proposed it (-1: seed)")
+POINT_STEP = ("1", "BO step that proposed it, counted from 1 (0: a seed point)")
 # Root attributes that change with every committed point; a running file keeps them in /committed.
 MUTABLE_ATTRS = ("converged_step", "n_points", "n_steps", "n_shots", "n_failed_attempts")
 
@@ -149,7 +153,7 @@ def point_rows(entries: Sequence[PointEntry], dimensions: int) -> dict[str, np.n
     rows = {name: np.asarray([getattr(p, name) for p in points], dtype=column_dtype(name, units))
             for name, (units, _) in POINT_COLUMNS.items() if name != "x"}
     rows["x"] = positions([p.x for p in points], dimensions)
-    rows["step"] = np.asarray([e.committed.step for e in entries], dtype=np.int32)
+    rows["step"] = np.asarray([numbering.shown(e.committed.step) for e in entries], dtype=np.int32)
     return rows
 
 
@@ -163,7 +167,8 @@ def step_rows(decisions: Sequence[Decision], names: Sequence[str], shapes: dict,
     ARRAY_COLUMNS (len, *shape) and "hyperparameters" {name: (len,)} (NaN where a decision
     lacks one of ``names``)."""
     rows = {name: np.asarray([getattr(d, name) for d in decisions], dtype=column_dtype(name, units))
-            for name, (units, _) in STEP_COLUMNS.items() if name != "x"}
+            for name, (units, _) in STEP_COLUMNS.items() if name not in ("x", "step")}
+    rows["step"] = np.asarray([numbering.shown(d.step) for d in decisions], dtype=column_dtype("step", "1"))
     rows["x"] = positions([d.x for d in decisions], dimensions)
     rows["hyperparameters"] = {
         name: np.asarray([d.hyperparameters.get(name, np.nan) for d in decisions], dtype=np.float64) for name in names}
@@ -206,7 +211,7 @@ def root_attrs(state: EngineState) -> dict:
         status=state.status.value,
         status_reason=state.reason,
         created_utc=state.created_utc,
-        converged_step=-1 if state.data.converged_step is None else state.data.converged_step,
+        converged_step=numbering.converged_attr(state.data.converged_step),
         n_points=len(state.points),
         n_steps=len(state.decisions),
         n_shots=state.n_shots,
@@ -589,6 +594,7 @@ def read_campaign(path: Path) -> dict:
         out["attrs"]["config"] = json.loads(out["attrs"]["config_json"])
         out["attrs"]["driver"] = json.loads(out["attrs"]["driver_json"]) if "driver_json" in attrs else {
             "name": out["attrs"]["instrument"], "version": "not recorded (schema 1)", "settings": {}}
+        numbering.from_schema(int(out["attrs"]["schema_version"]), out, out["attrs"])
     return out
 
 

@@ -44,6 +44,7 @@ from h5py import h5s
 
 from noisebo.campaign.engine import EngineState
 from storage import manifest
+from storage import steps as numbering
 from storage.faults import crash_point
 from storage.hdf5 import (
     ARRAY_COLUMNS,
@@ -330,7 +331,7 @@ class LiveFile:
         counts = {"points": len(state.points), "steps": len(state.decisions), "failures": len(state.failures),
                   "shots": rows["shots"] + len(shots["point"]),
                   "spectra": rows["spectra"] + sum(len(v) for v in spectra.values()), "n_shots": state.n_shots,
-                  "converged_step": -1 if state.data.converged_step is None else state.data.converged_step}
+                  "converged_step": numbering.converged_attr(state.data.converged_step)}
         self._columns["committed"].write(0, [counts[k] for k in COUNTERS])
         f.flush()
         committed_spectra = sum(len(v) for k, v in spectra.items() if k < len(state.points))

@@ -3,7 +3,8 @@
 A frame is everything the live view and the report draw at one moment of a campaign, in raw
 units. The input is the table dict of ``storage.hdf5.campaign_tables`` (a running
 campaign) or ``read_campaign`` (a file): the same frames come out of both, so a replayed
-recording equals the live one.
+recording equals the live one. Their "step" columns number steps as a user sees them
+(``storage.steps``): 0 for the seed points, k (1..n_steps) for BO step k.
 
 Frame numbering (the ``step`` timeline): 0 holds the seed points; k (1..n_steps) the decision of
 BO step k and the point it measured (1-based, as the progress lines print it); n_steps + 1 the
@@ -62,13 +63,13 @@ def normalised_reward(t: np.ndarray, noise: np.ndarray, alpha: float, beta: floa
 def n_frames(tables: dict, config: CampaignConfig) -> int:
     """Frames a campaign holds so far: seeds, one per committed BO point, the final one if done."""
     steps = np.asarray(tables["points"]["step"])
-    return 1 + int(np.sum(steps >= 0)) + (tables["summary"] is not None)
+    return 1 + int(np.sum(steps >= 1)) + (tables["summary"] is not None)
 
 
 def frame_at(tables: dict, config: CampaignConfig, k: int) -> Frame:
     """Frame ``k`` (see the module docstring) of a campaign's tables."""
     n_steps = len(tables["steps"]["step"])
-    final = tables["summary"] is not None and k == int(np.sum(np.asarray(tables["points"]["step"]) >= 0)) + 1
+    final = tables["summary"] is not None and k == int(np.sum(np.asarray(tables["points"]["step"]) >= 1)) + 1
     bo = min(k, n_steps) - 1  # index of the latest decision shown, -1 for none
     points = _points_until(tables["points"], k)
     shots_t = _measurement_time(tables, points)
@@ -104,9 +105,9 @@ def frames(tables: dict, config: CampaignConfig) -> list[Frame]:
 
 def _points_until(points: dict, k: int) -> dict:
     step = np.asarray(points["step"])
-    keep = step < k  # a point of BO step s (0-based) belongs to frame s + 1
+    keep = step <= k  # a point of step s belongs to frame s (seed points: 0)
     out = {name: np.asarray(points[name])[keep] for name in POINT_FIELDS}
-    out["frame"] = step[keep] + 1
+    out["frame"] = step[keep]
     return out
 
 

@@ -55,7 +55,7 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
     config = parse_config(data["attrs"]["config"])
     truth, law = instrument_curves(config, warn=_warn, source=(path, data["attrs"]["driver"]))
     out_dir.mkdir(parents=True, exist_ok=True)
-    steps = np.asarray(data["points"]["step"]) + 1  # 0 = seed point
+    steps = np.asarray(data["points"]["step"])  # 0: a seed point; BO steps from 1 (storage.steps)
     colours = step_colours(steps, config.schedule.n_steps)
     field = _t_map(data) is not None
     if config.space.dimensions == 1:
@@ -203,14 +203,14 @@ def _trajectory(ax, data: dict, config: CampaignConfig, colours) -> None:
 
 def _t_opt(ax, data: dict, config: CampaignConfig, law) -> None:
     steps, s, r = data["steps"], config.space, config.reward
-    k = np.asarray(steps["step"]) + 1
+    k = np.asarray(steps["step"])
     ax.plot(k, steps["t_opt"], "o-", color="tab:blue", label="predicted optimal t")
     if law is not None:
         t_star = true_optimal_t(law, s.t_min, s.t_max, r.alpha, r.beta)
         ax.axhline(t_star, color="k", ls="--", lw=1, label=f"true t* = {t_star:.3g} s")
     converged = int(data["attrs"]["converged_step"])
-    if converged >= 0:
-        ax.axvline(converged + 1, color="tab:green", ls=":", label=f"noise model converged (step {converged + 1})")
+    if converged >= 1:
+        ax.axvline(converged, color="tab:green", ls=":", label=f"noise model converged (step {converged})")
     if data["summary"] is not None:
         ax.plot([k[-1] + 1 if len(k) else 1], [data["summary"]["t_opt"]], "s", color="tab:red", label="final model")
     ax.set(xlabel="BO step", ylabel="predicted optimal t (s)", title="evolution of the predicted optimal t")
@@ -279,10 +279,16 @@ def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
     return out
 
 
-def _first_converged(converged) -> int | None:
-    """The first step whose ``converged`` flag is set, or None."""
-    hits = np.flatnonzero(np.asarray(converged, dtype=bool))
-    return int(hits[0]) if hits.size else None
+def benchmark_table(rows: dict[str, dict]) -> str:
+    """``noisebo.metrics.summary_table`` of records whose converged_step counts BO steps from 1
+    (``figures_from_file``), its first BO step's latency column named as such: step 1."""
+    return summary_table(rows).replace("| latency step 0 (s) |", "| latency step 1 (s) |")
+
+
+def _first_converged(steps: dict) -> int | None:
+    """The first BO step (counted from 1) whose ``converged`` flag is set, or None."""
+    hits = np.flatnonzero(np.asarray(steps["converged"], dtype=bool))
+    return int(np.asarray(steps["step"])[hits[0]]) if hits.size else None
 
 
 def figures_from_file(path: str | Path) -> dict:
@@ -296,7 +302,7 @@ def figures_from_file(path: str | Path) -> dict:
     record = campaign_figures(
         config, build(config.instrument), data["steps"]["t_opt"], data["summary"]["t_opt"], data["grid"]["x"],
         data["summary"]["f_mean"], data["shots"]["t"], data["steps"]["latency_s"],
-        _first_converged(data["steps"]["converged"]),
+        _first_converged(data["steps"]),
     )
     record.update(seed=int(data["attrs"]["seed"]), file=str(path))
     return record
@@ -311,7 +317,7 @@ def write_summary(paths: list, out_dir: str | Path) -> tuple[Path, Path]:
     out = Path(out_dir)
     (out / "sweep_summary.json").write_text(json.dumps({"records": records, "summary": rows}, indent=1))
     table, figure = out / "sweep_summary.md", out / "convergence_steps.png"
-    table.write_text("Median [IQR] over campaigns.\n\n" + summary_table(rows) + "\n")
+    table.write_text("Median [IQR] over campaigns.\n\n" + benchmark_table(rows) + "\n")
     convergence_figure(records, figure)
     return table, figure
 
@@ -340,7 +346,7 @@ def convergence_figure(records: list[dict], out: Path) -> None:
     width = 0.8 / len(policies)
     for i, policy in enumerate(policies):
         steps = [r["converged_step"] for r in records if r["policy"] == policy]
-        k = np.asarray([n_steps + 1 if s is None else s + 1 for s in steps])
+        k = np.asarray([n_steps + 1 if s is None else s for s in steps])
         counts = np.asarray([np.sum(k == b) for b in bins])
         ax.bar(bins + (i - (len(policies) - 1) / 2) * width, counts, width=width,
                label=f"{policy} ({len(steps)} campaigns, median {np.median(k):.0f})")

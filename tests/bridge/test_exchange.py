@@ -55,7 +55,7 @@ def test_the_next_shot_is_what_the_engine_asks_for():
     request = engine.ask(state)
     shot = exchange.next_shot(0.0)
     assert (shot["kind"], shot["point"], shot["shot"], shot["x"], shot["t"]) == ("shot", 0, 0, list(request.x), request.t)
-    assert (shot["wanted"], shot["attempt"], shot["seed"], shot["step"]) == (2, 0, 3, -1)
+    assert (shot["wanted"], shot["attempt"], shot["seed"], shot["step"]) == (2, 0, 3, 0)  # step 0: a seed point
     assert shot["campaign"] == "campaign/reward/s3@2026-11-23T00:00:00+00:00"
 
 

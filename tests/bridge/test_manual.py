@@ -37,16 +37,22 @@ def test_a_campaign_told_by_hand_equals_the_in_process_one(tmp_path, capsys):
     campaign = tmp_path / "forrester_reward_s0007.h5"
     assert out.splitlines()[0] == f"created {campaign}"
     simulator = build(config.instrument)
+    steps = {}  # point: its step, as ask --json and ask's text give it
     while True:
         _, out, _ = cli(capsys, "ask", campaign, "--json")
         request = json.loads(out)
         if request["kind"] == "done":
             break
+        text = cli(capsys, "ask", campaign)[1]
+        steps[request["point"]] = (request["step"], text.split("(")[1].split(")")[0])
         values = [repr(simulator.simulate(np.asarray(request["x"]), request["t"],
                                           numpy_rng(request["seed"], MEASURE, request["point"], shot)).value)
                   for shot in range(request["shot"], request["wanted"])]
         assert cli(capsys, "tell", campaign, "--point", request["point"], *values)[0] == 0
     assert request["status"] == "completed"
+    # 3 seed points (step 0), then BO steps 1 and 2 of 2
+    assert steps == {0: (0, "seed point"), 1: (0, "seed point"), 2: (0, "seed point"), 3: (1, "BO step 1/2"),
+                     4: (2, "BO step 2/2")}
     local = run_campaign(config, simulator, 7).final
     with Recorder.attach(campaign) as recorder:
         told = recorder.state

@@ -105,8 +105,9 @@ def test_every_call_needs_the_token_and_the_status_shows_progress(campaign):
     assert status == 200
     assert (progress["status"], progress["points"], progress["points_total"], progress["shots"]) == ("running", 1, 2, 2)
     assert progress["current"]["point"] == 1 and progress["instrument_pc"]["connected"] is True
+    assert progress["current"]["step"] == 0  # a seed point
     status, page = call(campaign.url, "GET", f"/?token={TOKEN}", token=None)
-    assert status == 200 and "1/2 points" in page
+    assert status == 200 and "1/2 points" in page and "point: 1, step: 0, shot:" in page
     status, schema = call(campaign.url, "GET", "/openapi.json", token=None)
     assert {"/next", "/shots/{point}/{shot}", "/status"} <= set(schema["paths"])
     assert call(campaign.url, "GET", "/docs", token=None)[0] == 200

@@ -136,9 +136,11 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
     assert main(["inspect", path, "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["seed"] == 2 and data["status"] == "completed" and data["config"]["name"] == "tiny"
-    assert len(data["points"]) == 7 and data["points"][0]["step"] is None and data["points"][3]["step"] == 0
+    # seed points are step 0, BO steps count from 1
+    assert [p["step"] for p in data["points"]] == [0, 0, 0, 1, 2, 3, 4]
     assert {"x", "t", "n_shots", "value", "noise", "t_opt"} <= set(data["points"][3])
-    assert data["first_converged_step"] is None or 0 <= data["first_converged_step"] < 4
+    assert data["points"][0]["t_opt"] is None and data["points"][3]["t_opt"] is not None
+    assert data["first_converged_step"] is None or 3 <= data["first_converged_step"] <= 4  # window 3: step 3 at the earliest
     assert main(["inspect", path]) == 0
     text = capsys.readouterr().out
     assert "status completed" in text and "t_opt (s)" in text
@@ -197,6 +199,37 @@ def test_a_schema_1_file_opens_for_inspect_report_and_replay(tmp_path, capsys):
     assert data["driver"] == {"name": "forrester", "version": "not recorded (schema 1)", "settings": {}}
     assert main(["report", str(old)]) == 0 and (tmp_path / "forrester_schema1_report.png").stat().st_size > 20_000
     assert main(["replay", str(old)]) == 0 and old.with_suffix(".rrd").stat().st_size > 10_000
+
+
+def test_a_schema_3_file_and_its_campaign_written_anew_inspect_the_same(tmp_path, capsys):
+    """tests/data/forrester_schema3.h5 stores 0-based BO steps (seed points -1, converged at index 2);
+    the same campaign written anew from its journal (schema 4) stores the shown steps."""
+    from pathlib import Path
+
+    data = Path(__file__).resolve().parents[1] / "data"
+    old, new = tmp_path / "old" / "forrester_schema3.h5", tmp_path / "new" / "forrester_schema3.h5"
+    old.parent.mkdir(), new.parent.mkdir()
+    shutil.copy(data / "forrester_schema3.h5", old)
+    for suffix in (".h5", ".journal"):
+        shutil.copy(data / f"forrester_schema3{suffix}", new.with_suffix(suffix))
+    assert main(["rebuild", str(new)]) == 0
+    capsys.readouterr()
+    seen = {}
+    for path in (old, new):
+        assert main(["inspect", str(path), "--json"]) == 0
+        seen[path] = json.loads(capsys.readouterr().out)
+        assert main(["inspect", str(path)]) == 0
+        text = capsys.readouterr().out
+        assert "noise model converged at step 3;" in text
+        lines = text.splitlines()
+        table = lines[[line.split()[0] for line in lines].index("step") + 1:][:7]
+        assert [line.split()[0] for line in table] == ["seed"] * 3 + ["1", "2", "3", "4"]
+    assert (seen[old]["schema_version"], seen[new]["schema_version"]) == (3, 4)
+    for summary in seen.values():
+        assert [p["step"] for p in summary["points"]] == [0, 0, 0, 1, 2, 3, 4]
+        assert summary["first_converged_step"] == 3
+    assert [p["t_opt"] for p in seen[old]["points"]] == [p["t_opt"] for p in seen[new]["points"]]
+    assert seen[old]["points"][0]["t_opt"] is None and seen[old]["points"][3]["t_opt"] is not None
 
 
 def test_a_temporary_server_that_does_not_start_in_time_is_one_line_and_no_file(tmp_path, tiny_yaml):

@@ -100,9 +100,9 @@ def test_the_summary_of_a_failed_budgeted_campaign_before_any_decision(state):
 
 def test_the_points_table(state):
     assert reporting.points_table(state) == [
-        {"point": 0, "step": "seed", "x": "0.25", "t_s": 1.0, "shots": 3, "value": 2.0, "noise": 0.5,
+        {"point": 0, "step": 0, "x": "0.25", "t_s": 1.0, "shots": 3, "value": 2.0, "noise": 0.5,
          "noise_measured": True},
-        {"point": 1, "step": "seed", "x": "0.5", "t_s": 2.0, "shots": 2, "value": 5.0, "noise": 1.25,
+        {"point": 1, "step": 0, "x": "0.5", "t_s": 2.0, "shots": 2, "value": 5.0, "noise": 1.25,
          "noise_measured": True},
         {"point": 2, "step": 1, "x": "0.125", "t_s": 0.5, "shots": 1, "value": -1.0, "noise": 0.75,
          "noise_measured": False},

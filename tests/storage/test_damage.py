@@ -199,7 +199,7 @@ def test_a_file_a_live_writer_holds_reads_within_5_s(tmp_path):
 def test_checksums_are_in_the_file_for_every_table_and_text_column(sources):
     for name in ("finished scalar", "killed scalar"):
         with h5py.File(sources[name], "r", swmr=name.startswith("killed")) as f:
-            assert f.attrs["schema_version"] == 3 and "integrity" in f
+            assert f.attrs["schema_version"] == 4 and "integrity" in f
             datasets = []
             f.visititems(lambda n, o: datasets.append((n, o)) if isinstance(o, h5py.Dataset) else None)
             for path, ds in datasets:

@@ -1,4 +1,5 @@
-"""Frames are pure functions of a campaign's tables; checked on a hand-made two-step campaign."""
+"""Frames are pure functions of a campaign's tables; checked on a hand-made two-step campaign
+(steps as the file stores them: seed points 0, BO steps from 1)."""
 
 import numpy as np
 import pytest
@@ -14,8 +15,8 @@ def tables(with_summary: bool) -> dict:
     points = {"x": np.array([0.1, 0.9, 0.5]), "t": np.array([1.0, 2.0, 1.5]), "value": np.array([1.0, 2.0, 3.0]),
               "noise": np.array([0.3, 0.2, 0.25]), "shot_std": np.array([0.3, 0.2, 0.25]),
               "n_shots": np.array([2, 2, 1]), "noise_measured": np.array([True, True, False]),
-              "step": np.array([-1, -1, 0])}
-    steps = {"step": np.array([0, 1]), "x": np.array([0.5, 0.0]), "t": np.array([1.5, 1.0]),
+              "step": np.array([0, 0, 1])}  # two seed points (step 0), then BO step 1's point
+    steps = {"step": np.array([1, 2]), "x": np.array([0.5, 0.0]), "t": np.array([1.5, 1.0]),
              "shots": np.array([1, 1]), "t_opt": np.array([1.2, 1.3]), "latency_s": np.array([0.5, 0.1]),
              "converged": np.array([False, True]), "acq_map": np.zeros((2, 3, 2)),
              "f_mean": np.array([[0.0, 1.0, 2.0]] * 2), "f_var": np.array([[4.0, 1.0, 0.0]] * 2),
