@@ -14,6 +14,8 @@ them (``tasks/campaign.py``), which show each stage in the flow run.
 
 from __future__ import annotations
 
+import time
+from dataclasses import replace
 from typing import NamedTuple
 
 import jax
@@ -54,18 +56,30 @@ class StepInputs(NamedTuple):
         return propose_key(self.seed, self.step)
 
 
+# Each stage records its own time, so a decision's latency is its arithmetic's whatever runs the
+# stages (plain calls, or Prefect tasks whose bookkeeping is the orchestration's, not the decision's).
+
 def noise_stage(step: StepInputs) -> NoiseFit:
-    return fit_noise_model(step.config, step.points, step.fit_key, step.previous, step.warm)
+    """The fit noise model stage of ``step``, timed."""
+    started = time.perf_counter()
+    noise = fit_noise_model(step.config, step.points, step.fit_key, step.previous, step.warm)
+    return noise._replace(seconds=time.perf_counter() - started)
 
 
 def gp_stage(step: StepInputs, noise: NoiseFit) -> PrimaryFit:
-    return fit_gp(step.config, step.points, noise, step.fit_key, step.previous)
+    """The fit GP stage of ``step``, timed."""
+    started = time.perf_counter()
+    gp = fit_gp(step.config, step.points, noise, step.fit_key, step.previous)
+    return gp._replace(seconds=time.perf_counter() - started)
 
 
 def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision:
+    """Predict, assess and acquire for ``step``: the decision, its ``latency_s`` the three
+    stages' own time."""
+    started = time.perf_counter()
     decision, _ = decide_on(step.config, combined(gp, noise), step.points, step.step, step.propose_key,
                             step.budget_left)
-    return decision
+    return replace(decision, latency_s=noise.seconds + gp.seconds + time.perf_counter() - started)
 
 
 def decide_on(

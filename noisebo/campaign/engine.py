@@ -14,7 +14,6 @@ and journals the events it gets back; replaying those events rebuilds the same s
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, replace
 from typing import Mapping, NamedTuple, Sequence
 
@@ -318,9 +317,7 @@ def advance(state: EngineState, stages: Stages = PLAIN) -> tuple[Event, ...]:
         if len(state.points) < MIN_POINTS_TO_SUMMARISE:  # a budget that paid for less has no models to give
             return (status,)
         return Summarised(stages.summarise(state.config, state.data, state.seed)), status
-    started = time.perf_counter()
-    decision = run_decision(step_inputs(state), stages)
-    return (Decided(replace(decision, latency_s=time.perf_counter() - started)),)
+    return (Decided(run_decision(step_inputs(state), stages)),)
 
 
 def step_inputs(state: EngineState) -> StepInputs:

@@ -12,6 +12,8 @@ flow makes each a task run) while the engine stays the one place that sequences 
 
 from __future__ import annotations
 
+import time
+from dataclasses import replace
 from typing import Callable, NamedTuple
 
 from noisebo.acquisition.records import Decision
@@ -35,8 +37,12 @@ PLAIN = Stages()
 
 def run_decision(step: StepInputs, stages: Stages = PLAIN) -> Decision:
     """One whole BO decision through ``stages``: fit the noise model, fit the GP, then predict,
-    assess convergence and acquire. Waits first for programs being compiled ahead that it needs."""
+    assess convergence and acquire. Waits first for programs being compiled ahead that it
+    needs; its ``latency_s`` is that wait plus the stages' own time."""
+    started = time.perf_counter()
     wait_for_compilation(step.config, step.points)
+    waited = time.perf_counter() - started
     noise = stages.fit_noise_model(step)
     gp = stages.fit_gp(step, noise)
-    return stages.acquire(step, gp, noise)
+    decision = stages.acquire(step, gp, noise)
+    return replace(decision, latency_s=waited + decision.latency_s)

@@ -107,7 +107,8 @@ class NoiseFit(NamedTuple):
     """The fit noise model stage's record: the noise law's (or the noise field's) posterior
     ``samples`` over its training ``data`` (model units: noise divided by ``scale``, in the
     value's units), how many merged ``inputs`` it saw, whether they were ``binned``, and whether
-    the step fitted ``warm`` (from the previous step's hyperparameters alone)."""
+    the step fitted ``warm`` (from the previous step's hyperparameters alone); ``seconds``: the
+    stage's own time, when a campaign's stage set it."""
 
     samples: inference.Samples
     data: noise_model.NoiseData | noise_field.FieldData
@@ -115,6 +116,7 @@ class NoiseFit(NamedTuple):
     inputs: int
     binned: bool
     warm: bool
+    seconds: float = 0.0
 
 
 class PrimaryFit(NamedTuple):
@@ -127,6 +129,7 @@ class PrimaryFit(NamedTuple):
     standardisation: primary.Standardisation
     inputs: int
     binned: bool
+    seconds: float = 0.0
 
 
 def combined(gp: PrimaryFit, noise: NoiseFit) -> Fitted:

@@ -12,7 +12,7 @@ from noisebo.config import AcquisitionConfig, CampaignConfig, RewardConfig
 from noisebo.events import Status
 from noisebo.models import primary
 from noisebo.models.grids import integration_points
-from noisebo.models.prediction import Posterior
+from noisebo.models.prediction import Posterior, spread_weights
 
 
 def test_rate_by_hand():
