@@ -5,7 +5,7 @@
 
 Prints one table row per policy. Convergence is the paper's rule (variance of the predicted
 optimal t over the last `window` BO steps below `threshold`); steps count from 1 (step 1 is the
-first BO step) and "converged <= step 9" counts campaigns whose first converged BO step is at most 9. t* is computed numerically from the instrument's
+first BO step) and "converged by step 10" counts campaigns whose first converged BO step is at most 10. t* is computed numerically from the instrument's
 true noise law and the configured reward. Latency is the decision time per BO step (both fits,
 prediction and acquisition). "recompiles" counts XLA compilations after each campaign's first BO
 step: with fixed-capacity padding it must be 0. ``--set`` overrides config keys (values read as

@@ -45,8 +45,8 @@ def campaign_figures(
 
     t* comes from the instrument's true noise law and the configured reward; RMSE compares the
     final f prediction (interpolated from the x grid) with the truth at 200 evenly spaced x (for d > 1 axes, at the reference points). Either
-    is None when the instrument does not know its truth. ``converged_step``: the first step at
-    which the campaign's own convergence rule held (None if it never did)."""
+    is None when the instrument does not know its truth. ``converged_step``: the first BO step
+    (counted from 1) at which the campaign's own convergence rule held (None if it never did)."""
     from noisebo.models.reward import true_optimal_t
 
     s, rew = config.space, config.reward
@@ -84,7 +84,7 @@ def summarise_campaigns(records: list[dict]) -> dict:
     rest = [v for r in records for v in r["step_latency_s"][1:]]
     return {
         "campaigns": len(records),
-        "converged_within_10": sum(1 for c in conv if c is not None and c <= 9) / max(len(records), 1),
+        "converged_within_10": sum(1 for c in conv if c is not None and c <= 10) / max(len(records), 1),
         "converged_step": median_iqr([c for c in conv if c is not None]),
         "t_rel_error": median_iqr([r["t_opt_rel_error"] for r in records]),
         "rmse_f": median_iqr([r["rmse_f"] for r in records]),
@@ -101,8 +101,8 @@ def _fmt(m, digits: int = 3) -> str:
 def summary_table(rows: dict[str, dict]) -> str:
     """A Markdown table of ``summarise_campaigns`` results keyed by policy (median [IQR])."""
     header = (
-        "| policy | campaigns | converged <= step 9 | first converged step | final abs(t_opt - t*)/t* "
-        "| final RMSE f | measurement time (s) | latency step 0 (s) | latency median rest (s) |"
+        "| policy | campaigns | converged by step 10 | first converged step | final abs(t_opt - t*)/t* "
+        "| final RMSE f | measurement time (s) | latency step 1 (s) | latency median rest (s) |"
     )
     lines = [header, "|---" * (header.count("|") - 1) + "|"]
     for policy, s in rows.items():

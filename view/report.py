@@ -280,9 +280,8 @@ def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
 
 
 def benchmark_table(rows: dict[str, dict]) -> str:
-    """``noisebo.metrics.summary_table`` of records whose converged_step counts BO steps from 1
-    (``figures_from_file``), its first BO step's latency column named as such: step 1."""
-    return summary_table(rows).replace("| latency step 0 (s) |", "| latency step 1 (s) |")
+    """``noisebo.metrics.summary_table`` of records (``figures_from_file``; BO steps from 1)."""
+    return summary_table(rows)
 
 
 def _first_converged(steps: dict) -> int | None:

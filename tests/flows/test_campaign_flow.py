@@ -42,8 +42,8 @@ def test_each_step_records_the_inputs_its_models_saw(finished):
     with h5py.File(finished, "r") as f:
         x, t, step = f["points/x"][()], f["points/t"][()], f["points/step"][()]
         steps = {k: f["steps"][k][()] for k in ("primary_inputs", "noise_inputs", "binned")}
-    for k in range(len(steps["binned"])):  # step k was fitted on the points measured before it
-        before = step < k
+    for k in range(len(steps["binned"])):  # BO step k + 1 was fitted on the points of steps 0 (seed) to k
+        before = step <= k
         assert steps["primary_inputs"][k] == np.unique(x[before]).size
         assert steps["noise_inputs"][k] == np.unique(t[before]).size  # 10 shots, then 3: all train it
     assert not steps["binned"].any()
@@ -51,7 +51,7 @@ def test_each_step_records_the_inputs_its_models_saw(finished):
 
 def test_file_layout_is_readable_with_plain_h5py(finished):
     with h5py.File(finished, "r") as f:
-        assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 3
+        assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 4
         assert json.loads(f.attrs["driver_json"]) == {"name": "forrester", "version": "0.1.0",
                                                       "settings": {"a0": 0.1, "a1": 2.0, "law": "inv_sqrt", "patch_a0": 0.0,
                                                                    "patch_x": 0.5, "patch_width": 0.05, "seed": 0}}
