@@ -15,8 +15,8 @@ them (``tasks/campaign.py``), which show each stage in the flow run.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
-from typing import NamedTuple
+from dataclasses import dataclass, replace
+from functools import cached_property
 
 import jax
 
@@ -26,12 +26,15 @@ from noisebo.acquisition.records import Decision
 from noisebo.campaign.compile_ahead import wait_for_compilation
 from noisebo.config import CampaignConfig
 from noisebo.models.convergence import assess
-from noisebo.models.fitting import Fitted, NoiseFit, PrimaryFit, combined, fit_gp, fit_key, fit_noise_model, warm_step
+from noisebo.models.fitting import (
+    Fitted, NoiseFit, PrimaryFit, combined, fit_gp, fit_key, fit_keys, fit_noise_model, warm_step,
+)
 from noisebo.models.prediction import predict
 from noisebo.state import CampaignState
 
 
-class StepInputs(NamedTuple):
+@dataclass(frozen=True)
+class StepInputs:
     """What BO step ``step`` (0-based index) decides from: the config, the points so far, the
     campaign's seed (the keys are (seed, step)), the previous step's hyperparameters (None at
     the first) and the instrument time the budget has left (s; None: no budget)."""
@@ -43,15 +46,16 @@ class StepInputs(NamedTuple):
     previous: dict | None
     budget_left: float | None
 
-    @property
+    @cached_property
     def warm(self) -> bool:
         return warm_step(self.config, self.step, self.previous, self.points.is_converged)
 
-    @property
-    def fit_key(self) -> jax.Array:
-        return fit_key(self.seed, self.step)
+    @cached_property
+    def fit_keys(self) -> tuple[jax.Array, jax.Array]:
+        """The (GP, noise model) keys of the step's fits, made once (a key costs about a ms)."""
+        return fit_keys(fit_key(self.seed, self.step))
 
-    @property
+    @cached_property
     def propose_key(self) -> jax.Array:
         return propose_key(self.seed, self.step)
 
@@ -62,14 +66,14 @@ class StepInputs(NamedTuple):
 def noise_stage(step: StepInputs) -> NoiseFit:
     """The fit noise model stage of ``step``, timed."""
     started = time.perf_counter()
-    noise = fit_noise_model(step.config, step.points, step.fit_key, step.previous, step.warm)
+    noise = fit_noise_model(step.config, step.points, step.fit_keys[1], step.previous, step.warm)
     return noise._replace(seconds=time.perf_counter() - started)
 
 
 def gp_stage(step: StepInputs, noise: NoiseFit) -> PrimaryFit:
     """The fit GP stage of ``step``, timed."""
     started = time.perf_counter()
-    gp = fit_gp(step.config, step.points, noise, step.fit_key, step.previous)
+    gp = fit_gp(step.config, step.points, noise, step.fit_keys[0], step.previous)
     return gp._replace(seconds=time.perf_counter() - started)
 
 

@@ -150,14 +150,14 @@ def fit_noise_model(
     capacity: int | None = None,
 ) -> NoiseFit:
     """Fit the noise model (or the noise field, when ``noise_model.field`` is set) on its
-    training points, from the second half of ``key`` (the step's fit key; the GP takes the
-    first). ``previous``: the previous step's ``hyperparameters``, an extra start; ``warm``: start
+    training points, drawing from ``key`` (the noise model's half of the step's fit key:
+    ``fit_keys``). ``previous``: the previous step's ``hyperparameters``, an extra start; ``warm``: start
     from them alone, when both models' are all there (the record says whether it did).
     ``capacity``: the padded size of the training set (default the smallest that fits; padding
     changes no result, only which compiled program runs)."""
     s, inf = config.space, config.inference
     x, t, _, n_shots, _ = _columns(config, state)
-    k_noise = jax.random.split(key)[1]
+    k_noise = key
     warm = warm and bool(_previous_guesses(previous, "primary", 1.0))
     if config.noise_model.field is not None:
         samples, data, scale, inputs, binned = field_fit.fit_field(config, state, scaled(s, x), k_noise, previous, warm,
@@ -179,11 +179,12 @@ def fit_gp(
 ) -> PrimaryFit:
     """Fit the primary GP of f on every point, each with its measurement variance noise^2 /
     shots (measured, or the noise model's where it stood when the point was taken), from the
-    first half of ``key``; warm when the noise model's fit was (``noise.warm``)."""
+    ``key`` (the GP's half of the step's fit key: ``fit_keys``); warm when the noise model's fit
+    was (``noise.warm``)."""
     s, inf = config.space, config.inference
     x, _, value, n_shots, point_noise = _columns(config, state)
     data, std, groups = primary.prepare(x, value, point_noise**2 / n_shots, s.lows, s.highs, inf.max_inputs, capacity)
-    k_primary = jax.random.split(key)[0]
+    k_primary = key
     p_warm = _previous_guesses(previous, "primary", 1.0)
     guesses = p_warm if noise.warm else [primary.prior_median(config.primary_model, s.dimensions)] + p_warm
     samples = _fit_one(config, _models(config)[0], data, k_primary, guesses, 0, inf.primary_quadrature, noise.warm)
@@ -197,8 +198,15 @@ def fit_models(
     """Both fit stages in turn (``fit_noise_model``, then ``fit_gp``) on one key, as the
     prediction takes them. ``capacities``: the padded (primary, noise) training-set sizes."""
     cap_primary, cap_noise = capacities or (None, None)
-    noise = fit_noise_model(config, state, key, previous, warm, cap_noise)
-    return combined(fit_gp(config, state, noise, key, previous, cap_primary), noise)
+    k_primary, k_noise = fit_keys(key)
+    noise = fit_noise_model(config, state, k_noise, previous, warm, cap_noise)
+    return combined(fit_gp(config, state, noise, k_primary, previous, cap_primary), noise)
+
+
+def fit_keys(key: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """The (GP, noise model) keys of a step's fit key."""
+    k_primary, k_noise = jax.random.split(key)
+    return k_primary, k_noise
 
 
 def hyperparameters(fitted: Fitted) -> dict[str, float]:
