@@ -50,11 +50,14 @@ def journal_length(path: Path) -> int:
     return len(journal.read(jpath)[0]) if jpath.exists() else 0
 
 
-def wait_for_length(path: Path, n: int, alive, timeout: float = 240) -> None:
+def wait_for_length(path: Path, n: int, alive, timeout: float = 240, what=lambda: "") -> None:
+    """Wait until the campaign's journal holds ``n`` records; ``what()`` says what the campaign
+    printed, when it ends or hangs first."""
     deadline = time.monotonic() + timeout
     while journal_length(path) < n:
-        assert alive(), "the process ended before the moment to kill it"
-        assert time.monotonic() < deadline, f"the journal did not reach {n} records"
+        assert alive(), f"the process ended before the moment to kill it: {what()}"
+        assert time.monotonic() < deadline, (f"the journal did not reach {n} records "
+                                             f"({journal_length(path)} after {timeout:.0f} s): {what()}")
         time.sleep(0.02)
 
 

@@ -37,10 +37,14 @@ def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_
     moments = sorted(np.random.default_rng(seed).choice(np.arange(4, 40), size=len(commands), replace=False))
 
     client = start_client(f"http://127.0.0.1:{port}", capture=True)
+    campaign = None
     try:
-        for command, moment in zip(commands, moments):
-            campaign = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            wait_for_length(path, moment, lambda process=campaign: process.poll() is None)
+        for k, (command, moment) in enumerate(zip(commands, moments)):
+            log = tmp_path / f"campaign{k}.log"
+            with open(log, "w") as output:
+                campaign = subprocess.Popen(command, env=env, stdout=output, stderr=subprocess.STDOUT)
+            alive = lambda process=campaign: process.poll() is None  # noqa: E731
+            wait_for_length(path, moment, alive, what=lambda log=log: log.read_text()[-3000:])
             campaign.send_signal(signal.SIGKILL)
             campaign.wait()
             assert client.poll() is None, f"the instrument PC's process ended: {client.communicate()}"
@@ -49,7 +53,10 @@ def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_
         assert done.returncode == 0, done.stderr[-3000:]
         served, err = client.communicate(timeout=60)
     finally:
-        client.kill()
+        for process in (campaign, client):
+            if process is not None and process.poll() is None:
+                process.kill()
+                process.communicate()
     assert client.returncode == 0, err
     assert served.strip() == "completed"
     assert_same_campaign(path, reference(seed))
