@@ -8,16 +8,21 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
 
 - "reward", "double": the paper's two policies (and shot schedule);
 - "fixed t_min", "fixed t*", "fixed t_max": the reward-driven policy with every point at one t
-  (t* from the simulator's own noise law and the configured reward) and ``shots_after`` shots
-  (at least 2) from the first point on: with no t to learn, no point needs the 30 shots;
-- "info rate": ``acquisition.policy: info_rate`` (``noisebo.acquisition.information``).
+  (t* is t*(law), from the simulator's own noise law and the configured reward: see
+  ``benchmarks/_tstar.py``) and ``shots_after`` shots (at least 2) from the first point on: with
+  no t to learn, no point needs the 30 shots;
+- "info_rate": ``acquisition.policy: info_rate`` (``noisebo.acquisition.information``).
+
+A design's name is the same everywhere: in --designs, in the output and as the key of the JSON's
+``records``.
 
 After every decision it scores the model that decision was made with (the GP mean on the x grid,
 interpolated to 200 evenly spaced positions for one axis) against the simulator's truth, beside
 the instrument time spent when it was made, and at the end the final model. It prints, per
 design, the median RMSE [IQR] once a given time is spent (the last model made within it), the
 median time to first reach --target (when every seed reaches it), and the final predicted t
-against t*; and plots the median curves with their IQR (--figure). A seed still measuring its
+against t*(law) (and against t*(x-avg) too where the simulator's noise depends on x and the two
+differ; the output names both); and plots the median curves with their IQR (--figure). A seed still measuring its
 seed points has no model yet: it counts as the worst error, so a median needs half the seeds to
 have one ("-" where fewer do). Results are written to --json after every seed, and a run given
 the same --json measures only the seeds it lacks: a long run interrupted keeps what it has
@@ -35,18 +40,29 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
+sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
-from instruments import build  # noqa: E402
-from instruments.registry import validated  # noqa: E402
+from _config import Parser, benchmark_config  # noqa: E402
+from _tstar import LAW, X_AVG, describe, differ, t_stars  # noqa: E402
+
 from noisebo.campaign.driver import run_campaign  # noqa: E402
-from noisebo.config import load_config  # noqa: E402
 from noisebo.metrics import median_iqr, relative_error, rmse  # noqa: E402
 from noisebo.models.grids import grids  # noqa: E402
-from noisebo.models.reward import true_optimal_t  # noqa: E402
 from noisebo.registry import paper_policies  # noqa: E402
 
-DESIGNS = (*paper_policies(), "fixed t_min", "fixed t*", "fixed t_max", "info rate")
+DESIGNS = (*paper_policies(), "fixed t_min", "fixed t*", "fixed t_max", "info_rate")
+RENAMED = {"info rate": "info_rate"}  # a JSON written before the names were one spelling
+
+
+def design_names(text: str) -> list[str]:
+    """--designs: comma-separated names, each one of DESIGNS (argparse's one-line error otherwise)."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in DESIGNS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown design {', '.join(repr(n) for n in unknown) or repr(text)}; known: {', '.join(DESIGNS)}")
+    return list(dict.fromkeys(names))
 NO_STEP_LIMIT = 1_000_000
 
 
@@ -54,7 +70,7 @@ def design_config(base, name: str, t_star: float):
     s = base.space
     if name in paper_policies():
         return base.with_overrides(acquisition={"policy": name})
-    if name == "info rate":
+    if name == "info_rate":
         return base.with_overrides(acquisition={"policy": "info_rate"})
     fixed = {"fixed t_min": s.t_min, "fixed t*": t_star, "fixed t_max": s.t_max}[name]
     after = base.schedule.shots_after  # no t to learn: every point gets the few shots a converged campaign takes
@@ -135,13 +151,14 @@ def figure(records: dict, budget: float, path: Path, title: str) -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = Parser(prog=Path(__file__).name, description=__doc__.split("\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
     parser.add_argument("--budget", type=float, default=900.0)
     parser.add_argument("--overhead", type=float, default=0.0)
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
-    parser.add_argument("--designs", default=",".join(DESIGNS))
+    parser.add_argument("--designs", type=design_names, default=list(DESIGNS), metavar="NAME[,NAME...]",
+                        help=f"comma-separated designs, quoted where a name has a space (default: all): {', '.join(DESIGNS)}")
     parser.add_argument("--at", default="100,200,300,500,860", help="times (s) to report the RMSE at")
     parser.add_argument("--target", type=float, default=0.46)
     parser.add_argument("--json", type=Path, default=None)
@@ -150,16 +167,18 @@ def main(argv=None) -> int:
                         help="measure nothing: report every seed --json holds for each design")
     args = parser.parse_args(argv)
 
-    base = validated(load_config(args.config).with_overrides(
+    base, instrument = benchmark_config(parser, args.config, lambda c: c.with_overrides(
         schedule={"budget_s": args.budget, "point_overhead_s": args.overhead, "n_steps": NO_STEP_LIMIT}))
-    instrument = build(base.instrument)
-    s, rew = base.space, base.reward
-    t_star = true_optimal_t(instrument.noise_law, s.t_min, s.t_max, rew.alpha, rew.beta)
+    stars = t_stars(base, instrument)
+    t_star = stars[LAW]
+    both = differ(stars)
     score = scorer(base, instrument)
-    names = [n.strip() for n in args.designs.split(",") if n.strip()]
+    names = args.designs
     at = [float(v) for v in args.at.split(",") if v.strip()] + [args.budget]
     records: dict[str, list] = {}
     done = json.loads(args.json.read_text()) if args.json and args.json.exists() else {}
+    if "records" in done:
+        done["records"] = {RENAMED.get(k, k): v for k, v in done["records"].items()}
     wanted = list(range(args.first_seed, args.first_seed + args.seeds))
     for name in names:
         if args.report:
@@ -183,16 +202,18 @@ def main(argv=None) -> int:
                     key=lambda r: r["seed"])
                 args.json.parent.mkdir(parents=True, exist_ok=True)
                 args.json.write_text(json.dumps({"config": base.model_dump(mode="json"), "t_star": t_star,
+                                                 "t_star_definition": LAW, "t_stars": stars,
                                                  "records": done["records"]}, default=float))
         records[name] = [kept[seed] for seed in wanted]
     counts = sorted({len(r) for r in records.values()})
     print(f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, "
           f"{'/'.join(str(c) for c in counts)} seeds per design; "
-          f"t* = {t_star:.4f} s\n")
+          f"{describe(stars, LAW + (f' and {X_AVG}' if both else ''))}\n")
     print("RMSE of f once this much instrument time is spent, median [IQR] over seeds:\n")
-    print("| design | " + " | ".join(f"{v:g} s" for v in at) + f" | time to RMSE {args.target:g} (s) | points "
-          "| final t within 5 % of t* | final t error |")
-    print("|---" * (len(at) + 5) + "|")
+    against = [LAW, X_AVG] if both else [LAW]
+    print("| design | " + " | ".join(f"{v:g} s" for v in at) + f" | time to RMSE {args.target:g} (s) | points | "
+          + " | ".join(f"final t within 5 % of {name} | final t error vs {name}" for name in against) + " |")
+    print("|---" * (len(at) + 3 + 2 * len(against)) + "|")
     for name, recs in records.items():
         cells = []
         for b in at:
@@ -203,12 +224,14 @@ def main(argv=None) -> int:
         reach = [time_to(r, args.target) for r in recs]
         reached = [v for v in reach if np.isfinite(v)]
         when = f"{np.median(reach):.0f}" if len(reached) == len(reach) else f"{len(reached)} of {len(reach)} reach it"
-        within = sum(r["t_rel_error"] <= 0.05 for r in recs)
-        terr = median_iqr([r["t_rel_error"] for r in recs])
         if not recs:
             continue
+        t_cells = []
+        for star in against:
+            errors = [relative_error(r["t_opt"], stars[star]) for r in recs]
+            t_cells.append(f"{sum(e <= 0.05 for e in errors)} of {len(recs)} | {100 * median_iqr(errors)[0]:.1f} %")
         print(f"| {name} ({len(recs)} seeds) | " + " | ".join(cells) + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
-              f"{within} of {len(recs)} | {100 * terr[0]:.1f} % |")
+              + " | ".join(t_cells) + " |")
     if args.figure:
         figure({n: r for n, r in records.items() if r}, args.budget, args.figure,
                f"{base.name}: budget {args.budget:g} s, {'/'.join(str(c) for c in counts)} seeds")

@@ -6,11 +6,11 @@ and whether every seed's campaign equals the seed run alone.
 
 Each engine writes its own folder; a campaign counts as equal when its points (x, t, value),
 predicted optimal t per step and final t_opt equal those of ``run_campaign`` for that seed.
+The config is validated as ``noisebo run`` validates it before any server starts (``_config.py``).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -21,13 +21,15 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
+sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
+
+from _config import Parser, benchmark_config  # noqa: E402
 
 from cli.main import parse_seeds  # noqa: E402
 from flows.processes import BIN, local_server, start, stop, wait_for  # noqa: E402
 from instruments import build  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
-from noisebo.config import load_config  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402
 from storage.hdf5 import read_campaign  # noqa: E402
 
@@ -60,13 +62,14 @@ def equal_to_alone(config, seeds, policies, folder: Path) -> tuple[int, int]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = Parser(prog=Path(__file__).name, description=__doc__.split("\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
     parser.add_argument("--seeds", default="0-3")
     parser.add_argument("--policy", choices=[*policy_names(), "both", "all"], default="both")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
-    config, seeds = load_config(args.config), parse_seeds(args.seeds)
+    config, _ = benchmark_config(parser, args.config)
+    seeds = parse_seeds(args.seeds)
     policies = chosen_policies(args.policy)
     n = len(seeds) * len(policies)
     rows = []

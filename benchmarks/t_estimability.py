@@ -1,4 +1,4 @@
-"""How well can any campaign pin t*? The ideal estimator's accuracy, by Monte Carlo.
+"""How well can any campaign pin t*(law)? The ideal estimator's accuracy, by Monte Carlo.
 
     python benchmarks/t_estimability.py [--config PATH] [--trials N]
 
@@ -9,11 +9,12 @@ from the configured seed design, the other points at t*), fits the law's two amp
 maximum likelihood (s^2 (n-1) / sigma^2 is chi-squared), and reports how far the optimum of the
 fitted law lands from t*. No model, prior or acquisition is involved: this is the accuracy a
 campaign of that design can reach at best, for the configured design and a few alternatives.
+t* here is t*(law), the optimum with the simulator's x-independent noise law (``_tstar.py``): the
+law is what is fitted. The config is validated as ``noisebo run`` validates it (``_config.py``).
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -21,12 +22,13 @@ import numpy as np
 from scipy import optimize
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
+sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
-from instruments import build  # noqa: E402
+from _config import Parser, benchmark_config  # noqa: E402
+from _tstar import LAW, law_t_star  # noqa: E402
+
 from noisebo.campaign.steps import seed_points  # noqa: E402
-from noisebo.config import load_config  # noqa: E402
-from noisebo.models.reward import true_optimal_t  # noqa: E402
 
 N_BEFORE_CONVERGENCE = 3  # BO points measured with shots_before: converged at step 2, the earliest
 
@@ -71,16 +73,15 @@ def simulate(config, noise_law, t_star: float, trials: int) -> np.ndarray:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = Parser(prog=Path(__file__).name, description=__doc__.split("\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "pfm.yaml"))
     parser.add_argument("--trials", type=int, default=400)
     args = parser.parse_args(argv)
-    base = load_config(args.config)
-    instrument = build(base.instrument)
-    s, rew = base.space, base.reward
-    t_star = true_optimal_t(instrument.noise_law, s.t_min, s.t_max, rew.alpha, rew.beta)
+    base, instrument = benchmark_config(parser, args.config)
+    s = base.space
+    t_star = law_t_star(base, instrument)
     a0, a1 = law_amplitudes(instrument.noise_law, s.t_min, s.t_max)
-    print(f"{base.name}: t* = {t_star:.4f} s; true law ~ sqrt(A1^2/t + A0^2) with A1 = {a1:.3f}, A0 = {a0:.3f} "
+    print(f"{base.name}: t* = {LAW} = {t_star:.4f} s (the optimum with the x-independent noise law); true law ~ sqrt(A1^2/t + A0^2) with A1 = {a1:.3f}, A0 = {a0:.3f} "
           f"(A0 is {100 * a0**2 / (a1**2 / t_star + a0**2):.0f} % of the noise variance at t*); {args.trials} trials")
     print("| seed times | shots before convergence | median abs(t_opt - t*)/t* | within 10 % |\n|---|---|---|---|")
     for scale in ("log", "log_span"):
