@@ -13,6 +13,7 @@ import os
 import sys
 from pathlib import Path
 
+from cli import noise_profile
 from flows import runtime
 from noisebo.config import CampaignConfig, ConfigError, load_config
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
@@ -640,6 +641,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     instruments = commands.add_parser("instruments", help="list the installed instrument drivers")
     instruments.set_defaults(handler=_instruments)
+
+    noise_profile.add_parser(commands)
 
     policies = commands.add_parser("policies", help="list the installed policies and noise laws")
     policies.set_defaults(handler=_policies_listed)

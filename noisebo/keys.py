@@ -14,6 +14,7 @@ SEED_POINTS = 1
 MEASURE = 2
 FIT = 3
 PROPOSE = 4
+PROFILE = 5  # a noise profile's fit (noisebo noise-profile)
 
 
 def numpy_rng(seed: int, purpose: int, *path: int) -> np.random.Generator:
