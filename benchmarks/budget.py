@@ -7,14 +7,29 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
 = --overhead and no step limit, for each seed:
 
 - "reward", "double": the paper's two policies (and shot schedule);
-- "fixed t_min", "fixed t*", "fixed t_max": the reward-driven policy with every point at one t
-  (t* is t*(law), from the simulator's own noise law and the configured reward: see
-  ``benchmarks/_tstar.py``) and ``shots_after`` shots (at least 2) from the first point on: with
-  no t to learn, no point needs the 30 shots;
+- six fixed designs, "fixed t=<t>": the reward-driven policy with every point at one t and
+  ``shots_after`` shots (at least 2) from the first point on (with no t to learn, no point needs
+  the 30 shots), at five log-spaced t across [t_min, t_max] (``np.geomspace``) and at t*, whose
+  name ends in " (t*)" (t*(law), from the simulator's own noise law and the configured reward:
+  see ``benchmarks/_tstar.py``). <t> is the nominal t in s to 4 significant digits, trailing
+  zeros dropped, never an exponent: for Forrester's [0.2, 10] s "fixed t=0.2", "fixed t=0.5318",
+  "fixed t=1.414", "fixed t=3.761", "fixed t=10" and "fixed t=2.512 (t*)". A campaign measures
+  only at the config's t grid (``acquisition.fixed_t`` takes the grid's nearest entry); the output
+  says which grid t each fixed design used where it is not the nominal one. "--designs fixed"
+  selects every fixed design;
 - "info_rate": ``acquisition.policy: info_rate`` (``noisebo.acquisition.information``).
 
 A design's name is the same everywhere: in --designs, in the output and as the key of the JSON's
-``records``.
+``records``; a fixed design's depends on the config (its t range and t*), so --help describes them
+and an unknown name is refused, naming every known one, once the config is read. A JSON written
+with the earlier fixed designs ("fixed t_min", "fixed t*", "fixed t_max": the same campaigns as
+"fixed t=<t_min>", "fixed t=<t*> (t*)", "fixed t=<t_max>") is read under the new names, taken
+from the t range and t* stored in that JSON.
+
+The table's last row, "best fixed t (in hindsight)", is at each checkpoint the lowest median
+RMSE of the fixed designs reported (and which t it was), chosen after the fact: no campaign
+could have known which t to fix; its time to the target is the least median time among the
+fixed designs every seed of which reaches it.
 
 After every decision it scores the model that decision was made with (the GP mean on the x grid,
 interpolated to 200 evenly spaced positions for one axis) against the simulator's truth, beside
@@ -51,30 +66,85 @@ from noisebo.metrics import median_iqr, relative_error, rmse  # noqa: E402
 from noisebo.models.grids import grids  # noqa: E402
 from noisebo.registry import paper_policies  # noqa: E402
 
-DESIGNS = (*paper_policies(), "fixed t_min", "fixed t*", "fixed t_max", "info_rate")
-RENAMED = {"info rate": "info_rate"}  # a JSON written before the names were one spelling
+FIXED = "fixed"  # in --designs: every fixed design
+FIXED_PREFIX = "fixed t="
+STAR_TAG = " (t*)"
+N_LOG_SPACED = 5
+INFO_RATE = "info_rate"
+# What --help lists: a fixed design's name depends on the config (its t range and t*).
+DESIGNS = (*paper_policies(), FIXED_PREFIX + "<t>", FIXED_PREFIX + "<t*>" + STAR_TAG, FIXED, INFO_RATE)
+RENAMED = {"info rate": INFO_RATE}  # a JSON written before the names were one spelling
+BEST_FIXED = "best fixed t (in hindsight)"
+
+
+def t_label(t: float) -> str:
+    """A t (s) in a design's name: 4 significant digits, trailing zeros dropped, no exponent
+    (0.2, 0.5318, 1.414, 10, 2.512)."""
+    return np.format_float_positional(float(f"{float(t):.4g}"), trim="-")
+
+
+def fixed_name(t: float, star: bool = False) -> str:
+    return f"{FIXED_PREFIX}{t_label(t)}{STAR_TAG if star else ''}"
+
+
+def is_fixed(name: str) -> bool:
+    return name.startswith(FIXED_PREFIX)
+
+
+def fixed_designs(t_min: float, t_max: float, t_star: float) -> dict[str, float]:
+    """{name: nominal t (s)} of the fixed designs, by t: five log-spaced t across [t_min, t_max]
+    and t* (its name tagged " (t*)")."""
+    ts = [(float(t), False) for t in np.geomspace(t_min, t_max, N_LOG_SPACED)] + [(float(t_star), True)]
+    return {fixed_name(t, star): t for t, star in sorted(ts)}
+
+
+def old_names(t_min: float, t_max: float, t_star: float | None) -> dict[str, str]:
+    """The names of a JSON written before the fixed designs were named by their t -> today's."""
+    out = {**RENAMED, "fixed t_min": fixed_name(t_min), "fixed t_max": fixed_name(t_max)}
+    if t_star is not None:
+        out["fixed t*"] = fixed_name(t_star, star=True)
+    return out
 
 
 def design_names(text: str) -> list[str]:
-    """--designs: comma-separated names, each one of DESIGNS (argparse's one-line error otherwise)."""
+    """--designs: comma-separated names (checked against the config's designs by ``resolve``)."""
     names = [n.strip() for n in text.split(",") if n.strip()]
-    unknown = [n for n in names if n not in DESIGNS]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(
-            f"unknown design {', '.join(repr(n) for n in unknown) or repr(text)}; known: {', '.join(DESIGNS)}")
+    if not names:
+        raise argparse.ArgumentTypeError(f"no design in {text!r}; known: {', '.join(DESIGNS)}")
     return list(dict.fromkeys(names))
+
+
+def resolve(names: list[str], known: list[str]) -> tuple[list[str], list[str]]:
+    """(designs, unknown names): "fixed" expanded to every fixed design of ``known``, in place."""
+    out, unknown = [], []
+    for name in names:
+        if name == FIXED:
+            out += [k for k in known if is_fixed(k)]
+        elif name in known:
+            out.append(name)
+        else:
+            unknown.append(name)
+    return list(dict.fromkeys(out)), unknown
+
+
 NO_STEP_LIMIT = 1_000_000
 
 
-def design_config(base, name: str, t_star: float):
-    s = base.space
+def grid_t(config, t: float) -> float:
+    """The t a fixed design measures at: the config's t-grid entry nearest t, as
+    ``acquisition.fixed_t`` takes it (``noisebo.acquisition.proposal._allowed_t``)."""
+    g = grids(config).t
+    return float(g[int(np.argmin(np.abs(g - t)))])
+
+
+def design_config(base, name: str, fixed: dict[str, float]):
     if name in paper_policies():
         return base.with_overrides(acquisition={"policy": name})
-    if name == "info_rate":
-        return base.with_overrides(acquisition={"policy": "info_rate"})
-    fixed = {"fixed t_min": s.t_min, "fixed t*": t_star, "fixed t_max": s.t_max}[name]
+    if name == INFO_RATE:
+        return base.with_overrides(acquisition={"policy": INFO_RATE})
+    t = fixed[name]  # nominal: the campaign takes the t grid's nearest entry
     after = base.schedule.shots_after  # no t to learn: every point gets the few shots a converged campaign takes
-    return base.with_overrides(acquisition={"policy": "reward", "fixed_t": float(fixed)},
+    return base.with_overrides(acquisition={"policy": "reward", "fixed_t": float(t)},
                                schedule={"shots_before": max(after, 2), "shots_after": after})
 
 
@@ -131,6 +201,18 @@ def quartiles(values) -> tuple[float, float, float]:
     return tuple(np.where(q >= NO_MODEL / 10, np.inf, q))
 
 
+def best_in_hindsight(records: dict, at) -> list[tuple[float, str] | None]:
+    """At each time in ``at``: (the lowest median RMSE over the fixed designs in ``records``, that
+    design's name), None where no fixed design has a median (half its seeds with a model)."""
+    medians = {name: [quartiles([rmse_at(r, b) for r in recs])[0] for b in at]
+               for name, recs in records.items() if is_fixed(name) and recs}
+    out = []
+    for i in range(len(at)):
+        finite = [(m[i], name) for name, m in medians.items() if np.isfinite(m[i])]
+        out.append(min(finite) if finite else None)
+    return out
+
+
 def figure(records: dict, budget: float, path: Path, title: str) -> None:
     from matplotlib.figure import Figure
 
@@ -145,6 +227,9 @@ def figure(records: dict, budget: float, path: Path, title: str) -> None:
             continue
         line, = ax.plot(grid[ok], mid[ok], label=name, lw=1.6)
         ax.fill_between(grid[ok], lo[ok], np.where(np.isfinite(hi), hi, np.nan)[ok], color=line.get_color(), alpha=0.15)
+    best = best_in_hindsight(records, grid)
+    if sum(is_fixed(n) for n in records) > 1 and any(b is not None for b in best):
+        ax.plot(grid, [np.nan if b is None else b[0] for b in best], "k--", lw=1.0, label=BEST_FIXED)
     ax.set(xlabel="instrument time spent (s)", ylabel="RMSE of f (median, IQR shaded)", title=title, yscale="log")
     ax.legend(fontsize=8)
     fig.savefig(path, dpi=120)
@@ -157,8 +242,13 @@ def main(argv=None) -> int:
     parser.add_argument("--overhead", type=float, default=0.0)
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
-    parser.add_argument("--designs", type=design_names, default=list(DESIGNS), metavar="NAME[,NAME...]",
-                        help=f"comma-separated designs, quoted where a name has a space (default: all): {', '.join(DESIGNS)}")
+    parser.add_argument("--designs", type=design_names, default=None, metavar="NAME[,NAME...]",
+                        help="comma-separated designs, quoted where a name has a space (default: all): "
+                             f"{', '.join(DESIGNS)}. <t>: five log-spaced t (s) across [t_min, t_max], <t*>: "
+                             "t*(law), in s to 4 significant digits, e.g. for [0.2, 10] s 'fixed t=0.2', "
+                             "'fixed t=0.5318', 'fixed t=1.414', 'fixed t=3.761', 'fixed t=10', "
+                             "'fixed t=2.512 (t*)'; 'fixed': all six. An unknown name is refused "
+                             "naming the config's designs")
     parser.add_argument("--at", default="100,200,300,500,860", help="times (s) to report the RMSE at")
     parser.add_argument("--target", type=float, default=0.46)
     parser.add_argument("--json", type=Path, default=None)
@@ -173,12 +263,25 @@ def main(argv=None) -> int:
     t_star = stars[LAW]
     both = differ(stars)
     score = scorer(base, instrument)
-    names = args.designs
+    s = base.space
+    fixed = fixed_designs(s.t_min, s.t_max, t_star)
+    known = [*paper_policies(), *fixed, INFO_RATE]
+    names, unknown = resolve(args.designs or known, known)
+    if unknown:
+        parser.error(f"argument --designs: unknown design {', '.join(repr(n) for n in unknown)}; "
+                     f"known: {', '.join([*known, FIXED])}")
     at = [float(v) for v in args.at.split(",") if v.strip()] + [args.budget]
     records: dict[str, list] = {}
     done = json.loads(args.json.read_text()) if args.json and args.json.exists() else {}
-    if "records" in done:
-        done["records"] = {RENAMED.get(k, k): v for k, v in done["records"].items()}
+    if "records" in done:  # earlier names, from the t range and t* that JSON was measured with
+        space = done.get("config", {}).get("space", {})
+        renamed = old_names(space.get("t_min", s.t_min), space.get("t_max", s.t_max), done.get("t_star", t_star))
+        done["records"] = {renamed.get(k, k): v for k, v in done["records"].items()}
+        if args.report and args.designs is None:  # everything it holds, under names of another config too
+            names += [k for k in done["records"] if k not in names]
+    on_grid = {name: grid_t(base, t) for name, t in fixed.items()}
+    snapped = [f"{name} at t = {on_grid[name]:.4g} s" for name in names
+               if name in fixed and abs(on_grid[name] / fixed[name] - 1.0) > 1e-9]
     wanted = list(range(args.first_seed, args.first_seed + args.seeds))
     for name in names:
         if args.report:
@@ -187,7 +290,7 @@ def main(argv=None) -> int:
         kept = {r["seed"]: r for r in done.get("records", {}).get(name, []) if r["seed"] in wanted}
         if kept:
             print(f"{name}: {len(kept)} seeds kept from {args.json}", file=sys.stderr, flush=True)
-        config = design_config(base, name, t_star)
+        config = design_config(base, name, fixed)
         for seed in wanted:
             if seed in kept:
                 continue
@@ -203,18 +306,29 @@ def main(argv=None) -> int:
                 args.json.parent.mkdir(parents=True, exist_ok=True)
                 args.json.write_text(json.dumps({"config": base.model_dump(mode="json"), "t_star": t_star,
                                                  "t_star_definition": LAW, "t_stars": stars,
+                                                 "fixed_t": {n: {"nominal_s": t, "grid_s": on_grid[n]}
+                                                             for n, t in fixed.items()},
                                                  "records": done["records"]}, default=float))
         records[name] = [kept[seed] for seed in wanted]
-    counts = sorted({len(r) for r in records.values()})
+    counts = sorted({len(r) for r in records.values() if r}) or [0]
     print(f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, "
           f"{'/'.join(str(c) for c in counts)} seeds per design; "
-          f"{describe(stars, LAW + (f' and {X_AVG}' if both else ''))}\n")
+          f"{describe(stars, LAW + (f' and {X_AVG}' if both else ''))}")
+    missing = [n for n, r in records.items() if not r]
+    if missing and args.report:
+        print(f"Not in {args.json}: {', '.join(missing)}")
+    if snapped:
+        print(f"A fixed design measures at the nearest of the config's {s.n_t} grid t in [{s.t_min:g}, {s.t_max:g}] s: "
+              + "; ".join(snapped))
+    print()
     print("RMSE of f once this much instrument time is spent, median [IQR] over seeds:\n")
     against = [LAW, X_AVG] if both else [LAW]
     print("| design | " + " | ".join(f"{v:g} s" for v in at) + f" | time to RMSE {args.target:g} (s) | points | "
           + " | ".join(f"final t within 5 % of {name} | final t error vs {name}" for name in against) + " |")
     print("|---" * (len(at) + 3 + 2 * len(against)) + "|")
     for name, recs in records.items():
+        if not recs:
+            continue
         cells = []
         for b in at:
             values = [rmse_at(r, b) for r in recs]
@@ -224,14 +338,25 @@ def main(argv=None) -> int:
         reach = [time_to(r, args.target) for r in recs]
         reached = [v for v in reach if np.isfinite(v)]
         when = f"{np.median(reach):.0f}" if len(reached) == len(reach) else f"{len(reached)} of {len(reach)} reach it"
-        if not recs:
-            continue
         t_cells = []
         for star in against:
             errors = [relative_error(r["t_opt"], stars[star]) for r in recs]
             t_cells.append(f"{sum(e <= 0.05 for e in errors)} of {len(recs)} | {100 * median_iqr(errors)[0]:.1f} %")
         print(f"| {name} ({len(recs)} seeds) | " + " | ".join(cells) + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
               + " | ".join(t_cells) + " |")
+    fixed_shown = [n for n, recs in records.items() if is_fixed(n) and recs]
+    if len(fixed_shown) > 1:
+        best = best_in_hindsight({n: records[n] for n in fixed_shown}, at)
+        cells = ["-" if b is None else f"{b[0]:.3f} ({b[1]})" for b in best]
+        reach = []
+        for n in fixed_shown:
+            times = [time_to(r, args.target) for r in records[n]]
+            if all(np.isfinite(times)):
+                reach.append((float(np.median(times)), n))
+        when = "-" if not reach else f"{min(reach)[0]:.0f} ({min(reach)[1]})"
+        print(f"| {BEST_FIXED} | " + " | ".join(cells) + f" | {when} | - | " + " | ".join("- | -" for _ in against) + " |")
+        print(f"\n{BEST_FIXED}: at each time the lowest median over the {len(fixed_shown)} fixed designs above "
+              "(which one in brackets), chosen after the fact: no campaign could have known which t to fix.")
     if args.figure:
         figure({n: r for n, r in records.items() if r}, args.budget, args.figure,
                f"{base.name}: budget {args.budget:g} s, {'/'.join(str(c) for c in counts)} seeds")

@@ -67,23 +67,78 @@ def test_a_line_past_the_scan_is_refused_at_once_as_the_cli_refuses_it(name, too
 def test_budget_designs_are_one_spelling_and_listed_in_help(capsys):
     assert "info_rate" in budget.DESIGNS and "info rate" not in budget.DESIGNS
     assert budget.design_names("info_rate") == ["info_rate"]
-    assert budget.design_names("info_rate, fixed t*,info_rate") == ["info_rate", "fixed t*"]
+    assert budget.design_names("info_rate, fixed t=10,info_rate") == ["info_rate", "fixed t=10"]
     with pytest.raises(SystemExit) as stop:
         budget.main(["--help"])
     assert stop.value.code == 0
     shown = " ".join(capsys.readouterr().out.split())  # argparse wraps the help
     for name in budget.DESIGNS:
         assert name in shown
+    assert "'fixed t=0.5318'" in shown and "'fixed t=2.512 (t*)'" in shown
 
 
 def test_an_unknown_design_is_one_line_naming_the_known_ones(capsys):
     with pytest.raises(SystemExit) as stop:
-        budget.main(["--designs", "info rate,reward"])
+        budget.main(["--designs", "info rate,reward,fixed t*"])
     assert stop.value.code == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1, lines
-    assert lines[0].startswith("budget.py: error: argument --designs: unknown design 'info rate'; known: ")
-    assert lines[0].split("known: ", 1)[1].startswith(", ".join(budget.DESIGNS))
+    assert lines[0].startswith("budget.py: error: argument --designs: unknown design 'info rate', 'fixed t*'; known: ")
+    known = ("reward, double, fixed t=0.2, fixed t=0.5318, fixed t=1.414, fixed t=2.512 (t*), fixed t=3.761, "
+             "fixed t=10, info_rate, fixed")  # Forrester: t in [0.2, 10] s, t*(law) = 2.512 s
+    assert lines[0].split("known: ", 1)[1].startswith(known)
+
+
+def test_the_five_log_spaced_fixed_times_and_their_names():
+    """[0.2, 10] s: 0.2 * 50 ** (k / 4) = 0.2, 0.5318, 1.414, 3.761, 10 (hand-computed), by t
+    with t* among them, its name tagged; 4 significant digits, no exponent, no trailing zeros."""
+    fixed = budget.fixed_designs(0.2, 10.0, 2.511886)
+    assert list(fixed) == ["fixed t=0.2", "fixed t=0.5318", "fixed t=1.414", "fixed t=2.512 (t*)",
+                           "fixed t=3.761", "fixed t=10"]
+    assert [fixed[n] for n in fixed] == pytest.approx([0.2, 0.531830, 1.414214, 2.511886, 3.760603, 10.0], rel=1e-6)
+    assert budget.fixed_designs(0.1, 2.0, 0.4697) == pytest.approx(
+        {"fixed t=0.1": 0.1, "fixed t=0.2115": 0.211474, "fixed t=0.4472": 0.447214, "fixed t=0.4697 (t*)": 0.4697,
+         "fixed t=0.9457": 0.945742, "fixed t=2": 2.0}, rel=1e-5)
+    assert [budget.t_label(t) for t in (0.25, 1.0, 12345.6, 0.00012345)] == ["0.25", "1", "12350", "0.0001234"]
+    # t* on one of the five: still its own design, the name tells them apart
+    assert list(budget.fixed_designs(0.2, 10.0, 10.0))[-2:] == ["fixed t=10", "fixed t=10 (t*)"]
+
+
+def test_fixed_selects_every_fixed_design_at_once():
+    known = ["reward", "double", *budget.fixed_designs(0.2, 10.0, 2.511886), "info_rate"]
+    names, unknown = budget.resolve(budget.design_names("info_rate,fixed"), known)
+    assert unknown == [] and names == ["info_rate", "fixed t=0.2", "fixed t=0.5318", "fixed t=1.414",
+                                       "fixed t=2.512 (t*)", "fixed t=3.761", "fixed t=10"]
+    names, unknown = budget.resolve(["fixed t=10", "fixed", "fixed t=0.53"], known)
+    assert len(names) == 6 and names[0] == "fixed t=10" and unknown == ["fixed t=0.53"]
+
+
+def test_a_fixed_design_measures_at_the_nearest_grid_t():
+    forrester = validated(load_config(ROOT / "data" / "configs" / "forrester.yaml"))  # t grid: 100 in [0.2, 10]
+    assert budget.grid_t(forrester, 0.5318296) == pytest.approx(0.2 + 3 * 9.8 / 99)
+    assert budget.grid_t(forrester, 10.0) == 10.0
+    config = budget.design_config(forrester, "fixed t=0.5318", {"fixed t=0.5318": 0.5318296})
+    assert config.acquisition.fixed_t == pytest.approx(0.5318296) and config.acquisition.policy == "reward"
+
+
+def _record(seed, times, errors):
+    return {"seed": seed, "times_s": times, "rmse": errors, "points": 3, "t_opt": 1.0, "t_rel_error": 0.0}
+
+
+def test_the_best_fixed_design_in_hindsight_is_the_minimum_of_the_medians_at_each_time():
+    """Hand-made: three seeds per design; medians at 10 / 20 / 30 s: a 3.0 / 2.0 / 1.5, b - (no
+    model in two of three seeds) / 1.0 / 1.2; the paper's policy is lower still but not fixed."""
+    records = {
+        "fixed t=0.2": [_record(0, [5, 15, 25], [3.0, 2.0, 1.5]), _record(1, [5, 15, 25], [2.0, 1.0, 1.0]),
+                        _record(2, [5, 15, 25], [4.0, 3.0, 2.0])],
+        "fixed t=10": [_record(0, [5, 15, 25], [float("nan"), 1.0, 1.2]), _record(1, [15, 25], [0.5, 1.2]),
+                       _record(2, [15, 25], [1.5, 1.1])],
+        "reward": [_record(0, [5], [0.1]), _record(1, [5], [0.1]), _record(2, [5], [0.1])],
+        "fixed t=3": [],  # none measured: ignored
+    }
+    assert budget.best_in_hindsight(records, [10, 20, 30]) == [(3.0, "fixed t=0.2"), (1.0, "fixed t=10"),
+                                                               (1.2, "fixed t=10")]
+    assert budget.best_in_hindsight(records, [1]) == [None]  # no fixed design has a model yet
 
 
 def test_the_report_keys_records_by_the_names_typed_and_names_its_t_star(tmp_path, capsys):
@@ -98,6 +153,29 @@ def test_the_report_keys_records_by_the_names_typed_and_names_its_t_star(tmp_pat
     out = capsys.readouterr().out
     assert "| info_rate (1 seeds) |" in out
     assert "final t within 5 % of t*(law)" in out and "t errors below compare against t*(law)" in out
+
+
+def test_the_report_of_a_json_with_the_earlier_fixed_designs(tmp_path, capsys):
+    """A JSON written with "fixed t_min", "fixed t*", "fixed t_max" (the t range and t* it stores,
+    here another than the config's) reports them under today's names, with the best in hindsight;
+    a key it does not know is shown as it is."""
+    def recs(errors):
+        return [_record(s, [10.0, 50.0], [e, e / 2]) for s, e in enumerate(errors)]
+
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps({"config": {"space": {"t_min": 0.1, "t_max": 2.0}}, "t_star": 0.4697,
+                                "records": {"fixed t_min": recs([1.0, 2.0, 3.0]), "fixed t*": recs([4.0, 5.0, 6.0]),
+                                            "fixed t_max": recs([0.5, 0.6, 0.7]), "reward": recs([9.0, 9.0, 9.0]),
+                                            "someone's design": recs([8.0, 8.0, 8.0])}}))
+    assert budget.main(["--report", "--json", str(path), "--budget", "60", "--at", "20"]) == 0
+    out = capsys.readouterr().out
+    for name in ("fixed t=0.1", "fixed t=0.4697 (t*)", "fixed t=2", "reward", "someone's design"):
+        assert f"| {name} (3 seeds) |" in out
+    assert "| best fixed t (in hindsight) | 0.600 (fixed t=2) | 0.300 (fixed t=2) |" in out
+    assert "fixed t_min" not in out and "Traceback" not in out
+    assert budget.main(["--report", "--json", str(path), "--designs", "fixed", "--budget", "60", "--at", "20"]) == 0
+    out = capsys.readouterr().out  # the config's fixed designs only: none of them is in this JSON
+    assert "(3 seeds)" not in out and "Not in " in out
 
 
 def test_the_two_t_star_definitions():
