@@ -34,6 +34,7 @@ finished file of the same campaign.
 
 from __future__ import annotations
 
+import gc
 import os
 from pathlib import Path
 from typing import Callable, Sequence
@@ -168,6 +169,20 @@ def _read_blobs(group: h5py.Group, start: int, stop: int, data: str, path) -> li
     return [raw[s - begin:e - begin] for s, e in zip([begin, *ends[:-1]], ends)]
 
 
+def start_swmr(f: h5py.File) -> None:
+    """Switch ``f`` to SWMR writing. HDF5 refuses while any attribute of the file is open, and
+    an attribute h5py opened can outlive its use, unreachable in a reference cycle (a traceback's
+    frames, say), until Python's cycle collector runs: seen once in a Dask sweep's worker. So
+    on that refusal collect the cycles and try once more; any other error is raised as it is."""
+    try:
+        f.swmr_mode = True
+    except RuntimeError as error:
+        if "attributes opened in the file" not in str(error):
+            raise
+        gc.collect()
+        f.swmr_mode = True
+
+
 def _check_rows(ds: h5py.Dataset, n: int, path) -> None:
     """A file whose table is shorter than its counter is damaged. An SWMR reader may hold the
     table's extent from before the counters it read (the structure's checksum loads every
@@ -214,7 +229,7 @@ class LiveFile:
             live = cls(path, f, state)
             live._layout(state)
             live._write(state, crash=lambda: None)
-            f.swmr_mode = True  # flushes: from here on the file opens with swmr=True, whatever happens
+            start_swmr(f)  # flushes: from here on the file opens with swmr=True, whatever happens
             crash_point("hdf5")
             fsync_file(tmp)
             os.replace(tmp, path)
