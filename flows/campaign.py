@@ -64,10 +64,24 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
                          f"noise={p.noise:.3g}{budget}")
         elif isinstance(event, MoreShots):
             lines.append(f"point {event.point}: {event.reason}; taking more shots ({event.wanted} in all)")
-        elif isinstance(event, Decided) and event.decision.converged and not state.data.is_converged:
-            lines.append(f"noise model converged at step {event.decision.step + 1}: t_opt = {event.decision.t_opt:.4g} s")
+        elif isinstance(event, Decided):
+            lines += decision_lines(state, event.decision)
         elif isinstance(event, StatusChanged) and event.status is Status.BUDGET_SPENT:
             lines.append(event.reason)
+    return lines
+
+
+def decision_lines(state: EngineState, decision) -> list[str]:
+    """What a decision tells a person: the noise profile dropped (first time only), the noise
+    model converged (first time only)."""
+    lines = []
+    dropped = state.config.noise_model.profile is not None and not decision.profile_in_use
+    if dropped and state.data.profile_dropped_step is None:
+        lines.append(f"noise profile contradicted at step {decision.step + 1} (posterior predictive p = "
+                     f"{decision.profile_p:.2g} < {state.config.noise_model.profile_alpha:g} on the replicate "
+                     "scatter): its prior is dropped and the noise law is learned afresh")
+    if decision.converged and not state.data.is_converged:
+        lines.append(f"noise model converged at step {decision.step + 1}: t_opt = {decision.t_opt:.4g} s")
     return lines
 
 

@@ -99,7 +99,30 @@ def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
     faults = config.instrument.faults
     if faults is not None and faults.corrupt_spectrum > 0 and not getattr(cls, "spectra", False):
         raise ConfigError(f"{source}: instrument.faults.corrupt_spectrum needs an instrument that returns spectra")
+    problem = profile_problem(config, settings.model_dump(mode="json"))
+    if problem is not None:
+        raise ConfigError(f"{source}: {problem}")
     return config.with_overrides(instrument={"settings": settings.model_dump(mode="json")})
+
+
+def profile_problem(config: CampaignConfig, settings: dict) -> str | None:
+    """Why ``noise_model.profile`` does not describe this instrument, or None: a profile made
+    with another driver, or with other settings (complete, as the driver validated them), is
+    refused unless ``noise_model.profile_check`` is false."""
+    noise = config.noise_model
+    if noise.profile is None or not noise.profile_check:
+        return None
+    made = noise.profile.driver
+    if made.name != config.instrument.kind:
+        return (f"noise_model.profile: it was made with the driver {made.name!r}, the campaign uses "
+                f"{config.instrument.kind!r} (set noise_model.profile_check: false to use it anyway)")
+    differ = sorted(k for k in set(made.settings) | set(settings) if made.settings.get(k) != settings.get(k))
+    if differ:
+        shown = "; ".join(f"{k}: {made.settings.get(k)!r} in the profile, {settings.get(k)!r} here" for k in differ[:3])
+        more = f" and {len(differ) - 3} more" if len(differ) > 3 else ""
+        return (f"noise_model.profile: it was made with other instrument settings ({shown}{more}; set "
+                "noise_model.profile_check: false to use it anyway)")
+    return None
 
 
 def space_problem(config: CampaignConfig, cls: type, settings: BaseModel) -> str | None:

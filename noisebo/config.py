@@ -417,6 +417,52 @@ class NoiseFieldConfig(FrozenModel):
     boundary_factor: Number = Field(2.0, ge=1.1, le=4.0)
 
 
+class ParameterPosterior(FrozenModel):
+    """One noise-law parameter's posterior: mean and sd (A0, A1 in the noise's units; p none)."""
+
+    mean: FiniteFloat
+    sd: NonNegativeFloat
+
+
+class ProfileDriver(FrozenModel):
+    name: str
+    version: str
+    settings: dict
+
+
+class ProfileCampaign(FrozenModel):
+    """One campaign a profile was made from: its file, config name, seed, start time (UTC) and
+    how many of its points measured the noise."""
+
+    file: str
+    config: str
+    seed: Count
+    created_utc: str
+    noise_points: Count
+
+
+PROFILE_KIND = "noisebo.noise_profile"
+
+
+class NoiseProfile(FrozenModel):
+    """An instrument's noise profile, what ``noisebo noise-profile`` writes
+    (``noisebo.models.profile``): the posterior of its noise law from finished campaigns, the
+    driver (name, version, settings) and the campaigns it came from."""
+
+    kind: Literal["noisebo.noise_profile"] = PROFILE_KIND
+    schema_version: Literal[1] = 1
+    driver: ProfileDriver
+    law: str
+    parameters: dict[str, ParameterPosterior]
+    t_range_s: tuple[FiniteFloat, FiniteFloat]
+    noise_points: Count
+    campaigns: tuple[ProfileCampaign, ...]
+    made_utc: str
+
+    def __hash__(self) -> int:  # holds mappings: hash its canonical JSON
+        return hash(self.model_dump_json())
+
+
 class NoiseModelConfig(FrozenModel):
     """Structured GP for the single-shot noise standard deviation Noise(t).
 
@@ -430,6 +476,15 @@ class NoiseModelConfig(FrozenModel):
     ``field``: None (default) for noise that does not depend on x, as the paper assumes; a
     ``NoiseFieldConfig`` to learn how the law's time-independent part (and optionally the
     time-dependent one) varies over x (``noisebo.models.noise_field``): the optimal time becomes t*(x).
+    ``profile``: an instrument's noise profile (``noisebo noise-profile``; in a YAML file the path
+    of the profile, read when the config is loaded, relative to the config's folder): each law
+    parameter's posterior becomes a normal prior (within the uniform bounds), so the campaign
+    starts from what earlier campaigns on the instrument learned. Before every fit the profile is
+    checked against the campaign's own replicate scatter (``noisebo.models.profile_check``); once
+    its posterior predictive p-value falls below ``profile_alpha`` the profile is dropped for good
+    and the law is learned afresh from the uniform priors. ``profile_check``: refuse a profile of
+    another driver or other driver settings (false: use it anyway, e.g. after a change of
+    settings known not to touch the noise).
     """
 
     mean: NoiseLawName = "inv_sqrt"
@@ -440,6 +495,30 @@ class NoiseModelConfig(FrozenModel):
     residual_amplitude_scale: PositiveFloat = 1.0
     learn_after_convergence: Flag = True
     field: NoiseFieldConfig | None = None
+    profile: NoiseProfile | None = None
+    profile_check: Flag = True
+    profile_alpha: Annotated[Number, Field(gt=0, lt=0.5)] = 0.01
+
+    @model_validator(mode="after")
+    def _profile_fits(self) -> NoiseModelConfig:
+        profile = self.profile
+        if profile is None:
+            return self
+        if self.field is not None:
+            raise ValueError("profile: a profile holds a noise law over t; it cannot be the prior of a noise field")
+        if profile.law != self.mean:
+            raise ValueError(f"profile: it describes the law {profile.law!r}, the config's noise_model.mean is "
+                             f"{self.mean!r}")
+        needed = ("a0", "a1", "p") if registry.noise_law(self.mean).infers_exponent else ("a0", "a1")
+        missing = [name for name in needed if name not in profile.parameters]
+        if missing:
+            raise ValueError(f"profile: the law {self.mean!r} needs the parameter(s) {', '.join(missing)}")
+        for name, prior in zip(needed, (self.a0_prior, self.a1_prior, self.p_prior)):
+            mean = profile.parameters[name].mean
+            if not prior.low <= mean <= prior.high:
+                raise ValueError(f"profile: its {name} = {mean:.4g} lies outside noise_model.{name}_prior "
+                                 f"[{prior.low:g}, {prior.high:g}]")
+        return self
 
 
 class InferenceConfig(FrozenModel):
@@ -508,6 +587,18 @@ class ScheduleConfig(FrozenModel):
     if need be fewer shots, that fit); a point that cannot fit ends the campaign with the status
     "budget_spent" and its final models (``noisebo resume --budget-s`` continues it with more).
     ``n_steps`` still ends it first if it is reached first.
+
+    ``mode``: "paper" (default) is the paper's protocol: seed points and every point until the
+    noise model converges take ``shots_before`` shots, whose sample sd is the point's measured
+    noise, then ``shots_after``. "budget" spends no instrument time on dedicated noise
+    measurements: every point, seeds included, takes ``shots_after`` (at least 2) shots, and the
+    noise model learns Noise(t) from the replicate scatter of every point (the sampling variance
+    of a few-shot sd is in its likelihood), while the GP for f uses the noise model's noise at
+    each point's t (a seed point, before there is a model, its own sd). Use it when instrument
+    time is short (a budget a few times what the paper's 30-shot seed points alone cost), or with
+    an instrument's noise profile (``noise_model.profile``); use "paper" to learn t* with the
+    paper's guarantees, or to reproduce its figures. It needs
+    ``noise_model.learn_after_convergence``.
     """
 
     n_seed: Count = Field(3, ge=1)
@@ -527,6 +618,22 @@ class ScheduleConfig(FrozenModel):
     tolerated_rate: Rate = 0.5
     budget_s: PositiveFloat | None = None
     point_overhead_s: NonNegativeFloat = 0.0
+    mode: Literal["paper", "budget"] = "paper"
+
+    @property
+    def seed_shots(self) -> int:
+        """Shots a seed point takes: ``shots_before`` (paper), ``shots_after`` (budget)."""
+        return self.shots_after if self.mode == "budget" else self.shots_before
+
+    @model_validator(mode="after")
+    def _budget_mode_measures_scatter(self) -> ScheduleConfig:
+        if self.mode == "budget" and self.shots_after < 2:
+            raise ValueError("mode: budget learns the noise from each point's replicate scatter; set shots_after to "
+                             "at least 2")
+        if self.mode == "budget" and self.adaptive_shots:
+            raise ValueError("mode: budget gives every point shots_after shots; adaptive_shots belongs to the paper "
+                             "mode's noise-measuring points")
+        return self
 
 
 class CampaignConfig(FrozenModel):
@@ -570,6 +677,13 @@ class CampaignConfig(FrozenModel):
             raise ValueError("schedule.noise_t: informative needs a noise model without noise_model.field")
         if self.acquisition.fixed_t is not None:
             raise ValueError("schedule.noise_t: informative chooses t, which acquisition.fixed_t fixes; use one of them")
+        return self
+
+    @model_validator(mode="after")
+    def _budget_mode_learns(self) -> CampaignConfig:
+        if self.schedule.mode == "budget" and not self.noise_model.learn_after_convergence:
+            raise ValueError("schedule.mode: budget learns the noise from every point's replicate scatter; set "
+                             "noise_model.learn_after_convergence: true")
         return self
 
     @model_validator(mode="after")
@@ -641,30 +755,16 @@ def migrate_v1(data: dict) -> dict:
     return data
 
 
-def parse_config(data: Any, source: str = "config") -> CampaignConfig:
-    """Validate a mapping into a ``CampaignConfig`` (a schema-1 mapping is migrated first); raise
-    ``ConfigError`` naming the field. The instrument's settings are checked by its driver (see
-    ``instruments.registry.validated``)."""
-    if not isinstance(data, dict):
-        raise ConfigError(f"{source}: expected a mapping of settings, got {type(data).__name__}")
-    if data.get("schema_version") == 1 and not isinstance(data["schema_version"], bool):
-        data = migrate_v1(data)
-    try:
-        return CampaignConfig.model_validate(data)
-    except ValidationError as error:
-        raise ConfigError(f"{source}: {describe_errors(error)}") from None
-
-
-def load_config(path: str | Path) -> CampaignConfig:
-    """Read and validate a YAML campaign configuration."""
-    path = Path(path)
+def _read_yaml(path: Path, what: str) -> Any:
+    """The YAML document in ``path``; ``ConfigError`` (naming it as ``what``) for a file that
+    cannot be read, is not UTF-8 text, is not YAML or is empty."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as error:
-        raise ConfigError(f"{path}: cannot read config ({error.strerror or error})") from None
+        raise ConfigError(f"{path}: cannot read {what} ({error.strerror or error})") from None
     except UnicodeDecodeError as error:
         raise ConfigError(f"{path}: not a text (UTF-8) file: byte {error.start} cannot be decoded; "
-                          "a campaign config is YAML text") from None
+                          f"a {'campaign config' if what == 'config' else what} is YAML text") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as error:
@@ -673,4 +773,55 @@ def load_config(path: str | Path) -> CampaignConfig:
         raise ConfigError(f"{path}: not valid YAML{where}") from None
     if data is None:
         raise ConfigError(f"{path}: the file is empty")
-    return parse_config(data, source=str(path))
+    return data
+
+
+def read_profile(path: str | Path, source: str = "config") -> dict:
+    """The noise profile in the YAML file ``path`` as a mapping, for ``noise_model.profile``;
+    ``ConfigError`` naming the field and the file for one that is missing, unreadable, empty,
+    not YAML or not a noise profile (another kind of file)."""
+    where = f"{source}: noise_model.profile"
+    try:
+        data = _read_yaml(Path(path), "noise profile")
+    except ConfigError as error:
+        raise ConfigError(f"{where}: {error}") from None
+    kind = data.get("kind") if isinstance(data, dict) else None
+    if kind != PROFILE_KIND:
+        found = f"kind {kind!r}" if isinstance(data, dict) and "kind" in data else f"no kind {PROFILE_KIND!r}"
+        raise ConfigError(f"{where}: {path} is not a noise profile ({found}; `noisebo noise-profile` writes one)")
+    return data
+
+
+def _inline_profile(data: dict, base: Path | None, source: str) -> dict:
+    """``data`` with a profile given as a path (relative to ``base``, the config's folder)
+    replaced by the profile it holds, so the config (and the campaign file) carries it."""
+    noise = data.get("noise_model")
+    if not isinstance(noise, dict) or not isinstance(noise.get("profile"), (str, Path)):
+        return data
+    path = Path(noise["profile"]).expanduser()
+    if base is not None and not path.is_absolute():
+        path = base / path
+    return {**data, "noise_model": {**noise, "profile": read_profile(path, source)}}
+
+
+def parse_config(data: Any, source: str = "config", base: Path | None = None) -> CampaignConfig:
+    """Validate a mapping into a ``CampaignConfig`` (a schema-1 mapping is migrated first); raise
+    ``ConfigError`` naming the field. The instrument's settings are checked by its driver (see
+    ``instruments.registry.validated``). A ``noise_model.profile`` given as a path is read
+    (``read_profile``; relative to ``base``, default the working folder)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping of settings, got {type(data).__name__}")
+    if data.get("schema_version") == 1 and not isinstance(data["schema_version"], bool):
+        data = migrate_v1(data)
+    data = _inline_profile(data, base, source)
+    try:
+        return CampaignConfig.model_validate(data)
+    except ValidationError as error:
+        raise ConfigError(f"{source}: {describe_errors(error)}") from None
+
+
+def load_config(path: str | Path) -> CampaignConfig:
+    """Read and validate a YAML campaign configuration (a profile path in it relative to its folder)."""
+    path = Path(path)
+    data = _read_yaml(path, "config")
+    return parse_config(data, source=str(path), base=path.parent)

@@ -41,12 +41,20 @@ class Point:
 class CampaignState:
     """Points in measurement order (seed points first), the predicted optimal t of each BO step
     (with a noise field, also its t*(x) on the reference points, (m,) per step), and the first
-    BO step at which the noise model converged (None until it does)."""
+    BO step at which the noise model converged (None until it does); with a noise profile, the
+    first BO step whose check dropped it (None while it is in use)."""
 
     points: tuple[Point, ...] = ()
     t_opt_history: tuple[float, ...] = ()
     converged_step: int | None = None
     t_opt_maps: tuple[np.ndarray, ...] = ()
+    profile_dropped_step: int | None = None
+
+    def with_profile(self, in_use: bool, step: int) -> CampaignState:
+        """``state`` with the profile dropped at ``step`` if this step's check dropped it first."""
+        if in_use or self.profile_dropped_step is not None:
+            return self
+        return replace(self, profile_dropped_step=step)
 
     def with_point(self, point: Point) -> CampaignState:
         return replace(self, points=self.points + (point,))

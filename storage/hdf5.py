@@ -62,6 +62,8 @@ STEP_COLUMNS = {
     "primary_inputs": ("1", "distinct x (or bins, if binned) the GP for f was fitted on"),
     "noise_inputs": ("1", "distinct t (or bins, if binned) the noise model was fitted on"),
     "binned": ("bool", "True: beyond inference.max_inputs distinct inputs, the GPs merged points by bins (an approximation)"),
+    "profile_p": ("1", "noise profile's posterior predictive p-value on the campaign's replicate scatter (NaN: no profile, or no point to check)"),
+    "profile_in_use": ("bool", "True: the noise profile was this step's prior; False: none, or dropped (contradicted at this or an earlier step)"),
 }
 POINT_COLUMNS = {
     "x": ("x units", "position"),

@@ -47,8 +47,9 @@ from noisebo.models.prediction import (
 
 
 def shots_for(is_converged: bool, schedule: ScheduleConfig) -> int:
-    """Shots the next point gets: ``shots_before`` until convergence, ``shots_after`` from then."""
-    return schedule.shots_after if is_converged else schedule.shots_before
+    """Shots the next point gets: ``shots_before`` until convergence, ``shots_after`` from then
+    (in the budget mode, ``shots_after`` always)."""
+    return schedule.shots_after if is_converged or schedule.mode == "budget" else schedule.shots_before
 
 
 def _propose_program(config: CampaignConfig):
@@ -185,7 +186,7 @@ def acquire(
         t=float(g.t[j]),
         acq_value=acq_value,
         shots=shots,
-        measure_noise=not now_converged and shots >= 2,
+        measure_noise=sched.mode == "paper" and not now_converged and shots >= 2,
         noise_at_t=noise_at_t,
         t_opt=t_opt,
         converged=now_converged,
@@ -200,6 +201,8 @@ def acquire(
         binned=bool(fitted.binned),
         t_opt_map=t_map,
         t_opt_interval=spread_t,
+        profile_p=float(fitted.profile.p_value),
+        profile_in_use=bool(fitted.profile.in_use),
     )
     return decision
 

@@ -24,7 +24,10 @@ class Decision:
     one axis); ``noise_mean``, ``noise_var`` (n_t,) on the t grid (for a noise field, their
     averages over the reference points). ``latency_s``: the decision's time (s).
     ``primary_inputs``, ``noise_inputs``: the distinct inputs (or bins) each GP was fitted on;
-    ``binned``: True when they were bins, an approximation (see ``noisebo.models.inputs``)."""
+    ``binned``: True when they were bins, an approximation (see ``noisebo.models.inputs``).
+    ``profile_p``: the noise profile's posterior predictive p-value on the noise model's training
+    points (NaN: no profile, or nothing to check yet); ``profile_in_use``: whether the profile
+    was this step's prior (``noisebo.models.profile_check``)."""
 
     step: int
     x: tuple[float, ...]
@@ -47,6 +50,8 @@ class Decision:
     binned: bool = False
     t_opt_map: np.ndarray = field(default_factory=lambda: np.zeros(0))
     t_opt_interval: float = float("nan")
+    profile_p: float = float("nan")
+    profile_in_use: bool = False
 
     def __post_init__(self) -> None:  # one number is one axis; a list (from a record) a tuple
         object.__setattr__(self, "x", as_position(self.x))

@@ -25,7 +25,7 @@ from noisebo.state import CampaignState, Point
 def stand_in_seeds(config: CampaignConfig, seed: int) -> CampaignState:
     """The campaign's seed points with stand-in readings (value = index, noise 1): a state of the
     shapes its first decision works on, before anything is measured."""
-    shots = config.schedule.shots_before
+    shots = config.schedule.seed_shots
     points = tuple(Point(tuple(row[:-1]), float(row[-1]), float(i), 1.0, shots, 1.0, True)
                    for i, row in enumerate(seed_points(config, seed)))
     return CampaignState(points=points)

@@ -156,7 +156,10 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
         if d.step != len(state.decisions) or _pending_decision(state) is not None:
             raise EngineError(f"decision for step {d.step} out of order")
         t_map = d.t_opt_map if d.t_opt_map.size else None
-        return replace(state, decisions=state.decisions + (d,), data=state.data.with_t_opt(d.t_opt, d.converged, t_map))
+        data = state.data.with_t_opt(d.t_opt, d.converged, t_map)
+        if state.config.noise_model.profile is not None:
+            data = data.with_profile(d.profile_in_use, d.step)
+        return replace(state, decisions=state.decisions + (d,), data=data)
     if isinstance(event, Summarised):
         return replace(state, summary=event.summary)
     if isinstance(event, StatusChanged):
@@ -231,7 +234,7 @@ def _point_under_way(state: EngineState) -> Request | None:
     index = len(state.points)
     if index < sched.n_seed:
         *x, t = (float(v) for v in seed_points(state.config, state.seed)[index])
-        return Request(index, -1, tuple(x), t, state.wanted or sched.shots_before, len(state.taken), None)
+        return Request(index, -1, tuple(x), t, state.wanted or sched.seed_shots, len(state.taken), None)
     decision = _pending_decision(state)
     if decision is None:
         return None

@@ -23,7 +23,7 @@ from noisebo.config import (
     SpaceConfig,
 )
 from noisebo.keys import FIT, jax_key
-from noisebo.models import field_fit, inference, noise_field, noise_model, primary
+from noisebo.models import field_fit, inference, noise_field, noise_model, primary, profile_check
 from noisebo.models.grids import scaled
 from noisebo.models.inputs import capacity_for, group_ids
 from noisebo.state import CampaignState
@@ -45,6 +45,7 @@ class Fitted(NamedTuple):
     primary_inputs: int = 0
     noise_inputs: int = 0
     binned: bool = False
+    profile: profile_check.ProfileCheck = profile_check.NO_PROFILE
 
 
 def _models(config: CampaignConfig):
@@ -107,8 +108,9 @@ class NoiseFit(NamedTuple):
     """The fit noise model stage's record: the noise law's (or the noise field's) posterior
     ``samples`` over its training ``data`` (model units: noise divided by ``scale``, in the
     value's units), how many merged ``inputs`` it saw, whether they were ``binned``, and whether
-    the step fitted ``warm`` (from the previous step's hyperparameters alone); ``seconds``: the
-    stage's own time, when a campaign's stage set it."""
+    the step fitted ``warm`` (from the previous step's hyperparameters alone); ``profile``: the
+    noise profile's check on the training points (``noisebo.models.profile_check``); ``seconds``:
+    the stage's own time, when a campaign's stage set it."""
 
     samples: inference.Samples
     data: noise_model.NoiseData | noise_field.FieldData
@@ -117,6 +119,7 @@ class NoiseFit(NamedTuple):
     binned: bool
     warm: bool
     seconds: float = 0.0
+    profile: profile_check.ProfileCheck = profile_check.NO_PROFILE
 
 
 class PrimaryFit(NamedTuple):
@@ -135,7 +138,7 @@ class PrimaryFit(NamedTuple):
 def combined(gp: PrimaryFit, noise: NoiseFit) -> Fitted:
     """The two fits as the prediction takes them."""
     return Fitted(gp.samples, gp.data, gp.standardisation, noise.samples, noise.data, noise.scale, gp.inputs,
-                  noise.inputs, gp.binned or noise.binned)
+                  noise.inputs, gp.binned or noise.binned, noise.profile)
 
 
 def _columns(config: CampaignConfig, state: CampaignState):
@@ -163,14 +166,17 @@ def fit_noise_model(
         samples, data, scale, inputs, binned = field_fit.fit_field(config, state, scaled(s, x), k_noise, previous, warm,
                                                                    capacity)
         return NoiseFit(samples, data, scale, inputs, binned, warm)
-    train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
-    data, scale, groups = noise_model.prepare(t[train], state.column("shot_std")[train], n_shots[train],
-                                              config.noise_model, s.t_min, s.t_max, inf.max_inputs, capacity)
+    cfg = config.noise_model
+    train = state.noise_training_mask(cfg.learn_after_convergence, config.schedule.shots_after)
+    t_train, std_train, n_train = t[train], state.column("shot_std")[train], n_shots[train]
+    check = profile_check.verdict(cfg, state.profile_dropped_step is not None, t_train, std_train, n_train)
+    data, scale, groups = noise_model.prepare(t_train, std_train, n_train, cfg, s.t_min, s.t_max, inf.max_inputs,
+                                              capacity, check.in_use)
     n_warm = _previous_guesses(previous, "noise", scale, np.asarray(data.bounds))
     warm = warm and bool(n_warm)
-    guesses = n_warm if warm else [noise_model.initial_guess(data, config.noise_model)] + n_warm
+    guesses = n_warm if warm else [noise_model.initial_guess(data, cfg)] + noise_model.profile_guess(data, cfg) + n_warm
     samples = _fit_one(config, _models(config)[1], data, k_noise, guesses, inf.laplace_samples, 0, warm)
-    return NoiseFit(samples, data, scale, groups.count.size, groups.binned, warm)
+    return NoiseFit(samples, data, scale, groups.count.size, groups.binned, warm, profile=check)
 
 
 def fit_gp(

@@ -36,7 +36,10 @@ class NoiseData(NamedTuple):
     mean of s/c4 over the data scale (0 on padding); rel_var: (1 - c4^2)/c4^2 of that mean, i.e.
     1 / sum over its points of c4^2/(1 - c4^2); count: points in the group; scatter: sum over its
     points of (y_i - y)^2 / rel_var_i; mask: True on real groups; bounds: (3, 2) prior bounds of
-    (A0, A1, p) in scaled units."""
+    (A0, A1, p) in scaled units. With a noise profile (``noise_model.profile``): prior (3, 2) the
+    normal prior's (mean, sd) of (A0, A1, p) in scaled units (a law without p: its row unused),
+    and prior_weight () 1.0 while the profile is in use, 0.0 once dropped (the uniform bounds
+    alone); both None without one."""
 
     t: jnp.ndarray
     ts: jnp.ndarray
@@ -46,6 +49,8 @@ class NoiseData(NamedTuple):
     scatter: jnp.ndarray
     mask: jnp.ndarray
     bounds: jnp.ndarray
+    prior: jnp.ndarray | None = None
+    prior_weight: jnp.ndarray | None = None
 
 
 def c4(n: np.ndarray) -> np.ndarray:
@@ -80,6 +85,10 @@ def make_model(cfg: NoiseModelConfig):
             "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
         )
         length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
+        if data.prior is not None:  # the profile: a normal prior inside the bounds, weighted 1 or 0
+            values = jnp.stack([a0, a1, jnp.asarray(p, dtype=a0.dtype)])[: 3 if law.infers_exponent else 2]
+            rows = data.prior[: values.shape[0]]
+            numpyro.factor("profile", data.prior_weight * jnp.sum(dist.Normal(rows[:, 0], rows[:, 1]).log_prob(values)))
         m = law.mean(data.t, a0, a1, p)
         cov = masked_covariance(matern52(data.ts, data.ts, amplitude**2, length), m**2 * data.rel_var, data.mask)
         numpyro.sample("y", dist.MultivariateNormal(jnp.where(data.mask, m, 0.0), covariance_matrix=cov), obs=data.y)
@@ -98,12 +107,27 @@ def group_log_factor(m: jnp.ndarray, data: NoiseData) -> jnp.ndarray:
     return jnp.sum(jnp.where(data.mask, terms, 0.0))
 
 
+def prior_rows(cfg: NoiseModelConfig, scale: float) -> np.ndarray:
+    """The profile's normal prior (3, 2): (mean, sd) of A0 and A1 over ``scale`` and of p (a
+    law without p: its prior's midpoint, unused); an sd is kept above a millionth of its
+    parameter's bounds, so a profile of sd 0 is a very narrow prior rather than none."""
+    rows = []
+    for name, bounds in (("a0", cfg.a0_prior), ("a1", cfg.a1_prior), ("p", cfg.p_prior)):
+        unit = scale if name != "p" else 1.0
+        floor = 1e-6 * (bounds.high - bounds.low) / unit
+        posterior = cfg.profile.parameters.get(name)
+        mean, sd = (0.5 * (bounds.low + bounds.high), 1.0) if posterior is None else (posterior.mean, posterior.sd)
+        rows.append([mean / unit, max(sd / unit, floor)])
+    return np.asarray(rows)
+
+
 def prepare(
     t, shot_std, n_shots, cfg: NoiseModelConfig, t_min: float, t_max: float, max_inputs: int,
-    capacity: int | None = None,
+    capacity: int | None = None, profile_in_use: bool = True,
 ) -> tuple[NoiseData, float, Grouped]:
     """Merge measured noise (numpy (n,): t in s, sample std, shots per point) by t and pad it
-    for the model (to ``capacity``, default the groups' ``capacity_for``).
+    for the model (to ``capacity``, default the groups' ``capacity_for``); with a profile, its
+    prior weighted by ``profile_in_use`` (the same program either way).
 
     Returns the data, the scale (same units as the noise) that model values are multiplied by,
     and the groups (in scaled units)."""
@@ -131,6 +155,9 @@ def prepare(
         mask=jnp.asarray(np.arange(g + pad) < g),
         bounds=jnp.asarray(bounds),
     )
+    if cfg.profile is not None:
+        data = data._replace(prior=jnp.asarray(prior_rows(cfg, scale)),
+                             prior_weight=jnp.asarray(1.0 if profile_in_use else 0.0))
     return data, scale, groups
 
 
@@ -165,6 +192,19 @@ def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
     if law.infers_exponent:
         guess["p"] = float(np.clip(p, bounds[2, 0] + eps, bounds[2, 1] - eps))
     return guess
+
+
+def profile_guess(data: NoiseData, cfg: NoiseModelConfig) -> list[dict[str, float]]:
+    """The profile's means as a starting point of the MAP fit (scaled units), while it is in use;
+    none otherwise."""
+    if data.prior is None or float(data.prior_weight) == 0.0:
+        return []
+    law = registry.noise_law(cfg.mean)
+    bounds, prior = np.asarray(data.bounds), np.asarray(data.prior)
+    eps = 1e-6
+    guess = {name: float(np.clip(prior[row, 0], bounds[row, 0] + eps, bounds[row, 1] - eps))
+             for row, name in enumerate(("a0", "a1", "p")) if name != "p" or law.infers_exponent}
+    return [guess | {"amplitude": float(np.exp(cfg.residual_amplitude_loc)), "length": float(np.exp(RESIDUAL_LENGTH_LOC))}]
 
 
 def predict_one(

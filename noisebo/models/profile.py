@@ -11,55 +11,20 @@ each law parameter's posterior mean and sd, in the noise's units.
 
 from __future__ import annotations
 
-from typing import Literal
-
 import jax
 import numpy as np
-from pydantic import Field
 
-from noisebo.config import CampaignConfig, FrozenModel
+from noisebo.config import (  # noqa: F401 - the profile's records, re-exported
+    PROFILE_KIND,
+    CampaignConfig,
+    NoiseProfile,
+    ParameterPosterior,
+    ProfileCampaign,
+    ProfileDriver,
+)
 from noisebo.models import inference, noise_model
 
-PROFILE_KIND = "noisebo.noise_profile"
 LAPLACE_DRAWS = 256  # posterior draws the parameters' mean and sd are taken over
-
-
-class ParameterPosterior(FrozenModel):
-    """One noise-law parameter's posterior: mean and sd (A0, A1 in the noise's units; p none)."""
-
-    mean: float
-    sd: float = Field(ge=0)
-
-
-class ProfileDriver(FrozenModel):
-    name: str
-    version: str
-    settings: dict
-
-
-class ProfileCampaign(FrozenModel):
-    """One campaign a profile was made from: its file, config name, seed, start time (UTC) and
-    how many of its points measured the noise."""
-
-    file: str
-    config: str
-    seed: int
-    created_utc: str
-    noise_points: int
-
-
-class NoiseProfile(FrozenModel):
-    """What ``noisebo noise-profile`` writes: the noise law's posterior on an instrument."""
-
-    kind: Literal["noisebo.noise_profile"] = PROFILE_KIND
-    schema_version: Literal[1] = 1
-    driver: ProfileDriver
-    law: str
-    parameters: dict[str, ParameterPosterior]
-    t_range_s: tuple[float, float]
-    noise_points: int
-    campaigns: tuple[ProfileCampaign, ...]
-    made_utc: str
 
 
 class NotDistillable(ValueError):
@@ -82,9 +47,10 @@ def distil(config: CampaignConfig, t: np.ndarray, shot_std: np.ndarray, n_shots:
         raise NotDistillable(f"the noise was measured at {np.unique(t).size} distinct t; a law needs at least 2")
     s, inf = config.space, config.inference
     t_min, t_max = min(s.t_min, float(t.min())), max(s.t_max, float(t.max()))
-    data, scale, _ = noise_model.prepare(t, shot_std, n_shots, config.noise_model, t_min, t_max, inf.max_inputs)
-    model = noise_model.make_model(config.noise_model)
-    guess = noise_model.initial_guess(data, config.noise_model)
+    own = config.noise_model.model_copy(update={"profile": None})  # the campaigns' data alone, not their prior
+    data, scale, _ = noise_model.prepare(t, shot_std, n_shots, own, t_min, t_max, inf.max_inputs)
+    model = noise_model.make_model(own)
+    guess = noise_model.initial_guess(data, own)
     fitted = inference.fit_map(model, data, key, inf.restarts, LAPLACE_DRAWS, [guess])
     out = {}
     for name in ("a0", "a1", "p"):

@@ -1,0 +1,122 @@
+"""Is a noise profile still true of the instrument? A posterior predictive check of the profile
+(``noise_model.profile``) on the campaign's own replicate scatter.
+
+A point of n >= 2 shots whose single-shot noise is sigma(t) has a sample sd s with
+u = (n - 1) s^2 / sigma(t)^2 ~ chi^2(n - 1), exactly, for normal shots; the points' sds have the
+log-likelihood
+
+    log L(sigma) = sum_i -(n_i - 1) log sigma(t_i) - (n_i - 1) s_i^2 / (2 sigma(t_i)^2)  (+ const).
+
+The discrepancy is the likelihood ratio of the best law (its parameters free within the
+config's uniform priors) against the profile's: LR = 2 (max log L - log L(profile)), chi^2 with
+as many degrees of freedom as the law has parameters (fewer when the points sit at fewer
+distinct t) if the profile is right. Its p-value is averaged over the profile's posterior (the
+posterior predictive p-value), on a Gauss-Hermite grid of ``NODES`` nodes per parameter, each
+parameter normal with the profile's mean and sd, cut at 0. Against the two single-number checks
+(the total scatter, the points one by one) it loses less power: on Forrester's t range, three
+30-shot seed points tell a profile of A0 = 0.1, A1 = 2 from an instrument of A0 = 0.5, A1 = 1 in
+87 % of draws at p < 0.01, against 74 % for those two checks together, and raise a false alarm
+on a true profile in under 1 % (``p_value``'s tests).
+"""
+
+from __future__ import annotations
+
+from itertools import product
+from typing import NamedTuple
+
+import numpy as np
+from scipy import optimize, stats
+
+from noisebo import registry
+from noisebo.config import NoiseModelConfig
+
+NODES = 5  # Gauss-Hermite nodes per profile parameter
+TINY_NOISE = 1e-12  # a law's noise is kept above this (a profile with A0 = A1 = 0 predicts none)
+
+
+class ProfileCheck(NamedTuple):
+    """One step's verdict on the profile: its posterior predictive ``p_value`` on the points so
+    far (NaN: no profile, or no point of two or more shots yet) and whether it is ``in_use``
+    (the prior of this step's fit: a profile is dropped at the first step whose p-value falls
+    below ``noise_model.profile_alpha``, and stays dropped)."""
+
+    p_value: float
+    in_use: bool
+
+
+NO_PROFILE = ProfileCheck(float("nan"), False)
+
+
+def _nodes(cfg: NoiseModelConfig) -> tuple[list[dict[str, float]], np.ndarray]:
+    """The profile's parameter sets (a grid of ``NODES`` per parameter) and their weights."""
+    profile = cfg.profile
+    names = list(profile.parameters)
+    z, w = np.polynomial.hermite_e.hermegauss(NODES)
+    w = w / w.sum()
+    sets, weights = [], []
+    for index in product(range(NODES), repeat=len(names)):
+        values = {n: profile.parameters[n].mean + profile.parameters[n].sd * z[i] for n, i in zip(names, index)}
+        values = {n: max(v, 0.0) for n, v in values.items()}
+        sets.append(values)
+        weights.append(float(np.prod([w[i] for i in index])))
+    return sets, np.asarray(weights)
+
+
+def _log_likelihood(sigma: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
+    return float(np.sum(-dof * np.log(sigma) - dof * s**2 / (2.0 * sigma**2)))
+
+
+def _law_sigma(law, t: np.ndarray, values: dict[str, float]) -> np.ndarray:
+    sigma = np.asarray(law.mean(t, values["a0"], values["a1"], values.get("p", 0.5)), dtype=np.float64)
+    return np.maximum(sigma, TINY_NOISE)
+
+
+def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
+    """max log L over the law's parameters within the config's uniform priors (L-BFGS-B from
+    the profile's means and from a few spread starts)."""
+    law = registry.noise_law(cfg.mean)
+    names = ["a0", "a1"] + (["p"] if law.infers_exponent else [])
+    priors = {"a0": cfg.a0_prior, "a1": cfg.a1_prior, "p": cfg.p_prior}
+    bounds = [(priors[n].low, priors[n].high) for n in names]
+
+    def loss(theta: np.ndarray) -> float:
+        return -_log_likelihood(_law_sigma(law, t, dict(zip(names, theta))), s, dof)
+
+    starts = [[cfg.profile.parameters[n].mean for n in names]]
+    scale = float(np.median(s)) if np.median(s) > 0 else 1.0
+    starts += [[scale * f0, scale * f1] + ([0.5] if law.infers_exponent else []) for f0, f1 in
+               ((0.5, 0.5), (0.05, 1.0), (1.0, 0.05))]
+    best = np.inf
+    for start in starts:
+        x0 = np.clip(start, [b[0] for b in bounds], [b[1] for b in bounds])
+        found = optimize.minimize(loss, x0, method="L-BFGS-B", bounds=bounds)
+        best = min(best, float(found.fun))
+    return -best
+
+
+def p_value(cfg: NoiseModelConfig, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray) -> float:
+    """The profile's posterior predictive p-value on points measured at t (n,) s with the sample
+    sd ``shot_std`` (n,) of ``n_shots`` (n,) shots (points of fewer than 2 shots, or a NaN sd,
+    are left out); NaN when none is left."""
+    t, s, n = (np.asarray(a, dtype=np.float64) for a in (t, shot_std, n_shots))
+    keep = (n >= 2) & np.isfinite(s) & np.isfinite(t)
+    t, s, dof = t[keep], s[keep], n[keep] - 1.0
+    if t.size == 0:
+        return float("nan")
+    law = registry.noise_law(cfg.mean)
+    best = best_log_likelihood(cfg, t, s, dof)
+    free = min(len(cfg.profile.parameters), np.unique(t).size)
+    sets, weights = _nodes(cfg)
+    ratios = np.asarray([2.0 * (best - _log_likelihood(_law_sigma(law, t, values), s, dof)) for values in sets])
+    return float(np.sum(weights * stats.chi2.sf(np.maximum(ratios, 0.0), free)))
+
+
+def verdict(cfg: NoiseModelConfig, dropped: bool, t: np.ndarray, shot_std: np.ndarray,
+            n_shots: np.ndarray) -> ProfileCheck:
+    """This step's ``ProfileCheck`` of ``cfg.profile`` on its noise model's training points
+    (``p_value``), given whether an earlier step ``dropped`` it: in use while every step's
+    p-value has been at least ``cfg.profile_alpha`` (or NaN)."""
+    if cfg.profile is None:
+        return NO_PROFILE
+    p = p_value(cfg, t, shot_std, n_shots)
+    return ProfileCheck(p, not dropped and not p < cfg.profile_alpha)
