@@ -17,7 +17,17 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
   only at the config's t grid (``acquisition.fixed_t`` takes the grid's nearest entry); the output
   says which grid t each fixed design used where it is not the nominal one. "--designs fixed"
   selects every fixed design;
-- "info_rate": ``acquisition.policy: info_rate`` (``noisebo.acquisition.information``).
+- "info_rate": ``acquisition.policy: info_rate`` (``noisebo.acquisition.information``);
+- "budget cold": ``schedule.mode: budget`` (no dedicated noise measurements: every point takes
+  ``shots_after`` shots and the noise model learns from their replicate scatter), the config's
+  policy, no profile;
+- "budget warm": the same with ``noise_model.profile``: --profile, or else a profile made here
+  by ``noisebo noise-profile`` from 3 campaigns of the paper's protocol (15 steps) on the same
+  instrument and settings with seeds 1000-1002, none of the benchmark's seeds (the output says
+  which); a --profile of another driver or other settings is used with ``profile_check: false``;
+- "gpcam": the peer, gpCAM (``benchmarks/_gpcam.py``: how it is set up and why that is fair),
+  when the optional extra is installed (``pip install 'noisebo[peers]'``); the output says so when
+  it is not.
 
 A design's name is the same everywhere: in --designs, in the output and as the key of the JSON's
 ``records``; a fixed design's depends on the config (its t range and t*), so --help describes them
@@ -71,8 +81,11 @@ FIXED_PREFIX = "fixed t="
 STAR_TAG = " (t*)"
 N_LOG_SPACED = 5
 INFO_RATE = "info_rate"
+COLD, WARM, GPCAM = "budget cold", "budget warm", "gpcam"
+PROFILE_SEEDS = (1000, 1001, 1002)  # the warm design's profile campaigns: none of the benchmark's seeds
 # What --help lists: a fixed design's name depends on the config (its t range and t*).
-DESIGNS = (*paper_policies(), FIXED_PREFIX + "<t>", FIXED_PREFIX + "<t*>" + STAR_TAG, FIXED, INFO_RATE)
+DESIGNS = (*paper_policies(), FIXED_PREFIX + "<t>", FIXED_PREFIX + "<t*>" + STAR_TAG, FIXED, INFO_RATE, COLD, WARM,
+           GPCAM)
 RENAMED = {"info rate": INFO_RATE}  # a JSON written before the names were one spelling
 BEST_FIXED = "best fixed t (in hindsight)"
 
@@ -137,15 +150,67 @@ def grid_t(config, t: float) -> float:
     return float(g[int(np.argmin(np.abs(g - t)))])
 
 
-def design_config(base, name: str, fixed: dict[str, float]):
+def design_config(base, name: str, fixed: dict[str, float], profile=None):
+    if name == COLD:
+        return base.with_overrides(schedule={"mode": "budget"})
+    if name == WARM:
+        check = profile.driver.name == base.instrument.kind and profile.driver.settings == base.instrument.settings
+        return base.with_overrides(schedule={"mode": "budget"}, noise_model={
+            "profile": profile.model_dump(mode="json"), "profile_check": check})
     if name in paper_policies():
         return base.with_overrides(acquisition={"policy": name})
+    if name == GPCAM:
+        return base  # the peer reads the instrument, space, budget and shots_after from it
     if name == INFO_RATE:
         return base.with_overrides(acquisition={"policy": INFO_RATE})
     t = fixed[name]  # nominal: the campaign takes the t grid's nearest entry
     after = base.schedule.shots_after  # no t to learn: every point gets the few shots a converged campaign takes
     return base.with_overrides(acquisition={"policy": "reward", "fixed_t": float(t)},
                                schedule={"shots_before": max(after, 2), "shots_after": after})
+
+
+def made_profile(base, folder: Path):
+    """The warm design's profile: ``noisebo noise-profile`` of 3 finished campaigns of the paper's
+    protocol (15 steps, no budget) on ``base``'s instrument and settings, seeds ``PROFILE_SEEDS``."""
+    from cli.noise_profile import make_profile
+    from instruments import build
+    from instruments.registry import driver_info
+    from noisebo.campaign import driver, engine
+    from storage.recorder import Recorder
+
+    paper = base.with_overrides(schedule={"mode": "paper", "budget_s": None, "n_steps": 15})
+    files = []
+    for seed in PROFILE_SEEDS:
+        path = folder / f"profile_s{seed}.h5"
+        if not path.exists():
+            started = engine.new_campaign(paper, seed, driver_info(paper.instrument), {}, "2026-11-25T00:00:00+00:00")
+            with Recorder.create(path, started) as recorder:
+                driver.drive(recorder.state, build(paper.instrument), recorder.commit)
+        files.append(path)
+    return make_profile(files)
+
+
+def warm_profile(args, base):
+    """(the warm design's profile, where it came from): --profile, or one made here (kept in a
+    folder beside --json, so a rerun reuses its campaigns)."""
+    import yaml
+
+    from noisebo.config import read_profile
+    from noisebo.models.profile import NoiseProfile
+
+    if args.profile is not None:
+        profile = NoiseProfile.model_validate(read_profile(args.profile, "--profile"))
+        same = profile.driver.name == base.instrument.kind and profile.driver.settings == base.instrument.settings
+        return profile, (f"profile {args.profile} ({len(profile.campaigns)} campaigns of {profile.driver.name}"
+                         f"{'' if same else '; other driver or settings, used with profile_check: false'})")
+    folder = (args.json.parent / f"{args.json.stem}_profile") if args.json else Path("budget_profile")
+    folder.mkdir(parents=True, exist_ok=True)
+    profile = made_profile(base, folder)
+    (folder / "profile.yaml").write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
+    law = ", ".join(f"{k} = {p.mean:.4g} ± {p.sd:.2g}" for k, p in profile.parameters.items())
+    return profile, (f"profile made here from 3 paper-protocol campaigns (15 steps) of {base.name} with the same "
+                     f"instrument and settings, seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}: {law} "
+                     f"({folder / 'profile.yaml'})")
 
 
 def scorer(config, instrument):
@@ -253,6 +318,9 @@ def main(argv=None) -> int:
     parser.add_argument("--target", type=float, default=0.46)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--figure", type=Path, default=None)
+    parser.add_argument("--profile", type=Path, default=None, metavar="PROFILE.yaml",
+                        help="the warm design's noise profile (default: made here from 3 paper-protocol campaigns, "
+                             f"seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}, kept beside --json)")
     parser.add_argument("--report", action="store_true",
                         help="measure nothing: report every seed --json holds for each design")
     args = parser.parse_args(argv)
@@ -265,7 +333,7 @@ def main(argv=None) -> int:
     score = scorer(base, instrument)
     s = base.space
     fixed = fixed_designs(s.t_min, s.t_max, t_star)
-    known = [*paper_policies(), *fixed, INFO_RATE]
+    known = [*paper_policies(), *fixed, INFO_RATE, COLD, WARM, GPCAM]
     names, unknown = resolve(args.designs or known, known)
     if unknown:
         parser.error(f"argument --designs: unknown design {', '.join(repr(n) for n in unknown)}; "
@@ -283,6 +351,17 @@ def main(argv=None) -> int:
     snapped = [f"{name} at t = {on_grid[name]:.4g} s" for name in names
                if name in fixed and abs(on_grid[name] / fixed[name] - 1.0) > 1e-9]
     wanted = list(range(args.first_seed, args.first_seed + args.seeds))
+    notes = []
+    if GPCAM in names and not args.report:
+        from _gpcam import available, run_gpcam
+        missing_peer = available()
+        if missing_peer is not None:
+            names.remove(GPCAM)
+            notes.append(f"gpcam: not run: {missing_peer}")
+    profile = None
+    if WARM in names and not args.report:
+        profile, whence = warm_profile(args, base)
+        notes.append(f"budget warm: {whence}")
     for name in names:
         if args.report:
             records[name] = done.get("records", {}).get(name, [])
@@ -290,11 +369,12 @@ def main(argv=None) -> int:
         kept = {r["seed"]: r for r in done.get("records", {}).get(name, []) if r["seed"] in wanted}
         if kept:
             print(f"{name}: {len(kept)} seeds kept from {args.json}", file=sys.stderr, flush=True)
-        config = design_config(base, name, fixed)
+        config = design_config(base, name, fixed, profile)
         for seed in wanted:
             if seed in kept:
                 continue
-            rec = run_one(config, instrument, seed, score, t_star)
+            run = run_gpcam if name == GPCAM else run_one
+            rec = run(config, instrument, seed, score, t_star)
             kept[seed] = rec
             print(f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
                   f"{rec['rmse'][-1]:.3f}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, "
@@ -314,6 +394,8 @@ def main(argv=None) -> int:
     print(f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, "
           f"{'/'.join(str(c) for c in counts)} seeds per design; "
           f"{describe(stars, LAW + (f' and {X_AVG}' if both else ''))}")
+    for note in notes:
+        print(note)
     missing = [n for n, r in records.items() if not r]
     if missing and args.report:
         print(f"Not in {args.json}: {', '.join(missing)}")
