@@ -21,7 +21,9 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
 - "budget cold": ``schedule.mode: budget`` (no dedicated noise measurements: every point takes
   ``shots_after`` shots and the noise model learns from their replicate scatter), the config's
   policy, no profile;
-- "budget warm": the same with ``noise_model.profile``: --profile, or else a profile made here
+- "budget info_rate": the budget mode with ``acquisition.policy: info_rate`` (the most reduction
+  of f's integrated variance per second), no profile;
+- "budget warm": the budget mode with ``noise_model.profile``: --profile, or else a profile made here
   by ``noisebo noise-profile`` from 3 campaigns of the paper's protocol (15 steps) on the same
   instrument and settings with seeds 1000-1002, none of the benchmark's seeds (the output says
   which); a --profile of another driver or other settings is used with ``profile_check: false``;
@@ -81,11 +83,11 @@ FIXED_PREFIX = "fixed t="
 STAR_TAG = " (t*)"
 N_LOG_SPACED = 5
 INFO_RATE = "info_rate"
-COLD, WARM, GPCAM = "budget cold", "budget warm", "gpcam"
+COLD, WARM, GPCAM, BUDGET_RATE = "budget cold", "budget warm", "gpcam", "budget info_rate"
 PROFILE_SEEDS = (1000, 1001, 1002)  # the warm design's profile campaigns: none of the benchmark's seeds
 # What --help lists: a fixed design's name depends on the config (its t range and t*).
-DESIGNS = (*paper_policies(), FIXED_PREFIX + "<t>", FIXED_PREFIX + "<t*>" + STAR_TAG, FIXED, INFO_RATE, COLD, WARM,
-           GPCAM)
+DESIGNS = (*paper_policies(), FIXED_PREFIX + "<t>", FIXED_PREFIX + "<t*>" + STAR_TAG, FIXED, INFO_RATE, COLD,
+           BUDGET_RATE, WARM, GPCAM)
 RENAMED = {"info rate": INFO_RATE}  # a JSON written before the names were one spelling
 BEST_FIXED = "best fixed t (in hindsight)"
 
@@ -153,6 +155,8 @@ def grid_t(config, t: float) -> float:
 def design_config(base, name: str, fixed: dict[str, float], profile=None):
     if name == COLD:
         return base.with_overrides(schedule={"mode": "budget"})
+    if name == BUDGET_RATE:
+        return base.with_overrides(schedule={"mode": "budget"}, acquisition={"policy": INFO_RATE})
     if name == WARM:
         check = profile.driver.name == base.instrument.kind and profile.driver.settings == base.instrument.settings
         return base.with_overrides(schedule={"mode": "budget"}, noise_model={
@@ -333,7 +337,7 @@ def main(argv=None) -> int:
     score = scorer(base, instrument)
     s = base.space
     fixed = fixed_designs(s.t_min, s.t_max, t_star)
-    known = [*paper_policies(), *fixed, INFO_RATE, COLD, WARM, GPCAM]
+    known = [*paper_policies(), *fixed, INFO_RATE, COLD, BUDGET_RATE, WARM, GPCAM]
     names, unknown = resolve(args.designs or known, known)
     if unknown:
         parser.error(f"argument --designs: unknown design {', '.join(repr(n) for n in unknown)}; "
