@@ -288,13 +288,17 @@ def figure(records: dict, budget: float, path: Path, title: str) -> None:
     grid = np.linspace(0.0, budget, 181)[1:]
     fig = Figure(figsize=(8, 5), layout="constrained")
     ax = fig.subplots()
-    for name, recs in records.items():
+    from matplotlib import colormaps
+
+    palette = colormaps["tab20"].colors  # 20 distinct colours: more designs than the default cycle's 10
+    for k, (name, recs) in enumerate(records.items()):
         curves = np.array([[rmse_at(r, b) for b in grid] for r in recs])
         mid, lo, hi = quartiles(curves)
         ok = np.isfinite(mid)  # where at least half the seeds have a model
         if not ok.any():
             continue
-        line, = ax.plot(grid[ok], mid[ok], label=name, lw=1.6)
+        style = {"ls": ":", "lw": 1.2} if is_fixed(name) else {"ls": "-", "lw": 1.8}  # fixed designs dotted
+        line, = ax.plot(grid[ok], mid[ok], label=name, color=palette[(2 * k) % 20 + (2 * k // 20) % 2], **style)
         ax.fill_between(grid[ok], lo[ok], np.where(np.isfinite(hi), hi, np.nan)[ok], color=line.get_color(), alpha=0.15)
     best = best_in_hindsight(records, grid)
     if sum(is_fixed(n) for n in records) > 1 and any(b is not None for b in best):
