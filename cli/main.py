@@ -337,6 +337,19 @@ def _sweep(args) -> int:
     return 0
 
 
+def _profile_summary(config: dict, steps: dict) -> dict | None:
+    """The noise profile a campaign started from (None: none) and the first BO step (from 1)
+    whose check dropped it (None: in use throughout)."""
+    profile = (config.get("noise_model") or {}).get("profile")
+    if profile is None:
+        return None
+    in_use = [bool(v) for v in steps.get("profile_in_use", [])]
+    dropped = next((int(s) for s, used in zip(steps["step"], in_use) if not used), None)
+    law = ", ".join(f"{name} = {p['mean']:.4g} ± {p['sd']:.2g}" for name, p in profile["parameters"].items())
+    return {"law": profile["law"], "parameters": law, "driver": profile["driver"]["name"],
+            "campaigns": len(profile.get("campaigns", ())), "dropped_at_step": dropped}
+
+
 def inspect_summary(path: Path) -> dict:
     """The JSON view of a campaign file (see ``noisebo inspect --json``)."""
     import numpy as np
@@ -372,6 +385,7 @@ def inspect_summary(path: Path) -> dict:
                  "x_at_shortest_t_opt": as_position(data["grid"]["x"][int(np.argmin(t_map))])}
     return {
         "file": str(path),
+        "noise_profile": _profile_summary(attrs["config"], steps),
         "status": attrs["status"],
         "status_reason": attrs["status_reason"],
         "seed": int(attrs["seed"]),
@@ -418,6 +432,12 @@ def _inspect(args) -> int:
     if summary["budget_s"] is not None:
         print(f"  instrument-time budget {summary['budget_s']:.4g} s, {summary['spent_s']:.4g} s spent "
               f"(shots and {summary['config']['schedule']['point_overhead_s']:g} s per point)")
+    profile = summary["noise_profile"]
+    if profile is not None:
+        fate = ("in use throughout" if profile["dropped_at_step"] is None else
+                f"contradicted by the replicate scatter and dropped at step {profile['dropped_at_step']}")
+        print(f"  noise profile ({profile['law']}: {profile['parameters']}; {profile['driver']}, "
+              f"{profile['campaigns']} campaigns): {fate}")
     field = summary["noise_field"]
     if field is not None:
         print(f"  noise field: optimal t per position from {field['t_opt_min']:.4g} s (at x = "

@@ -10,6 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
+from cli.main import inspect_summary
 from flows.campaign import decision_lines
 from instruments import build
 from instruments.registry import driver_info, validated
@@ -93,3 +94,5 @@ def test_the_drop_is_said_in_the_progress_and_the_file(stale, tmp_path):
         assert list(f["steps/profile_in_use"][()]) == [False, False]
         assert f["steps/profile_p"][0] < 0.01
         assert "posterior predictive" in f["steps/profile_p"].attrs["description"]
+    profile = inspect_summary(tmp_path / "stale.h5")["noise_profile"]  # what `noisebo inspect` says
+    assert profile["dropped_at_step"] == 1 and profile["parameters"] == "a0 = 0.1 ± 0.01, a1 = 2 ± 0.05"
