@@ -158,9 +158,8 @@ def design_config(base, name: str, fixed: dict[str, float], profile=None):
     if name == BUDGET_RATE:
         return base.with_overrides(schedule={"mode": "budget"}, acquisition={"policy": INFO_RATE})
     if name == WARM:
-        check = profile.driver.name == base.instrument.kind and profile.driver.settings == base.instrument.settings
         return base.with_overrides(schedule={"mode": "budget"}, noise_model={
-            "profile": profile.model_dump(mode="json"), "profile_check": check})
+            "profile": profile.model_dump(mode="json"), "profile_check": describes(profile, base)})
     if name in paper_policies():
         return base.with_overrides(acquisition={"policy": name})
     if name == GPCAM:
@@ -171,6 +170,15 @@ def design_config(base, name: str, fixed: dict[str, float], profile=None):
     after = base.schedule.shots_after  # no t to learn: every point gets the few shots a converged campaign takes
     return base.with_overrides(acquisition={"policy": "reward", "fixed_t": float(t)},
                                schedule={"shots_before": max(after, 2), "shots_after": after})
+
+
+def describes(profile, base) -> bool:
+    """Whether ``profile`` was made with ``base``'s driver and settings: the check a campaign
+    makes of its profile (``instruments.registry.profile_problem``)."""
+    from instruments.registry import profile_problem
+
+    checked = base.with_overrides(noise_model={"profile": profile.model_dump(mode="json"), "profile_check": True})
+    return profile_problem(checked, base.instrument.settings) is None
 
 
 def made_profile(base, folder: Path):
@@ -204,9 +212,8 @@ def warm_profile(args, base):
 
     if args.profile is not None:
         profile = NoiseProfile.model_validate(read_profile(args.profile, "--profile"))
-        same = profile.driver.name == base.instrument.kind and profile.driver.settings == base.instrument.settings
         return profile, (f"profile {args.profile} ({len(profile.campaigns)} campaigns of {profile.driver.name}"
-                         f"{'' if same else '; other driver or settings, used with profile_check: false'})")
+                         f"{'' if describes(profile, base) else '; other driver or settings, used with profile_check: false'})")
     folder = (args.json.parent / f"{args.json.stem}_profile") if args.json else Path("budget_profile")
     folder.mkdir(parents=True, exist_ok=True)
     profile = made_profile(base, folder)
