@@ -18,17 +18,14 @@ refused too.
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
-from instruments import build  # noqa: E402
-from instruments.registry import validated  # noqa: E402
+from noisebo.instruments import build  # noqa: E402
+from noisebo.instruments.registry import validated  # noqa: E402
 from noisebo.campaign.driver import simulates  # noqa: E402
 from noisebo.config import CampaignConfig, ConfigError, load_config  # noqa: E402
 

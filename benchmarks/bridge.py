@@ -24,18 +24,17 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from bridge.client import Spectrum, serve_instrument
-from instruments import build
-from instruments.registry import driver_info, validated
+from noisebo.bridge.client import Spectrum, serve_instrument
+from noisebo.instruments import build
+from noisebo.instruments.registry import driver_info, validated
 from noisebo.campaign.driver import drive, now_utc
 from noisebo.campaign.engine import new_campaign
 from noisebo.config import load_config
 from noisebo.events import DriverInfo, ShotTaken
 from noisebo.keys import MEASURE, numpy_rng
 from noisebo.reduction import Reading
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 TOKEN = "benchmark-token"
 DISTINCT = 16  # distinct prerecorded readings, cycled

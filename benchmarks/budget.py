@@ -68,7 +68,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
-sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
 from _config import Parser, benchmark_config  # noqa: E402
 from _tstar import LAW, X_AVG, describe, differ, t_stars  # noqa: E402
@@ -175,7 +174,7 @@ def design_config(base, name: str, fixed: dict[str, float], profile=None):
 def describes(profile, base) -> bool:
     """Whether ``profile`` was made with ``base``'s driver and settings: the check a campaign
     makes of its profile (``instruments.registry.profile_problem``)."""
-    from instruments.registry import profile_problem
+    from noisebo.instruments.registry import profile_problem
 
     checked = base.with_overrides(noise_model={"profile": profile.model_dump(mode="json"), "profile_check": True})
     return profile_problem(checked, base.instrument.settings) is None
@@ -184,11 +183,11 @@ def describes(profile, base) -> bool:
 def made_profile(base, folder: Path):
     """The warm design's profile: ``noisebo noise-profile`` of 3 finished campaigns of the paper's
     protocol (15 steps, no budget) on ``base``'s instrument and settings, seeds ``PROFILE_SEEDS``."""
-    from cli.noise_profile import make_profile
-    from instruments import build
-    from instruments.registry import driver_info
+    from noisebo.cli.noise_profile import make_profile
+    from noisebo.instruments import build
+    from noisebo.instruments.registry import driver_info
     from noisebo.campaign import driver, engine
-    from storage.recorder import Recorder
+    from noisebo.storage.recorder import Recorder
 
     paper = base.with_overrides(schedule={"mode": "paper", "budget_s": None, "n_steps": 15})
     files = []

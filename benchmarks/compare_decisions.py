@@ -15,13 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from instruments import build  # noqa: E402
+from noisebo.instruments import build  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import CampaignConfig, load_config  # noqa: E402
 

@@ -36,7 +36,6 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
-sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
 from _config import Parser, benchmark_config, refuse  # noqa: E402
 from _tstar import LAW, X_AVG, law_t_star, reference_positions, x_averaged_t_star  # noqa: E402

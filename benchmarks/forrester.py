@@ -26,7 +26,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
-sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
 from _config import Parser, benchmark_config  # noqa: E402
 from _tstar import LAW, X_AVG, describe, differ, t_stars  # noqa: E402
@@ -37,8 +36,8 @@ from noisebo.diagnostics import compile_count  # noqa: E402
 from noisebo.metrics import campaign_figures, relative_error, summarise_campaigns  # noqa: E402
 from noisebo.models.grids import grids  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402
-from storage.steps import shown as shown_step  # noqa: E402
-from view.report import benchmark_table  # noqa: E402
+from noisebo.storage.steps import shown as shown_step  # noqa: E402
+from noisebo.view.report import benchmark_table  # noqa: E402
 
 
 def with_overrides(config, assignments: list[str]):

@@ -33,7 +33,6 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 STEP_LINE = re.compile(r"^step (\d+)/\d+:")
 
@@ -49,7 +48,7 @@ def timed_lines(command: list[str], env: dict) -> tuple[list[tuple[float, str]],
 
 def shot_seconds(config, file: dict) -> np.ndarray:
     """What the simulated instrument itself took for each BO point's shots (s), re-run here."""
-    from instruments import build
+    from noisebo.instruments import build
     from noisebo.keys import MEASURE, numpy_rng
 
     instrument = build(config.instrument)
@@ -88,7 +87,7 @@ def main(argv=None) -> int:
 def one_run(args, reports: str) -> dict | None:
 
     from noisebo.config import load_config
-    from storage.hdf5 import read_campaign
+    from noisebo.storage.hdf5 import read_campaign
 
     base = load_config(args.config)
     config = base.with_overrides(name="long", schedule={"n_steps": args.points - base.schedule.n_seed})
@@ -97,7 +96,7 @@ def one_run(args, reports: str) -> dict | None:
     config_path.write_text(yaml.safe_dump(config.model_dump(mode="json")))
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "NOISEBO_PREFECT_REPORTS": "1" if reports == "on" else "0"}
     env.pop("PREFECT_API_URL", None)
-    lines, code = timed_lines([sys.executable, "-m", "cli.main", "run", str(config_path), "--seed", str(args.seed),
+    lines, code = timed_lines([sys.executable, "-m", "noisebo.cli.main", "run", str(config_path), "--seed", str(args.seed),
                                "--out", str(work), *(["--no-rrd"] if args.no_rrd else [])], env)
     if code != 0:
         print(f"noisebo run failed (exit {code}); last lines:\n" + "\n".join(line for _, line in lines[-5:]))

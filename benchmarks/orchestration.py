@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,17 +26,16 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from flows import runtime  # noqa: E402
+from noisebo.flows import runtime  # noqa: E402
 
 runtime.configure()
 
 import h5py  # noqa: E402
 
-from flows.campaign import campaign  # noqa: E402
-from flows.local import flow_settings  # noqa: E402
-from instruments import build  # noqa: E402
+from noisebo.flows.campaign import campaign  # noqa: E402
+from noisebo.flows.local import flow_settings  # noqa: E402
+from noisebo.instruments import build  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402

@@ -24,7 +24,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
-sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
 from _config import Parser, benchmark_config  # noqa: E402
 from _tstar import LAW, X_AVG, describe, differ, t_stars  # noqa: E402
@@ -32,7 +31,7 @@ from forrester import run_one  # noqa: E402
 
 from noisebo.metrics import relative_error, summarise_campaigns  # noqa: E402
 from noisebo.reduction import shot_value  # noqa: E402
-from view.report import benchmark_table  # noqa: E402
+from noisebo.view.report import benchmark_table  # noqa: E402
 
 BASELINES = {"fixed 2 s": 2.0, "fixed 0.1 s": 0.1}
 

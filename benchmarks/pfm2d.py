@@ -29,13 +29,12 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
-sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
 from _config import Parser, benchmark_config  # noqa: E402
 from _tstar import LAW, X_AVG, describe, differ, t_stars  # noqa: E402
 
-from instruments import build  # noqa: E402
-from instruments.registry import validated  # noqa: E402
+from noisebo.instruments import build  # noqa: E402
+from noisebo.instruments.registry import validated  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.metrics import median_iqr, relative_error, rmse  # noqa: E402
 from noisebo.models.grids import grids  # noqa: E402
@@ -101,7 +100,7 @@ def latency(config_path: str, sizes: list[int]) -> list[dict]:
 def figure(record: dict, config, instrument, path: Path) -> None:
     from matplotlib.figure import Figure
 
-    from view.area import draw_image
+    from noisebo.view.area import draw_image
 
     result = record["result"]
     g = grids(config)

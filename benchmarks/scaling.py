@@ -42,7 +42,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 SHOTS = 30
 
@@ -52,8 +51,8 @@ def state_of(config, n: int, design: str = "grid", seed: int = 0):
     value: mean of 30 Gaussian shots about its truth, which for PFM skips the sweeps' SHO fits)."""
     import numpy as np
 
-    from instruments import build
-    from instruments.registry import validated
+    from noisebo.instruments import build
+    from noisebo.instruments.registry import validated
     from noisebo.models.grids import grids
     from noisebo.state import CampaignState, Point
 
@@ -150,7 +149,7 @@ def cold_starts(config_path: str) -> list[dict]:
 
     import yaml
 
-    from flows.processes import local_server
+    from noisebo.flows.processes import local_server
     from noisebo.config import load_config
 
     work = Path(tempfile.mkdtemp(prefix="noisebo-cold-"))
@@ -163,7 +162,7 @@ def cold_starts(config_path: str) -> list[dict]:
         env = {**env, "NOISEBO_JAX_CACHE": str(work / f"jax-{server}"), "PYTHONUNBUFFERED": "1"}
         for run in ("first run", "cache warm"):
             started = time.perf_counter()
-            process = subprocess.Popen([sys.executable, "-m", "cli.main", "run", str(path), "--out",
+            process = subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(path), "--out",
                                         str(work / f"{server}-{run}"), "--no-rrd"], cwd=ROOT, env=env,
                                        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
             first = next((time.perf_counter() - started for line in process.stdout if line.startswith("step 1/")), None)

@@ -42,9 +42,8 @@ import httpx
 from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from flows.processes import local_server, wait_for
+from noisebo.flows.processes import local_server, wait_for
 
 WINDOW = (1600, 1000)
 MAX_BYTES = 400_000
@@ -73,7 +72,7 @@ def find_chromium() -> str:
 
 
 def run_campaign(env: dict, config: str, seed: int, folder: Path) -> None:
-    command = [sys.executable, "-m", "cli.main", "run", config, "--seed", str(seed), "--out", str(folder / "runs"),
+    command = [sys.executable, "-m", "noisebo.cli.main", "run", config, "--seed", str(seed), "--out", str(folder / "runs"),
                "--no-rrd"]
     print("campaign:", "noisebo", *command[3:], flush=True)
     started = time.monotonic()

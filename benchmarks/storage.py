@@ -36,7 +36,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from noisebo.acquisition.records import Decision  # noqa: E402
 from noisebo.campaign import engine  # noqa: E402
@@ -53,10 +52,10 @@ from noisebo.events import (  # noqa: E402
 from noisebo.reduction import Reading, ShotValue  # noqa: E402
 from noisebo.sho import SHOFit  # noqa: E402
 from noisebo.state import Point  # noqa: E402
-from storage import live, records  # noqa: E402
-from storage.hdf5 import write_snapshot  # noqa: E402
-from storage.journal import JournalWriter  # noqa: E402
-from storage.recorder import Recorder, journal_path  # noqa: E402
+from noisebo.storage import live, records  # noqa: E402
+from noisebo.storage.hdf5 import write_snapshot  # noqa: E402
+from noisebo.storage.journal import JournalWriter  # noqa: E402
+from noisebo.storage.recorder import Recorder, journal_path  # noqa: E402
 
 HYPERPARAMETERS = ("noise.a0", "noise.a1", "primary.amplitude", "primary.length")
 CONVERGED_AT = 5  # BO step from which points get shots_after shots

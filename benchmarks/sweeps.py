@@ -22,16 +22,15 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
-sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
 from _config import Parser, benchmark_config  # noqa: E402
 
-from cli.main import parse_seeds  # noqa: E402
-from flows.processes import BIN, local_server, start, stop, wait_for  # noqa: E402
-from instruments import build  # noqa: E402
+from noisebo.cli.main import parse_seeds  # noqa: E402
+from noisebo.flows.processes import BIN, local_server, start, stop, wait_for  # noqa: E402
+from noisebo.instruments import build  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402
-from storage.hdf5 import read_campaign  # noqa: E402
+from noisebo.storage.hdf5 import read_campaign  # noqa: E402
 
 ENGINES = {
     "sequential (1 thread)": ["--runner", "threads", "--workers", "1"],

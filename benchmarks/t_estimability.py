@@ -23,7 +23,6 @@ from scipy import optimize
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
-sys.path.insert(0, str(ROOT))  # first: the storage and bridge packages, not benchmarks/storage.py, bridge.py
 
 from _config import Parser, benchmark_config  # noqa: E402
 from _tstar import LAW, law_t_star  # noqa: E402

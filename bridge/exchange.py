@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from bridge.wire import (
+from noisebo.bridge.wire import (
     ReadingBody,
     ReadingShape,
     WireError,
@@ -29,7 +29,7 @@ from noisebo.campaign.engine import EngineState
 from noisebo.events import Done, Request, ShotError
 from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
 from noisebo.reduction import Reading
-from storage.steps import shown as shown_step
+from noisebo.storage.steps import shown as shown_step
 
 Clock = Callable[[], float]
 StopRequested = Callable[[], "str | None"]  # the name of a signal that asked the campaign to stop, or None

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.wire import ReadingShape, WireError, campaign_id, request_json, spectrum_of
+from noisebo.bridge.wire import ReadingShape, WireError, campaign_id, request_json, spectrum_of
 from noisebo.campaign import engine
 from noisebo.campaign.engine import EngineState
 from noisebo.events import DecisionDue, Done, Event, Request, ShotError
 from noisebo.reduction import Reading
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 Say = Callable[[str], None]
 
@@ -29,7 +29,7 @@ class ManualError(ValueError):
 def reading_shape(state: EngineState) -> ReadingShape:
     """What this campaign's readings look like: the "shape" of a remote or manual instrument's
     settings, else a spectrum for a driver that returns spectra, else one number."""
-    from instruments.registry import driver_class
+    from noisebo.instruments.registry import driver_class
 
     settings = state.config.instrument.settings
     if "shape" in settings:

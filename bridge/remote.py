@@ -9,17 +9,19 @@ import secrets
 import socket
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pydantic import Field, model_validator
 
 import noisebo
-from bridge.exchange import Exchange
-from bridge.server import BridgeServer
-from bridge.wire import ReadingShape
-from noisebo.campaign.engine import EngineState
+from noisebo.bridge.wire import ReadingShape
 from noisebo.config import Count, FrozenModel, Number
 from noisebo.failures import InstrumentUnavailable
 from noisebo.reduction import Reading
+
+if TYPE_CHECKING:  # the exchange and the server load with the campaign, not to list or validate the driver
+    from noisebo.bridge.server import BridgeServer
+    from noisebo.campaign.engine import EngineState
 
 TOKEN_ENV = "NOISEBO_BRIDGE_TOKEN"
 DEFAULT_TOKEN_FILE = "~/.noisebo/bridge.token"
@@ -143,6 +145,8 @@ class RemoteInstrument:
     Settings = RemoteSettings
 
     def __init__(self, settings: RemoteSettings | None = None):
+        from noisebo.bridge.exchange import Exchange
+
         self.settings = settings or RemoteSettings()
         self.exchange = Exchange(self.settings.shape, self.settings.silence_s)
         self._server: BridgeServer | None = None
@@ -152,6 +156,9 @@ class RemoteInstrument:
         return self.settings.shape.reading == "spectrum"
 
     def open(self) -> None:
+        from noisebo.bridge.exchange import Exchange
+        from noisebo.bridge.server import BridgeServer
+
         s = self.settings
         if s.tls is not None:
             check_tls(s)
@@ -191,7 +198,7 @@ class RemoteInstrument:
     def measure(self, x, t: float) -> Reading:
         if self._server is None:
             raise InstrumentUnavailable("the remote instrument is not open (its bridge is not serving)")
-        from flows import abort  # only its flag, read while waiting
+        from noisebo.flows import abort  # only its flag, read while waiting
 
         return self.exchange.wait_outcome(x, t, abort.requested)
 

@@ -27,8 +27,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from bridge.exchange import Exchange
-from bridge.wire import ReadingBody, WireError, parse_body
+from noisebo.bridge.exchange import Exchange
+from noisebo.bridge.wire import ReadingBody, WireError, parse_body
 
 MAX_WAIT_S = 60.0
 DRAIN_MAX_BYTES = 256 * 2**20  # an unwanted body is read and discarded up to this; beyond it the connection is closed

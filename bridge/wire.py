@@ -25,7 +25,7 @@ import base64
 import binascii
 import json
 import math
-from typing import Annotated, Any, Literal, Union
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
 import numpy as np
 from pydantic import (
@@ -39,11 +39,13 @@ from pydantic import (
 )
 
 from noisebo import config
-from noisebo.campaign.engine import EngineState
 from noisebo.config import FrozenModel
 from noisebo.events import Request, ShotError
 from noisebo.reduction import Reading
-from storage.steps import shown as shown_step
+from noisebo.storage.steps import shown as shown_step
+
+if TYPE_CHECKING:
+    from noisebo.campaign.engine import EngineState
 
 
 class WireError(ValueError):

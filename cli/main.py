@@ -2,6 +2,9 @@
 
 Every command validates its input before it creates anything; a problem is reported as one line
 ``noisebo: error: ...`` with exit code 2.
+
+Each command imports what it needs when it runs: `--help`, `--version`, `instruments`, `config`
+and `inspect` load neither Prefect nor JAX (``benchmarks/cli.py`` times them).
 """
 
 from __future__ import annotations
@@ -12,14 +15,14 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from cli import noise_profile
-from flows import runtime
-from noisebo.config import CampaignConfig, ConfigError, load_config
+from noisebo.cli import noise_profile
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
-from storage.hdf5 import CampaignFileError, check_present
-from storage.isolated import call_isolated
-from storage.journal import JournalError, JournalWriter
+from noisebo.storage.integrity import CampaignFileError
+
+if TYPE_CHECKING:
+    from noisebo.config import CampaignConfig
 
 EXIT_USAGE = 2
 EXIT_FAILED = 3
@@ -44,24 +47,54 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
-def _prefect():
-    runtime.configure()
-    import flows.campaign
-    import flows.sweep
+def _runtime():
+    """flows.runtime: Prefect's and JAX's process settings, and the failure log."""
+    from noisebo.flows import runtime
 
-    return flows.campaign, flows.sweep
+    return runtime
+
+
+def _loaded_error(module: str, name: str) -> type[BaseException]:
+    """The exception class ``module.name`` if that module is loaded, else one that is never
+    raised: a command imports what it uses, so an error of a module it never imported cannot have
+    been raised."""
+    return getattr(sys.modules[module], name) if module in sys.modules else _NeverRaised
+
+
+class _NeverRaised(Exception):
+    pass
+
+
+def check_present(path: Path) -> Path:
+    from noisebo.storage.hdf5 import check_present as present
+
+    return present(path)
+
+
+def call_isolated(*args, **kwargs):
+    from noisebo.storage.isolated import call_isolated as isolated
+
+    return isolated(*args, **kwargs)
+
+
+def _prefect():
+    _runtime().configure()
+    from noisebo.flows import campaign, sweep
+
+    return campaign, sweep
 
 
 def flow_settings():
-    runtime.configure()
-    from flows.local import flow_settings as settings
+    _runtime().configure()
+    from noisebo.flows.local import flow_settings as settings
 
     return settings()
 
 
 def _validated(path) -> CampaignConfig:
     """A config file loaded, its instrument settings checked by the driver it names."""
-    from instruments.registry import validated
+    from noisebo.config import load_config
+    from noisebo.instruments.registry import validated
 
     return validated(load_config(path), str(path))
 
@@ -69,12 +102,12 @@ def _validated(path) -> CampaignConfig:
 def _run(args) -> int:
     config = _validated(args.config)
     if config.instrument.kind == "manual":  # refused here, before Prefect starts and logs the driver's refusal
-        from bridge.remote import MEASURED_BY_HAND
+        from noisebo.bridge.remote import MEASURED_BY_HAND
 
         raise UsageError(f"{args.config}: {MEASURED_BY_HAND.format(config=args.config)}")
     if args.policy:
         config = config.with_overrides(acquisition={"policy": args.policy})
-    from storage.recorder import campaign_path
+    from noisebo.storage.recorder import campaign_path
 
     path = campaign_path(config, args.seed, args.out)
     if path.exists() or path.with_suffix(".journal").exists():
@@ -109,6 +142,8 @@ def outcome_line(path: Path) -> str:
 
 
 def _resume(args) -> int:
+    from noisebo.storage.journal import JournalError, JournalWriter
+
     path = Path(args.file)
     if not path.with_suffix(".journal").exists():
         raise CampaignFileError(f"cannot resume {path}: no journal {path.with_suffix('.journal')} beside it")
@@ -126,7 +161,7 @@ def _resume(args) -> int:
     if state.status.value == "completed":
         # A kill during the finished file's write leaves the running file in place: write the
         # finished file from the journal (the same file again when it was not cut short).
-        from storage.recorder import Recorder
+        from noisebo.storage.recorder import Recorder
 
         Recorder.resume(path).close()
         print(f"{path} is already complete: nothing to resume", file=sys.stderr)
@@ -146,8 +181,8 @@ def _resume(args) -> int:
 def _journal_state(path: Path):
     """The campaign as its journal (its source of truth) has it; a torn last record (which the
     resume drops) is said on stderr."""
-    from storage import journal, records
-    from storage.recorder import DAMAGED_JOURNAL_ADVICE
+    from noisebo.storage import journal, records
+    from noisebo.storage.recorder import DAMAGED_JOURNAL_ADVICE
 
     jpath = path.with_suffix(".journal")
     try:
@@ -165,7 +200,7 @@ def _journal_state(path: Path):
 
 
 def _rebuild(args) -> int:
-    from storage.recorder import rebuild_file
+    from noisebo.storage.recorder import rebuild_file
 
     for line in rebuild_file(Path(args.file), keep_intact=args.keep_intact):
         print(line)
@@ -188,7 +223,7 @@ def _abortable(path: Path):
     """SIGINT/SIGTERM stop the campaign cleanly after the current point (see flows/abort.py)."""
     from prefect.exceptions import TerminationSignal
 
-    from flows.abort import AbortFlag, CampaignAborted, stopping_signal
+    from noisebo.flows.abort import AbortFlag, CampaignAborted, stopping_signal
 
     try:
         with AbortFlag().installed():
@@ -214,8 +249,8 @@ def _serve(args) -> int:
         raise UsageError("--interval must be a positive number of seconds")
     for path in args.config:
         _validated(path)  # every config validated before anything is registered
-    runtime.configure()
-    from flows.deployments import deployments_for, serve_all
+    _runtime().configure()
+    from noisebo.flows.deployments import deployments_for, serve_all
 
     deployments = [d for path in args.config
                    for d in deployments_for(path, args.out, seeds, policies, args.cron, args.interval)]
@@ -229,8 +264,8 @@ def _deploy(args) -> int:
     _require_server("deploy needs a Prefect server")
     for path in args.config:
         _validated(path)
-    runtime.configure()
-    from flows.workers import deploy_campaign
+    _runtime().configure()
+    from noisebo.flows.workers import deploy_campaign
 
     for path in args.config:
         name = deploy_campaign(path, args.pool, args.out)
@@ -270,7 +305,7 @@ def _policies_listed(args) -> int:
 
 
 def _instruments(args) -> int:
-    from instruments.registry import DriverBroken, driver_class, installed
+    from noisebo.instruments.registry import DriverBroken, driver_class, installed
 
     for name, found in installed().items():
         try:
@@ -291,7 +326,7 @@ def _warn(line: str) -> None:
 
 
 def _replay(args) -> int:
-    from view.recording import replay
+    from noisebo.view.recording import replay
 
     path = check_present(Path(args.file))
     out = call_isolated(replay, path, args.out, _warn, what=str(path))
@@ -300,7 +335,7 @@ def _replay(args) -> int:
 
 
 def _report(args) -> int:
-    from view.report import report
+    from noisebo.view.report import report
 
     target = Path(args.target)
     if not target.is_dir():
@@ -355,7 +390,7 @@ def inspect_summary(path: Path) -> dict:
     import numpy as np
 
     from noisebo.state import as_position
-    from storage.hdf5 import read_campaign, read_failures
+    from noisebo.storage.hdf5 import read_campaign, read_failures
 
     data = read_campaign(path)
     attrs, points, steps = data["attrs"], data["points"], data["steps"]
@@ -455,11 +490,11 @@ def _inspect(args) -> int:
 
 
 def _start(args) -> int:
-    from bridge import manual
-    from instruments.registry import driver_info
+    from noisebo.bridge import manual
+    from noisebo.instruments.registry import driver_info
     from noisebo.campaign import engine
     from noisebo.campaign.driver import now_utc
-    from storage.recorder import Recorder, campaign_path, package_versions
+    from noisebo.storage.recorder import Recorder, campaign_path, package_versions
 
     config = _validated(args.config)
     if args.policy:
@@ -477,7 +512,7 @@ def _start(args) -> int:
 
 
 def _ask(args) -> int:
-    from bridge import manual
+    from noisebo.bridge import manual
 
     state, step = _manually(lambda: manual.ask(Path(args.file), _warn, resume=args.resume))
     _show_next(args, state, step)
@@ -485,8 +520,8 @@ def _ask(args) -> int:
 
 
 def _tell(args) -> int:
-    from bridge import manual
-    from flows.campaign import progress_lines
+    from noisebo.bridge import manual
+    from noisebo.flows.campaign import progress_lines
 
     path = Path(args.file)
     given = sum(bool(v) for v in (args.values, args.spectrum, args.error))
@@ -513,7 +548,7 @@ def _tell(args) -> int:
 
 
 def _manually(call):
-    from bridge.manual import ManualError
+    from noisebo.bridge.manual import ManualError
 
     try:
         return call()
@@ -522,7 +557,7 @@ def _manually(call):
 
 
 def _show_next(args, state, step) -> None:
-    from bridge import manual
+    from noisebo.bridge import manual
 
     if args.json:
         print(json.dumps(manual.as_json(state, step)))
@@ -566,7 +601,10 @@ def _view_options(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    import noisebo
+
     parser = _Parser(prog="noisebo", description="Bayesian optimisation of where and how long to measure.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {noisebo.__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = commands.add_parser("run", help="run one campaign through the Prefect flow")
@@ -683,7 +721,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         return args.handler(args)
-    except (ConfigError, CampaignFileError, UsageError) as error:
+    except (_loaded_error("noisebo.config", "ConfigError"), CampaignFileError, UsageError) as error:
         print(f"noisebo: error: {error}", file=sys.stderr)
         return EXIT_USAGE
     except Aborted as stopped:
@@ -693,11 +731,11 @@ def main(argv: list[str] | None = None) -> int:
         print("noisebo: interrupted", file=sys.stderr)
         return EXIT_SIGNAL["SIGINT"]
     except FailureBudgetExceeded as error:
-        print(f"noisebo: stopped: {error}; the file records status failed{runtime.failure_log().mention()}",
+        print(f"noisebo: stopped: {error}; the file records status failed{_runtime().failure_log().mention()}",
               file=sys.stderr)
         return EXIT_FAILED
     except InstrumentUnavailable as error:
-        print(f"noisebo: error: {error}; nothing was measured{runtime.failure_log().mention()}", file=sys.stderr)
+        print(f"noisebo: error: {error}; nothing was measured{_runtime().failure_log().mention()}", file=sys.stderr)
         return EXIT_FAILED
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -706,7 +744,7 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(error, RuntimeError) and "ephemeral Prefect API server" in str(error):
             print(f"noisebo: error: {server_timeout_message()}; nothing was measured", file=sys.stderr)
         else:
-            print(f"noisebo: error: {runtime.failure_log().report(error)}", file=sys.stderr)
+            print(f"noisebo: error: {_runtime().failure_log().report(error)}", file=sys.stderr)
         return EXIT_FAILED
 
 

@@ -7,10 +7,7 @@ import datetime as dt
 import os
 from pathlib import Path
 
-import yaml
-
-from storage.hdf5 import CampaignFileError, check_present
-from storage.isolated import call_isolated
+from noisebo.storage.integrity import CampaignFileError
 
 
 def noise_measurements(path: Path) -> dict:
@@ -18,7 +15,7 @@ def noise_measurements(path: Path) -> dict:
     the points whose noise was measured (t, sample sd, shots)."""
     import numpy as np
 
-    from storage.hdf5 import read_campaign
+    from noisebo.storage.hdf5 import read_campaign
 
     data = read_campaign(path)
     attrs, points = data["attrs"], data["points"]
@@ -46,6 +43,8 @@ def make_profile(files: list[Path]) -> "NoiseProfile":  # noqa: F821 - imported 
     from noisebo.config import parse_config
     from noisebo.keys import PROFILE, jax_key
     from noisebo.models.profile import NoiseProfile, NotDistillable, ProfileCampaign, ProfileDriver, distil
+    from noisebo.storage.hdf5 import check_present
+    from noisebo.storage.isolated import call_isolated
 
     campaigns = [call_isolated(noise_measurements, check_present(f), what=str(f)) for f in files]
     _same(campaigns, "the driver", lambda c: (c["driver"]["name"], c["driver"]["version"], c["driver"]["settings"]))
@@ -70,6 +69,8 @@ def make_profile(files: list[Path]) -> "NoiseProfile":  # noqa: F821 - imported 
 
 
 def run(args) -> int:
+    import yaml
+
     out = Path(args.out)
     if out.exists():
         raise CampaignFileError(f"{out} already exists; a profile is not overwritten (remove it or name another --out)")

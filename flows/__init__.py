@@ -4,6 +4,6 @@ Importing this package applies noisebo's process defaults for Prefect (``flows.r
 Prefect itself is imported, so the Python API gets the same temporary-server settings as the
 command line."""
 
-from flows import runtime
+from noisebo.flows import runtime
 
 runtime.configure()

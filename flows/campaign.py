@@ -20,9 +20,9 @@ from typing import Callable, Sequence
 from prefect import flow
 from prefect.utilities.annotations import quote
 
-from flows import abort
-from flows.reporting import RunReport, run_name
-from instruments import build, registry
+from noisebo.flows import abort
+from noisebo.flows.reporting import RunReport, run_name
+from noisebo.instruments import build, registry
 from noisebo.campaign.driver import drive, now_utc
 from noisebo.campaign.engine import KEEP_BUDGET, EngineState, advance, ask, new_campaign
 from noisebo.config import CampaignConfig, load_config
@@ -36,8 +36,8 @@ from noisebo.events import (
 )
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
 from noisebo.state import format_position
-from storage.recorder import Recorder, campaign_path, package_versions, read_started
-from tasks import campaign as ops
+from noisebo.storage.recorder import Recorder, campaign_path, package_versions, read_started
+from noisebo.tasks import campaign as ops
 
 Progress = Callable[[str], None]
 _COMPILED: list[bool] = []  # set once this process has made a decision (and compiled its programs)
@@ -186,8 +186,8 @@ def _viewed(recorder: Recorder, instrument, record_rrd: bool, live: str | None, 
     if not record_rrd and live is None:
         yield lambda state: None
         return
-    from view.recording import CampaignRecording, instrument_curves, rrd_path_for
-    from view.rerun_view import RerunView
+    from noisebo.view.recording import CampaignRecording, instrument_curves, rrd_path_for
+    from noisebo.view.rerun_view import RerunView
 
     truth, law = instrument_curves(config, instrument)
     rrd = rrd_path_for(recorder.h5_path) if record_rrd else None

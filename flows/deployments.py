@@ -18,8 +18,8 @@ from pathlib import Path
 
 from prefect import serve
 
-from flows.campaign import campaign
-from flows.sweep import sweep
+from noisebo.flows.campaign import campaign
+from noisebo.flows.sweep import sweep
 from noisebo.config import load_config
 
 

@@ -6,7 +6,7 @@ import contextlib
 
 import prefect.settings as ps
 
-from flows import runtime
+from noisebo.flows import runtime
 
 
 @contextlib.contextmanager
@@ -21,7 +21,7 @@ def flow_settings():
     if ps.PREFECT_API_URL.value():
         yield
         return
-    from flows.temporary_server import temporary_server
+    from noisebo.flows.temporary_server import temporary_server
 
     temporary_server().start()
     with ps.temporary_settings({ps.PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None}):

@@ -26,7 +26,7 @@ from typing import Callable, Sequence
 from noisebo.campaign.engine import EngineState
 from noisebo.events import Event, ShotFailed, Status, StatusChanged
 from noisebo.state import format_position
-from storage.steps import shown as shown_step
+from noisebo.storage.steps import shown as shown_step
 
 PROGRESS_INTERVAL_S = 1.0
 EVENT_PREFIX = "noisebo.campaign"

@@ -16,10 +16,10 @@ from prefect.cache_policies import NO_CACHE
 from prefect.exceptions import PrefectHTTPStatusError
 from prefect.task_runners import ThreadPoolTaskRunner
 
-from flows.campaign import campaign, campaign_path, resolve_config, resume
-from flows.reporting import report_sweep
+from noisebo.flows.campaign import campaign, campaign_path, resolve_config, resume
+from noisebo.flows.reporting import report_sweep
 from noisebo.config import CampaignConfig
-from view.report import write_summary
+from noisebo.view.report import write_summary
 
 
 def _orchestration_failed(task, task_run, state) -> bool:

@@ -20,7 +20,7 @@ from pathlib import Path
 import prefect.settings as ps
 from prefect.server.api.server import SubprocessASGIServer
 
-from flows import processes
+from noisebo.flows import processes
 
 SERVER_APP = "prefect.server.api.server:create_app"
 GUARD = Path(__file__).resolve().with_name("server_guard.py")

@@ -7,7 +7,7 @@ from pathlib import Path
 from prefect import flow
 
 from noisebo.config import load_config
-from flows.runtime import PROJECT_ROOT
+from noisebo.flows.runtime import PROJECT_ROOT
 
 
 def ensure_process_pool(pool: str) -> None:

@@ -17,7 +17,6 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from noisebo.campaign.driver import simulates
 from noisebo.reduction import Reading
 
 
@@ -54,5 +53,7 @@ class Follower(Protocol):
 def is_simulator(instrument) -> bool:
     """Whether the instrument (the fault injector and the timeout guard pass it through) is a
     ``Simulator``: the same check the campaign loop makes before drawing a shot."""
+    from noisebo.campaign.driver import simulates  # the campaign loop, with the models: not for listing drivers
+
     return simulates(instrument)
 

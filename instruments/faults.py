@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from instruments.base import Instrument, Reading, is_simulator
+from noisebo.instruments.base import Instrument, Reading, is_simulator
 from noisebo.config import FAULT_KINDS, FaultsConfig
 from noisebo.failures import InstrumentError
 

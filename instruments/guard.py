@@ -11,7 +11,7 @@ import threading
 
 import numpy as np
 
-from instruments.base import Instrument, Reading, is_simulator
+from noisebo.instruments.base import Instrument, Reading, is_simulator
 from noisebo.failures import InstrumentError, InstrumentTimeout  # noqa: F401 - re-exported
 
 

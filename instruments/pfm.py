@@ -41,9 +41,9 @@ import numpy as np
 from pydantic import Field, model_validator
 
 import noisebo
-from instruments.base import Reading
-from instruments.pfm_area import ScanAreaConfig, SyntheticAreaConfig, scan_area, synthetic_area
-from instruments.pfm_profile import ScanProfileConfig, SyntheticProfileConfig, build_profile
+from noisebo.instruments.base import Reading
+from noisebo.instruments.pfm_area import ScanAreaConfig, SyntheticAreaConfig, scan_area, synthetic_area
+from noisebo.instruments.pfm_profile import ScanProfileConfig, SyntheticProfileConfig, build_profile
 from noisebo.config import Count, FrozenModel, NonNegativeFloat, Number, PositiveFloat
 from noisebo.sho import model_and_jacobian, sho_amplitude, sho_phase
 

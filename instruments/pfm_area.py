@@ -19,8 +19,8 @@ import numpy as np
 from pydantic import Field, model_validator
 from scipy import ndimage
 
-from instruments.pfm_profile import ChannelIndex
-from instruments.pfm_scan import DEFAULT_SCAN, ProfileError, read_scan, signed_response
+from noisebo.instruments.pfm_profile import ChannelIndex
+from noisebo.instruments.pfm_scan import DEFAULT_SCAN, ProfileError, read_scan, signed_response
 from noisebo.config import Count, FrozenModel, NonNegativeFloat, Number, PositiveFloat
 
 PixelIndex = Annotated[Count, Field(ge=0)]

@@ -22,8 +22,8 @@ from importlib.metadata import EntryPoint, entry_points
 
 from pydantic import BaseModel, ValidationError
 
-from instruments.faults import FaultyInstrument
-from instruments.guard import TimeoutGuard
+from noisebo.instruments.faults import FaultyInstrument
+from noisebo.instruments.guard import TimeoutGuard
 from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
 from noisebo.events import DriverInfo
 from noisebo.reduction import register_reduction

@@ -25,20 +25,21 @@ import json
 import os
 import zlib
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import h5py
 import numpy as np
 
-from noisebo.acquisition.records import Decision
-from noisebo.campaign.engine import EngineState, PointEntry
-from noisebo.events import ShotFailed, ShotTaken
-from noisebo.models.grids import grids
-from storage import manifest
-from storage import steps as numbering
-from storage.faults import crash_point
-from storage.integrity import NO_JOURNAL, CampaignFileError, Opening, examine
-from storage.journal import _fsync_dir
+from noisebo.storage import manifest
+from noisebo.storage import steps as numbering
+from noisebo.storage.faults import crash_point
+from noisebo.storage.integrity import NO_JOURNAL, CampaignFileError, Opening, examine
+from noisebo.storage.journal import _fsync_dir
+
+if TYPE_CHECKING:  # readers of a file (inspect, ask) need no model: the writers import grids when they run
+    from noisebo.acquisition.records import Decision
+    from noisebo.campaign.engine import EngineState, PointEntry
+    from noisebo.events import ShotFailed, ShotTaken
 
 SCHEMA = "noisebo.campaign"
 SCHEMA_VERSION = 4
@@ -127,6 +128,8 @@ def array_shapes(state: EngineState) -> dict[str, tuple[int, ...]]:
     """The per-step array shapes (without the step axis): acq_map (n_x, n_t), f_* (n_x,),
     noise_* (n_t,); for d > 1 axes, acq_map and f_* are (m,) on the m reference points. With a
     noise field, also t_opt_map (m,)."""
+    from noisebo.models.grids import grids
+
     s = state.config.space
     m, n_t = grids(state.config).x.shape[0], s.n_t
     acq = (m, n_t) if s.dimensions == 1 else (m,)
@@ -184,6 +187,8 @@ def campaign_tables(state: EngineState) -> dict:
     """The campaign as plain columns, in the shape ``read_campaign`` returns (without "attrs"):
     "grid", "points", "steps" (with "hyperparameters" and the per-step arrays), "shots" and
     "summary" (None until done)."""
+    from noisebo.models.grids import grids
+
     g = grids(state.config)
     decisions = state.decisions
     d = state.config.space.dimensions
@@ -225,6 +230,8 @@ def root_attrs(state: EngineState) -> dict:
 
 
 def fill_grid(f: h5py.File, state: EngineState) -> None:
+    from noisebo.models.grids import grids
+
     g = grids(state.config)
     grid = f.create_group("grid")
     _put(grid, "x", g.x, "x units", "candidate x grid")
@@ -558,7 +565,7 @@ def _campaign(path: Path):
 
 
 def _is_live(attrs: dict) -> bool:
-    from storage import live
+    from noisebo.storage import live
 
     return attrs.get("layout") == live.LAYOUT
 
@@ -582,7 +589,7 @@ def read_campaign(path: Path) -> dict:
 
     Keys: "attrs" (root attributes, with "config" parsed from config_json), "grid", "points",
     "steps" (with "hyperparameters"), "shots" (dicts of arrays) and "summary" (None until done)."""
-    from storage import live
+    from noisebo.storage import live
 
     with _campaign(path) as (f, attrs):
         if _is_live(attrs):
@@ -618,7 +625,7 @@ def read_spectra(path: Path, point: int) -> np.ndarray:
 def spectra_reader(path: Path):
     """``read_spectra`` for many points of one file: a function point -> its raw sweeps, over the
     file opened (and its checksums of structure checked) once."""
-    from storage import live
+    from noisebo.storage import live
 
     with _campaign(path) as (f, attrs):
         appending = _is_live(attrs)
@@ -640,7 +647,7 @@ def spectra_reader(path: Path):
 def read_shot_fits(path: Path) -> dict | None:
     """Per-shot SHO fit columns (``/shots/fit``, see FIT_UNITS) of a campaign file, None if its
     shots are not sweeps."""
-    from storage import live
+    from noisebo.storage import live
 
     with _campaign(path) as (f, attrs):
         if _is_live(attrs):
@@ -652,7 +659,7 @@ def read_shot_fits(path: Path) -> dict | None:
 
 def read_failures(path: Path) -> dict:
     """The failed attempts (``/failures``): point, shot, x, t (n,) and kind, reason (n,) bytes."""
-    from storage import live
+    from noisebo.storage import live
 
     with _campaign(path) as (f, attrs):
         if _is_live(attrs):

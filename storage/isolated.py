@@ -14,7 +14,7 @@ import signal
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 
-from storage.hdf5 import CampaignFileError
+from noisebo.storage.hdf5 import CampaignFileError
 
 DEFAULT_TIMEOUT_S = 600.0
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from storage.faults import crash_point
+from noisebo.storage.faults import crash_point
 
 MAGIC = b"NBJ1"
 _FRAME = struct.Struct("<4sIQI")

@@ -37,17 +37,16 @@ from __future__ import annotations
 import gc
 import os
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import h5py
 import numpy as np
 from h5py import h5s
 
-from noisebo.campaign.engine import EngineState
-from storage import manifest
-from storage import steps as numbering
-from storage.faults import crash_point
-from storage.hdf5 import (
+from noisebo.storage import manifest
+from noisebo.storage import steps as numbering
+from noisebo.storage.faults import crash_point
+from noisebo.storage.hdf5 import (
     ARRAY_COLUMNS,
     FAILURE_COLUMNS,
     FAILURE_TEXT,
@@ -80,7 +79,10 @@ from storage.hdf5 import (
     temporary_path,
     x_tail,
 )
-from storage.journal import _fsync_dir
+from noisebo.storage.journal import _fsync_dir
+
+if TYPE_CHECKING:  # reading a running file needs no model
+    from noisebo.campaign.engine import EngineState
 
 LAYOUT = "appending"
 COUNTERS = ("points", "steps", "shots", "failures", "spectra", "n_shots", "converged_step")

@@ -29,10 +29,10 @@ from noisebo.events import (
     StatusChanged,
     Summarised,
 )
-from storage import journal, records
-from storage.hdf5 import CampaignFileError, stray_temporaries, write_snapshot
-from storage.journal import JournalError, JournalWriter
-from storage.live import LiveFile
+from noisebo.storage import journal, records
+from noisebo.storage.hdf5 import CampaignFileError, stray_temporaries, write_snapshot
+from noisebo.storage.journal import JournalError, JournalWriter
+from noisebo.storage.live import LiveFile
 
 PACKAGES = ("noisebo", "numpy", "scipy", "jax", "jaxlib", "numpyro", "h5py", "prefect", "pydantic", "rerun-sdk")
 

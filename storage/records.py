@@ -33,7 +33,7 @@ from noisebo.events import (
 from noisebo.reduction import Reading, ShotValue
 from noisebo.sho import SHOFit
 from noisebo.state import Point
-from storage.journal import Record
+from noisebo.storage.journal import Record
 
 FIT_NUMBERS = ("amplitude", "amplitude_se", "resonance_hz", "resonance_se", "q", "q_se", "phase_deg", "sign")
 DECISION_ARRAYS = ("acq_map", "f_mean", "f_var", "noise_mean", "noise_var", "t_opt_map")

@@ -9,7 +9,7 @@ os.environ.setdefault("PREFECT_HOME", tempfile.mkdtemp(prefix="noisebo-test-pref
 os.environ.setdefault("NOISEBO_JAX_CACHE", "")
 os.environ.setdefault("NOISEBO_LOG_DIR", tempfile.mkdtemp(prefix="noisebo-test-logs-"))  # failure logs
 
-from flows import runtime  # noqa: E402
+from noisebo.flows import runtime  # noqa: E402
 
 runtime.configure()
 

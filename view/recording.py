@@ -14,8 +14,8 @@ import numpy as np
 
 from noisebo.config import CampaignConfig, parse_config
 from noisebo.models.grids import grids
-from view.frames import Frame, frame_at, frames, n_frames
-from view.rerun_view import RerunView
+from noisebo.view.frames import Frame, frame_at, frames, n_frames
+from noisebo.view.rerun_view import RerunView
 
 FIT_KEYS = ("amplitude", "resonance_hz", "q", "sign")
 
@@ -32,8 +32,8 @@ def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[s
     gives None."""
     try:
         if instrument is None:
-            from instruments import build
-            from instruments.registry import DriverNotInstalled
+            from noisebo.instruments import build
+            from noisebo.instruments.registry import DriverNotInstalled
 
             try:
                 instrument = build(config.instrument)
@@ -46,7 +46,7 @@ def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[s
                                 "which is not installed here")
                     warn(f"{what}: drawn without the instrument's ground truth and noise law")
                 return None, None
-        from instruments.base import is_simulator
+        from noisebo.instruments.base import is_simulator
 
         if not is_simulator(instrument):
             return None, None
@@ -63,7 +63,7 @@ def true_optimal_map(config: CampaignConfig, instrument=None) -> tuple[np.ndarra
     that does not know it."""
     try:
         if instrument is None:
-            from instruments import build
+            from noisebo.instruments import build
 
             instrument = build(config.instrument)
         if not hasattr(instrument, "noise_law_at"):
@@ -107,7 +107,7 @@ class CampaignRecording:
         needs: the per-step arrays by reference and the shots added point by point, so a frame of
         a long campaign costs what is new, not a copy of everything (the finished campaign's
         summary frame, once, takes the whole tables)."""
-        from storage.hdf5 import (
+        from noisebo.storage.hdf5 import (
             array_shapes,
             campaign_tables,
             hyperparameter_names,
@@ -168,7 +168,7 @@ def last_sweep(spectra: Callable[[int], np.ndarray], data: dict, fits: dict, poi
 
 def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], None] = print) -> Path:
     """Rebuild a campaign's recording from its HDF5 file alone; returns the .rrd path."""
-    from storage.hdf5 import read_campaign, read_shot_fits, spectra_reader
+    from noisebo.storage.hdf5 import read_campaign, read_shot_fits, spectra_reader
 
     h5_path = Path(h5_path)
     data = read_campaign(h5_path)

@@ -19,10 +19,10 @@ from noisebo.config import CampaignConfig, parse_config
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
 from noisebo.models.reward import true_optimal_t
 from noisebo.state import format_position
-from storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits, read_spectra
-from view.area import axis_labels, draw_image
-from view.recording import instrument_curves, last_sweep, true_optimal_map
-from view.style import step_colours
+from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits, read_spectra
+from noisebo.view.area import axis_labels, draw_image
+from noisebo.view.recording import instrument_curves, last_sweep, true_optimal_map
+from noisebo.view.style import step_colours
 
 DPI = 130
 
@@ -292,7 +292,7 @@ def _first_converged(steps: dict) -> int | None:
 
 def figures_from_file(path: str | Path) -> dict:
     """Benchmark figures of one finished campaign, from its HDF5 file alone."""
-    from instruments import build
+    from noisebo.instruments import build
 
     data = read_campaign(path)
     config = parse_config(data["attrs"]["config"])

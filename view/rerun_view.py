@@ -31,9 +31,9 @@ import numpy as np
 
 from noisebo.config import CampaignConfig
 from noisebo.state import format_position
-from view.area import as_image
-from view.frames import Curve, Frame
-from view.style import step_colours
+from noisebo.view.area import as_image
+from noisebo.view.frames import Curve, Frame
+from noisebo.view.style import step_colours
 
 BOX_W, BOX_H = 300.0, 150.0
 TRACES = ("t_opt_s", "a0", "a1", "latency_s", "measurement_time_s")
@@ -115,7 +115,7 @@ class RerunView:
     def _open(self, name: str, rrd: Path | None, live: str | None) -> None:
         import rerun as rr
 
-        from view.blueprint import blueprint
+        from noisebo.view.blueprint import blueprint
 
         self.rr = rr
         self.stream = rr.RecordingStream("noisebo", recording_id=name, send_properties=False)

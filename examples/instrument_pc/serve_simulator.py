@@ -11,9 +11,9 @@ import sys
 
 import numpy as np
 
-from bridge.client import Spectrum, serve_instrument
-from instruments import build
-from instruments.registry import validated
+from noisebo.bridge.client import Spectrum, serve_instrument
+from noisebo.instruments import build
+from noisebo.instruments.registry import validated
 from noisebo.config import load_config
 from noisebo.keys import MEASURE, numpy_rng
 

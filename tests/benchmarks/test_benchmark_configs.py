@@ -15,13 +15,13 @@ import yaml
 ROOT = Path(__file__).resolve().parents[2]
 BENCHMARKS = ROOT / "benchmarks"
 if str(BENCHMARKS) not in sys.path:
-    sys.path.append(str(BENCHMARKS))  # after the project root: its storage and bridge packages come first
+    sys.path.append(str(BENCHMARKS))  # the benchmarks' shared helpers (_config, _gpcam)
 
 import _tstar  # noqa: E402
 import budget  # noqa: E402
 
-from instruments import build  # noqa: E402
-from instruments.registry import validated  # noqa: E402
+from noisebo.instruments import build  # noqa: E402
+from noisebo.instruments.registry import validated  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
 from noisebo.models.reward import true_optimal_t  # noqa: E402
 

@@ -17,14 +17,14 @@ with warnings.catch_warnings():  # fvgp's import puts simplefilter("once", UserW
 ROOT = Path(__file__).resolve().parents[2]
 BENCHMARKS = ROOT / "benchmarks"
 if str(BENCHMARKS) not in sys.path:
-    sys.path.append(str(BENCHMARKS))  # after the project root: its storage and bridge packages come first
+    sys.path.append(str(BENCHMARKS))  # the benchmarks' shared helpers (_config, _gpcam)
 
 import _gpcam
 import budget
 from _config import validated_config
 from _tstar import LAW, t_stars
 
-from instruments import build
+from noisebo.instruments import build
 from noisebo.models.grids import grids
 
 BUDGET_S = 40.0

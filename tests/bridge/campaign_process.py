@@ -8,13 +8,13 @@ It prints the bridge's lines, then the final status and reason."""
 import sys
 from pathlib import Path
 
-from flows import abort
-from instruments import build
-from instruments.registry import driver_info, validated
+from noisebo.flows import abort
+from noisebo.instruments import build
+from noisebo.instruments.registry import driver_info, validated
 from noisebo.campaign.driver import drive, now_utc
 from noisebo.campaign.engine import new_campaign
 from noisebo.config import load_config
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 
 def main(config_path: str, path: str) -> None:

@@ -9,12 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from instruments import build
-from instruments.registry import driver_info, validated
+from noisebo.instruments import build
+from noisebo.instruments.registry import driver_info, validated
 from noisebo.campaign.driver import drive, now_utc
 from noisebo.campaign.engine import new_campaign
 from noisebo.config import load_config
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 TOKEN = "test-token-123"
 

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import yaml
 
-from instruments import build
-from instruments.registry import validated
+from noisebo.instruments import build
+from noisebo.instruments.registry import validated
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
-from storage import journal, records
+from noisebo.storage import journal, records
 
 OVERRIDES = {"space": {"n_x": 40, "n_t": 30}, "schedule": {"n_steps": 3, "shots_before": 6, "shots_after": 3}}
 SOURCE = "data/configs/forrester.yaml"

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge import client
-from bridge.client import (
+from noisebo.bridge import client
+from noisebo.bridge.client import (
     CampaignRefused,
     ShotRequest,
     Spectrum,

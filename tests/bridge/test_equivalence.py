@@ -7,8 +7,8 @@ import sys
 import numpy as np
 import pytest
 
-from instruments import build
-from instruments.registry import validated
+from noisebo.instruments import build
+from noisebo.instruments.registry import validated
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
 from tests.bridge.conftest import remote_config, served

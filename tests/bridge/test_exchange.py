@@ -2,8 +2,8 @@ import threading
 
 import pytest
 
-from bridge.exchange import Exchange
-from bridge.wire import ReadingBody, ReadingShape, WireError
+from noisebo.bridge.exchange import Exchange
+from noisebo.bridge.wire import ReadingBody, ReadingShape, WireError
 from noisebo.campaign import engine
 from noisebo.config import CampaignConfig
 from noisebo.events import DriverInfo, ShotError

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 import yaml
 
-from cli.main import main
-from instruments import build
-from instruments.registry import validated
+from noisebo.cli.main import main
+from noisebo.instruments import build
+from noisebo.instruments.registry import validated
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
 from noisebo.keys import MEASURE, numpy_rng
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 SMALL = {"space": {"n_x": 40, "n_t": 30}, "schedule": {"n_steps": 2, "shots_before": 4, "shots_after": 2}}
 

@@ -8,7 +8,7 @@ import urllib.request
 import h5py
 import pytest
 
-from bridge.remote import RemoteInstrument, RemoteSettings
+from noisebo.bridge.remote import RemoteInstrument, RemoteSettings
 from noisebo.config import ConfigError
 from noisebo.failures import InstrumentUnavailable
 from tests.bridge.conftest import TOKEN, call, post_value, remote_config, served

@@ -12,9 +12,9 @@ from pathlib import Path
 import h5py
 import yaml
 
-from instruments.registry import validated
+from noisebo.instruments.registry import validated
 from noisebo.config import load_config
-from storage import journal, records
+from noisebo.storage import journal, records
 from tests.bridge.conftest import call
 from tests.bridge.kills import OVERRIDES, SOURCE
 

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from bridge.wire import ReadingShape, WireError, outcome_of, parse_body
+from noisebo.bridge.wire import ReadingShape, WireError, outcome_of, parse_body
 from noisebo.events import ShotError
 from noisebo.reduction import Reading
 

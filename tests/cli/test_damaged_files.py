@@ -10,8 +10,8 @@ import h5py
 import numpy as np
 import pytest
 
-from cli.main import main
-from storage import journal
+from noisebo.cli.main import main
+from noisebo.storage import journal
 from tests.storage.test_damage import finished, killed
 
 ANSWER_S = 5.0

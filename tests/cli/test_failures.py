@@ -28,7 +28,7 @@ def cli_env(tmp_path: Path, api_url: str) -> dict[str, str]:
 
 
 def start_run(config: Path, tmp_path: Path, env: dict[str, str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "cli.main", "run", str(config), "--out", str(tmp_path / "runs"),
+    return subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(config), "--out", str(tmp_path / "runs"),
                              "--no-rrd"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -65,7 +65,7 @@ def test_a_second_signal_stops_at_once_with_its_exit_code(signum, code, tiny_con
 def test_a_stop_at_once_names_its_signal():
     from prefect.exceptions import TerminationSignal
 
-    from flows.abort import StoppedAtOnce, stopping_signal
+    from noisebo.flows.abort import StoppedAtOnce, stopping_signal
 
     assert stopping_signal(StoppedAtOnce("SIGTERM")) == "SIGTERM"
     assert stopping_signal(TerminationSignal(signal.SIGTERM)) == "SIGTERM"

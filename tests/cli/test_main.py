@@ -6,12 +6,12 @@ import shutil
 import h5py
 import pytest
 
-from cli.main import main, parse_seeds
-from flows.campaign import start_campaign
+from noisebo.cli.main import main, parse_seeds
+from noisebo.flows.campaign import start_campaign
 from noisebo.campaign.engine import new_campaign
 from noisebo.config import CampaignConfig
 from noisebo.events import DriverInfo
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 
 def snapshot(folder):
@@ -129,7 +129,7 @@ def test_seed_ranges(text, seeds):
 
 
 def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harness, capsys):
-    from flows.campaign import campaign
+    from noisebo.flows.campaign import campaign
 
     path = campaign(tiny_config, seed=2, out_dir=str(tmp_path))
     capsys.readouterr()
@@ -239,7 +239,7 @@ def test_a_temporary_server_that_does_not_start_in_time_is_one_line_and_no_file(
 
     env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
     env.update(PREFECT_HOME=str(tmp_path / "prefect"), PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS="1")
-    done = subprocess.run([sys.executable, "-m", "cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs")],
+    done = subprocess.run([sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs")],
                           env=env, capture_output=True, text=True, timeout=300, check=False)
     assert done.returncode == 3
     assert done.stderr.splitlines() == [
@@ -250,9 +250,9 @@ def test_a_temporary_server_that_does_not_start_in_time_is_one_line_and_no_file(
 
 
 def test_a_spent_budget_is_resumed_only_with_a_larger_one(tiny_config, tmp_path, prefect_harness, capsys):
-    from instruments.forrester import ForresterInstrument
+    from noisebo.instruments.forrester import ForresterInstrument
     from noisebo.campaign.driver import drive
-    from storage.hdf5 import read_campaign
+    from noisebo.storage.hdf5 import read_campaign
 
     config = tiny_config.with_overrides(schedule={"budget_s": 60.0, "n_steps": 100})
     path = tmp_path / "budget.h5"

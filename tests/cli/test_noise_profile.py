@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 import yaml
 
-from cli.main import main
-from instruments import build
-from instruments.registry import driver_info
+from noisebo.cli.main import main
+from noisebo.instruments import build
+from noisebo.instruments.registry import driver_info
 from noisebo.campaign import driver, engine
 from noisebo.models.profile import NoiseProfile
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 
 def finished(path, config, seed):

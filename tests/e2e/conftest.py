@@ -2,7 +2,7 @@
 
 import pytest
 
-from flows.processes import local_server
+from noisebo.flows.processes import local_server
 
 
 @pytest.fixture(scope="session")

@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from flows.processes import BIN, start, stop, wait_for
+from noisebo.flows.processes import BIN, start, stop, wait_for
 from tests.bridge.kills import assert_same_campaign, free_port, reference, start_client, write_remote_config
 
 pytestmark = pytest.mark.e2e

@@ -31,7 +31,7 @@ def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_
     out = tmp_path / "runs"
     path = out / f"killed_reward_s{seed:04d}.h5"
     env = {**os.environ, **prefect_server, "NOISEBO_BRIDGE_TOKEN": "kill-test-token"}
-    cli = [sys.executable, "-m", "cli.main"]
+    cli = [sys.executable, "-m", "noisebo.cli.main"]
     commands = [[*cli, "run", str(config), "--seed", str(seed), "--out", str(out), "--no-rrd"]]
     commands += [[*cli, "resume", str(path), "--no-rrd"]] * 2
     moments = sorted(np.random.default_rng(seed).choice(np.arange(4, 40), size=len(commands), replace=False))

@@ -16,7 +16,7 @@ from tests.bridge.kills import free_port, write_remote_config
 from tests.bridge.test_signals import ABORT_WITHIN_S, journaled_status
 
 pytestmark = pytest.mark.e2e
-CLI = [sys.executable, "-m", "cli.main"]
+CLI = [sys.executable, "-m", "noisebo.cli.main"]
 TOKEN = "e2e-signal-token-0123456789abcdef"
 
 

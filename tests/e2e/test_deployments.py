@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import yaml
 
-from flows.processes import BIN, start, stop, wait_for
-from instruments import build
+from noisebo.flows.processes import BIN, start, stop, wait_for
+from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
-from storage.hdf5 import read_campaign
+from noisebo.storage.hdf5 import read_campaign
 
 pytestmark = pytest.mark.e2e
 

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import yaml
 
-from instruments import build
-from instruments.registry import validated
+from noisebo.instruments import build
+from noisebo.instruments.registry import validated
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
-from storage.hdf5 import read_campaign, read_spectra
+from noisebo.storage.hdf5 import read_campaign, read_spectra
 
 pytestmark = pytest.mark.e2e
 
@@ -38,7 +38,7 @@ def long_yaml(tmp_path):
 
 
 def noisebo(args, env):
-    return subprocess.run([sys.executable, "-m", "cli.main", *args], env=env, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "noisebo.cli.main", *args], env=env, capture_output=True, text=True,
                           timeout=900)
 
 

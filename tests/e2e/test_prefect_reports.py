@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from flows.processes import wait_for
+from noisebo.flows.processes import wait_for
 
 pytestmark = pytest.mark.e2e
 
@@ -25,7 +25,7 @@ def write_config(path: Path, config) -> Path:
 
 
 def noisebo_run(env, config: Path, out: Path, seed: int) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cli.main", "run", str(config), "--seed", str(seed), "--out", str(out),
+    return subprocess.run([sys.executable, "-m", "noisebo.cli.main", "run", str(config), "--seed", str(seed), "--out", str(out),
                            "--no-rrd"], env=env, capture_output=True, text=True, timeout=600,
                           cwd=Path(__file__).resolve().parents[2])
 
@@ -148,7 +148,7 @@ def test_a_failed_campaign_says_why_and_an_automation_reacts(prefect_server, api
     from prefect.events.actions import DoNothing
     from prefect.events.filters import EventFilter, EventNameFilter
 
-    from flows.reporting import failed_campaign_trigger
+    from noisebo.flows.reporting import failed_campaign_trigger
 
     automation = Automation(name="tiny campaign failed", trigger=failed_campaign_trigger("tiny"),
                             actions=[DoNothing()]).create()

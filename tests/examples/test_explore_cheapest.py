@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from instruments import build
+from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import ConfigError, load_config
 from noisebo.models.grids import grids
-from storage.hdf5 import read_campaign
+from noisebo.storage.hdf5 import read_campaign
 from tests.examples import packages
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -36,7 +36,7 @@ def config_path(tmp_path):
 
 
 def noisebo(args, env):
-    return subprocess.run([sys.executable, "-m", "cli", *args], env=env, capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "noisebo.cli", *args], env=env, capture_output=True, text=True, timeout=300)
 
 
 def environment(target=None, prefect=None):

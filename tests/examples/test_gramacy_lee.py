@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from instruments.registry import settings_of
+from noisebo.instruments.registry import settings_of
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import ConfigError, InstrumentConfig, lax_fields
-from storage import journal
-from storage.hdf5 import read_campaign
+from noisebo.storage import journal
+from noisebo.storage.hdf5 import read_campaign
 from tests.examples import packages
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,7 +39,7 @@ def config_path(tmp_path):
 
 
 def noisebo(args, env, **kwargs):
-    return subprocess.run([sys.executable, "-m", "cli", *args], env=env, capture_output=True, text=True, timeout=300,
+    return subprocess.run([sys.executable, "-m", "noisebo.cli", *args], env=env, capture_output=True, text=True, timeout=300,
                           **kwargs)
 
 
@@ -65,7 +65,7 @@ def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(target,
     env = environment(prefect_harness, target)
     out = tmp_path / "runs"
     path = out / f"gramacy-lee_reward_s{SEED:04d}.h5"
-    run = subprocess.Popen([sys.executable, "-m", "cli", "run", str(config_path), "--seed", str(SEED), "--out", str(out)],
+    run = subprocess.Popen([sys.executable, "-m", "noisebo.cli", "run", str(config_path), "--seed", str(SEED), "--out", str(out)],
                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and run.poll() is None:
@@ -88,8 +88,8 @@ def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(target,
     assert data["attrs"]["driver"]["version"] == "0.2.0" and data["attrs"]["driver"]["settings"]["a1"] == 0.5
 
     monkeypatch.syspath_prepend(str(target))  # the same campaign uninterrupted, in this process
-    from cli.main import _validated
-    from instruments import build
+    from noisebo.cli.main import _validated
+    from noisebo.instruments import build
 
     config = _validated(config_path)
     alone = run_campaign(config, build(config.instrument), SEED)

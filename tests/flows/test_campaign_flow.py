@@ -7,12 +7,12 @@ import h5py
 import numpy as np
 import pytest
 
-from flows.campaign import campaign, campaign_path, resume, start_campaign
-from flows.sweep import sweep, task_runner
-from instruments import build
+from noisebo.flows.campaign import campaign, campaign_path, resume, start_campaign
+from noisebo.flows.sweep import sweep, task_runner
+from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
-from storage.hdf5 import CampaignFileError
-from storage.recorder import Recorder
+from noisebo.storage.hdf5 import CampaignFileError
+from noisebo.storage.recorder import Recorder
 
 
 def points_of(path):
@@ -118,7 +118,7 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
     assert "| reward | 3 |" in artifact.data
     assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000
     # `noisebo report DIR` redraws the same from the files alone
-    from view.report import report
+    from noisebo.view.report import report
 
     written = report(tmp_path, tmp_path / "report")
     assert [p.name for p in written] == ["convergence_steps.png", "sweep_summary.md"]

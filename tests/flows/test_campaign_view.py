@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import rerun.chunk
 
-from flows.campaign import campaign
-from storage.hdf5 import read_campaign
-from view.frames import frame_at
-from view.recording import replay
-from view.rerun_view import RerunView
+from noisebo.flows.campaign import campaign
+from noisebo.storage.hdf5 import read_campaign
+from noisebo.view.frames import frame_at
+from noisebo.view.recording import replay
+from noisebo.view.rerun_view import RerunView
 
 ENTITIES = {"/acquisition/map", "/acquisition/points", "/f/mean", "/f/band", "/f/truth", "/f/points",
             "/noise/mean", "/noise/band", "/noise/law", "/noise/points", "/reward/curve", "/reward/t_opt",
@@ -112,7 +112,7 @@ def _png_size(path) -> tuple[int, int]:
 
 
 def test_report_of_a_campaign_file(recorded, tmp_path):
-    from view.report import report
+    from noisebo.view.report import report
 
     written = report(recorded, tmp_path)
     assert [p.name for p in written] == ["tiny_reward_s0003_report.png"]
@@ -121,8 +121,8 @@ def test_report_of_a_campaign_file(recorded, tmp_path):
 
 
 def test_report_of_a_directory_without_campaigns_is_a_clear_error(tmp_path):
-    from storage.hdf5 import CampaignFileError
-    from view.report import report
+    from noisebo.storage.hdf5 import CampaignFileError
+    from noisebo.view.report import report
 
     with pytest.raises(CampaignFileError, match="no campaign files"):
         report(tmp_path)

@@ -7,8 +7,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from flows.campaign import campaign
-from flows.deployments import deployments_for
+from noisebo.flows.campaign import campaign
+from noisebo.flows.deployments import deployments_for
 
 
 def test_the_same_seed_twice_through_the_deployment_gets_two_folders(tiny_yaml, prefect_harness, tmp_path):

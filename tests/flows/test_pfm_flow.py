@@ -8,11 +8,11 @@ import h5py
 import numpy as np
 import pytest
 
-from flows.campaign import campaign, resume
-from instruments import build
+from noisebo.flows.campaign import campaign, resume
+from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
-from storage.hdf5 import read_campaign, read_spectra
+from noisebo.storage.hdf5 import read_campaign, read_spectra
 
 PFM_TINY = CampaignConfig().with_overrides(
     name="pfm-tiny",
@@ -49,7 +49,7 @@ def test_pfm_flow_equals_the_pure_loop_and_keeps_raw_spectra(pfm_file):
 
 
 def test_resumed_pfm_campaign_refits_journaled_sweeps_identically(pfm_file, tmp_path, prefect_harness):
-    from storage import journal
+    from noisebo.storage import journal
 
     records, _ = journal.read(Path(pfm_file).with_suffix(".journal"))
     cut = next(i for i, r in enumerate(records) if r.type == "shot" and r.fields["point"] == 1 and r.fields["shot"] == 3)
@@ -65,7 +65,7 @@ def test_resumed_pfm_campaign_refits_journaled_sweeps_identically(pfm_file, tmp_
 
 
 def test_pfm_report_draws_the_campaign_and_its_last_sweep(pfm_file, tmp_path):
-    from view.report import report
+    from noisebo.view.report import report
 
     written = report(Path(pfm_file), tmp_path)
     assert [p.name for p in written] == ["pfm-tiny_double_s0002_report.png", "pfm-tiny_double_s0002_sweep.png"]

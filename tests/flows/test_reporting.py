@@ -7,7 +7,7 @@ import logging
 import numpy as np
 import pytest
 
-from flows import reporting
+from noisebo.flows import reporting
 from noisebo.campaign.engine import EngineState, PointEntry
 from noisebo.events import (
     DriverInfo,

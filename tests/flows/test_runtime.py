@@ -50,7 +50,7 @@ def test_no_failure_no_log(tmp_path):
 def test_prefects_exit_notice_is_not_shown_and_its_other_warnings_are(caplog):
     import logging
 
-    from flows import runtime
+    from noisebo.flows import runtime
 
     worker = logging.getLogger("EventsWorker")
     filters = list(worker.filters)

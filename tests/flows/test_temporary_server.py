@@ -14,8 +14,8 @@ import time
 import httpx
 import pytest
 
-from flows import processes
-from flows import temporary_server as temporary
+from noisebo.flows import processes
+from noisebo.flows import temporary_server as temporary
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 
@@ -57,7 +57,7 @@ def spawn_and_vanish(code: str, env: dict[str, str], folder) -> list[tuple[int, 
 
 @pytest.mark.e2e
 def test_kill_9_of_noisebo_run_takes_its_temporary_server_with_it(tmp_path, tiny_yaml):
-    run = subprocess.Popen([sys.executable, "-m", "cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs"),
+    run = subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs"),
                             "--no-rrd"], env=run_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                            text=True)
     try:
@@ -85,7 +85,7 @@ def test_the_guard_stops_the_server_when_the_parent_goes_without_a_death_signal(
     [(server, started)] = spawn_and_vanish(f"""
         import subprocess, sys, time
         import httpx
-        from flows import temporary_server as temporary
+        from noisebo.flows import temporary_server as temporary
         server = subprocess.Popen([sys.executable, "-P", str(temporary.GUARD), str(os.getpid()), "watch", "{port}"],
                                   env=temporary.server_environment())
         for _ in range(1200):
@@ -116,7 +116,7 @@ def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path)
     home = tmp_path / "home"
     (recorded, recorded_at), (unrecorded, unrecorded_at) = spawn_and_vanish(f"""
         from prefect.server.api.server import SubprocessASGIServer
-        from flows import temporary_server as temporary
+        from noisebo.flows import temporary_server as temporary
         server = SubprocessASGIServer()
         for record, url in ((True, {database(tmp_path, "recorded")!r}), (False, {database(tmp_path, "unrecorded")!r})):
             os.environ["PREFECT_API_DATABASE_CONNECTION_URL"] = url
@@ -170,7 +170,7 @@ def test_a_port_taken_meanwhile_is_retried_on_another_without_a_word(tmp_path):
         port = taken.getsockname()[1]
         code = textwrap.dedent(f"""
             import httpx
-            from flows import temporary_server
+            from noisebo.flows import temporary_server
             server = temporary_server.GuardedServer(port={port})
             server.start()
             print(server.port != {port}, httpx.get(server.api_url + "/health").status_code)
@@ -184,7 +184,7 @@ def test_a_port_taken_meanwhile_is_retried_on_another_without_a_word(tmp_path):
 FOUR_HUNDRED_TASKS = """
 import sys
 from prefect import flow, task
-from flows import local
+from noisebo.flows import local
 
 @task
 def one(i):

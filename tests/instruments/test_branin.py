@@ -4,9 +4,9 @@ entry point, and bad shots."""
 import numpy as np
 import pytest
 
-from instruments import Instrument, build, registry
-from instruments.base import Simulator
-from instruments.branin import BraninInstrument, BraninSettings, branin
+from noisebo.instruments import Instrument, build, registry
+from noisebo.instruments.base import Simulator
+from noisebo.instruments.branin import BraninInstrument, BraninSettings, branin
 from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig
 
 MINIMISERS = np.array([[-np.pi, 12.275], [np.pi, 2.275], [9.42478, 2.475]])
@@ -28,7 +28,7 @@ def test_values_by_hand_and_no_lower_value_on_a_grid():
 
 
 def test_the_driver_is_registered_and_built_from_config():
-    assert registry.installed()["branin"].target == "instruments.branin:BraninInstrument"
+    assert registry.installed()["branin"].target == "noisebo.instruments.branin:BraninInstrument"
     inst = build(InstrumentConfig(kind="branin", settings={"a0": 0.3, "a1": 1.0}))
     assert isinstance(inst, Instrument) and isinstance(inst, Simulator) and isinstance(inst, BraninInstrument)
     assert inst.dimensions == 2 and inst.bounds == [(-5.0, 10.0), (0.0, 15.0)]

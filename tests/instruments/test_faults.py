@@ -7,9 +7,9 @@ import h5py
 import numpy as np
 import pytest
 
-from instruments import build
-from instruments.faults import FaultyInstrument
-from instruments.forrester import ForresterInstrument
+from noisebo.instruments import build
+from noisebo.instruments.faults import FaultyInstrument
+from noisebo.instruments.forrester import ForresterInstrument
 from noisebo.config import FAULT_KINDS, CampaignConfig, FaultsConfig, InstrumentConfig
 from noisebo.failures import (
     FailureBudgetExceeded,
@@ -17,7 +17,7 @@ from noisebo.failures import (
     InstrumentTimeout,
     check_budget,
 )
-from storage.hdf5 import read_campaign
+from noisebo.storage.hdf5 import read_campaign
 
 
 def faulty(**rates):
@@ -77,7 +77,7 @@ def test_failure_budget_by_hand(failed, attempts, stops):
 
 
 def run_flow(config, seed, path, instrument):
-    from flows.campaign import run, start_campaign
+    from noisebo.flows.campaign import run, start_campaign
 
     with start_campaign(path, config, seed) as recorder:
         return run(recorder, instrument=instrument)
@@ -106,7 +106,7 @@ def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tin
 
 
 def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config, prefect_harness, tmp_path):
-    from flows.campaign import campaign, resume
+    from noisebo.flows.campaign import campaign, resume
 
     config = tiny_config.with_overrides(instrument={"faults": {"seed": 1, "exception": 0.9}},
                                         schedule={"min_failed": 5, "tolerated_rate": 0.5})
@@ -143,7 +143,7 @@ def test_spectrum_faults_never_give_a_usable_wrong_value_silently(kind, reason):
 
 
 def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny_config, prefect_harness, tmp_path):
-    from flows.campaign import campaign
+    from noisebo.flows.campaign import campaign
     from noisebo.campaign.driver import run_campaign
 
     # 70 % of the readings NaN: some points get too few usable shots and must take more
@@ -163,7 +163,7 @@ def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny
 
 @pytest.mark.slow
 def test_a_200_step_campaign_with_a_quarter_of_faults(prefect_harness, tmp_path):
-    from flows.campaign import run, start_campaign
+    from noisebo.flows.campaign import run, start_campaign
     from noisebo.models.reward import true_optimal_t
 
     config = CampaignConfig().with_overrides(

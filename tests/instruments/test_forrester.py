@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from instruments import Instrument, build
-from instruments.base import Simulator
-from instruments.forrester import ForresterInstrument, ForresterSettings, forrester
+from noisebo.instruments import Instrument, build
+from noisebo.instruments.base import Simulator
+from noisebo.instruments.forrester import ForresterInstrument, ForresterSettings, forrester
 from noisebo.config import InstrumentConfig
 
 X = np.array([0.5])

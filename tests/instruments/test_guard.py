@@ -4,9 +4,9 @@ import time
 import numpy as np
 import pytest
 
-from instruments import build
-from instruments.base import Reading
-from instruments.guard import InstrumentTimeout, TimeoutGuard
+from noisebo.instruments import build
+from noisebo.instruments.base import Reading
+from noisebo.instruments.guard import InstrumentTimeout, TimeoutGuard
 from noisebo.config import InstrumentConfig
 
 

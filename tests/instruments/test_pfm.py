@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from instruments import Instrument, build
-from instruments.pfm import PFMInstrument, PFMSettings
-from instruments.pfm_profile import ProfileError, ScanProfileConfig, SyntheticProfileConfig, scan_profile, synthetic_profile
-from instruments.registry import validated
+from noisebo.instruments import Instrument, build
+from noisebo.instruments.pfm import PFMInstrument, PFMSettings
+from noisebo.instruments.pfm_profile import ProfileError, ScanProfileConfig, SyntheticProfileConfig, scan_profile, synthetic_profile
+from noisebo.instruments.registry import validated
 from noisebo.config import ConfigError, InstrumentConfig, ReductionConfig, parse_config
 from noisebo.reduction import shot_value
 

@@ -8,12 +8,12 @@ import pytest
 import yaml
 from scipy import ndimage
 
-from instruments.faults import FaultyInstrument
-from instruments.pfm import PFMInstrument, PFMSettings
-from instruments.pfm_area import ScanAreaConfig, SyntheticAreaConfig
-from instruments.pfm_profile import ScanProfileConfig, SyntheticProfileConfig
-from instruments.pfm_scan import PROJECT_ROOT, ProfileError, dominant_phase
-from instruments.registry import build, validated
+from noisebo.instruments.faults import FaultyInstrument
+from noisebo.instruments.pfm import PFMInstrument, PFMSettings
+from noisebo.instruments.pfm_area import ScanAreaConfig, SyntheticAreaConfig
+from noisebo.instruments.pfm_profile import ScanProfileConfig, SyntheticProfileConfig
+from noisebo.instruments.pfm_scan import PROJECT_ROOT, ProfileError, dominant_phase
+from noisebo.instruments.registry import build, validated
 from noisebo.config import ConfigError, FaultsConfig, InstrumentConfig, ReductionConfig, parse_config
 from noisebo.reduction import shot_value
 

@@ -7,10 +7,10 @@ import h5py
 import numpy as np
 import pytest
 
-from instruments.pfm import PFMInstrument, PFMSettings
-from instruments.pfm_area import ScanAreaConfig
-from instruments.pfm_profile import ScanProfileConfig, scan_profile
-from instruments.pfm_scan import PROJECT_ROOT, ChannelError, ProfileError, read_scan
+from noisebo.instruments.pfm import PFMInstrument, PFMSettings
+from noisebo.instruments.pfm_area import ScanAreaConfig
+from noisebo.instruments.pfm_profile import ScanProfileConfig, scan_profile
+from noisebo.instruments.pfm_scan import PROJECT_ROOT, ChannelError, ProfileError, read_scan
 
 SHIPPED = PROJECT_ROOT / "data" / "pfm" / "PTO_Funakubo0003.h5"
 # The 0001 scan lives beside the project (the shared data folder), not in data/pfm.

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flows.campaign import InstrumentUnavailable, campaign, opened
-from instruments import registry
-from instruments.registry import validated
+from noisebo.flows.campaign import InstrumentUnavailable, campaign, opened
+from noisebo.instruments import registry
+from noisebo.instruments.registry import validated
 from noisebo.config import CampaignConfig, ConfigError, load_config
 
 DRIVERS = {

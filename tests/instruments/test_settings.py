@@ -4,7 +4,7 @@ says what was given; ints where floats belong and lists for pairs still work."""
 
 import pytest
 
-from instruments.registry import driver_class, validated
+from noisebo.instruments.registry import driver_class, validated
 from noisebo.config import CampaignConfig, ConfigError, lax_fields, load_config
 
 NAN, INF = float("nan"), float("inf")

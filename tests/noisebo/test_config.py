@@ -211,7 +211,7 @@ def test_ints_for_numbers_whole_numbers_for_counts_and_lists_for_pairs_are_accep
 
 @pytest.mark.parametrize("path", sorted((ROOT / "data" / "configs").glob("*.yaml")), ids=lambda p: p.name)
 def test_a_config_comes_back_from_the_json_a_journal_stores(path):
-    from instruments.registry import validated
+    from noisebo.instruments.registry import validated
 
     cfg = validated(load_config(path))
     stored = json.loads(json.dumps(cfg.model_dump(mode="json")))

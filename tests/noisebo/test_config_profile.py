@@ -4,8 +4,8 @@
 import pytest
 import yaml
 
-from cli.main import main
-from instruments.registry import driver_info, validated
+from noisebo.cli.main import main
+from noisebo.instruments.registry import driver_info, validated
 from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, load_config, parse_config
 
 SETTINGS = driver_info(InstrumentConfig(kind="forrester", settings={"a0": 0.1, "a1": 2.0})).settings  # complete

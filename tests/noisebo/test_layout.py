@@ -6,38 +6,50 @@ import sys
 from pathlib import Path
 
 import pytest
+from installed_layout import adapters
 
 CORE = Path(__file__).resolve().parents[2] / "noisebo"
-FORBIDDEN = {"prefect", "h5py", "rerun", "fastapi", "uvicorn", "instruments", "flows", "tasks", "storage", "view",
-             "cli", "bridge", "starlette", "matplotlib", "httpx", "prefect_dask", "dask"}
+FORBIDDEN = set(adapters()) | {"prefect", "h5py", "rerun", "fastapi", "uvicorn", "starlette", "matplotlib", "httpx",
+                        "prefect_dask", "dask"}
 
 
-def imported_roots(path: Path) -> set[str]:
-    """Top-level names of every import in a module, including imports inside functions."""
-    roots = set()
+def forbidden_in(name: str) -> set[str]:
+    """The forbidden packages (FORBIDDEN) that the dotted module ``name`` is or lies in."""
+    return {f for f in FORBIDDEN if name == f or name.startswith(f + ".")}
+
+
+def imported_names(path: Path) -> set[str]:
+    """Dotted names of every import in a module, including imports inside functions
+    ("from a.b import c" gives a.b and a.b.c: c may be a module)."""
+    names = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
-            roots |= {alias.name.split(".")[0] for alias in node.names}
+            names |= {alias.name for alias in node.names}
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            roots.add(node.module.split(".")[0])
-    return roots
+            names |= {node.module} | {f"{node.module}.{alias.name}" for alias in node.names}
+    return names
+
+
+def forbidden_imports(path: Path) -> set[str]:
+    return set().union(*(forbidden_in(name) for name in imported_names(path)))
 
 
 @pytest.mark.parametrize("module", sorted(p.relative_to(CORE).as_posix() for p in CORE.rglob("*.py")))
 def test_no_core_module_imports_an_adapter(module):
-    assert not imported_roots(CORE / module) & FORBIDDEN
+    assert forbidden_imports(CORE / module) == set()
 
 
 def test_importing_the_whole_core_loads_no_adapter():
     modules = [".".join(("noisebo", *p.relative_to(CORE).with_suffix("").parts)).removesuffix(".__init__")
                for p in CORE.rglob("*.py")]
     code = (f"import importlib, sys\nfor m in {modules!r}: importlib.import_module(m)\n"
-            f"print(sorted({{m.split('.')[0] for m in sys.modules}} & {FORBIDDEN!r}))")
+            f"print(sorted(m for m in sys.modules if any(m == f or m.startswith(f + '.') for f in {sorted(FORBIDDEN)!r})))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
 
 def test_the_checker_sees_an_import_inside_a_function(tmp_path):
     module = tmp_path / "m.py"
-    module.write_text("def f():\n    import h5py.h5f\n    from prefect import flow\n")
-    assert imported_roots(module) == {"h5py", "prefect"}
+    module.write_text("def f():\n    import h5py.h5f\n    from prefect import flow\n    from noisebo import storage\n"
+                      "    from noisebo import config\n")
+    assert forbidden_imports(module) == {"h5py", "prefect", "noisebo.storage"}

@@ -6,8 +6,8 @@ import textwrap
 
 import pytest
 
-from cli.main import main
-from instruments import build
+from noisebo.cli.main import main
+from noisebo.instruments import build
 from noisebo import registry
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig, ConfigError

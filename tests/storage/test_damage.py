@@ -18,9 +18,9 @@ import pytest
 
 from benchmarks.storage import point_commits, started
 from noisebo.events import Status, StatusChanged
-from storage.hdf5 import CampaignFileError, read_campaign, read_failures, read_shot_fits, read_spectra
-from storage.isolated import call_isolated
-from storage.recorder import Recorder, rebuild_file
+from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_failures, read_shot_fits, read_spectra
+from noisebo.storage.isolated import call_isolated
+from noisebo.storage.recorder import Recorder, rebuild_file
 from tests.storage.test_hdf5 import SMALL, assert_same
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -33,7 +33,7 @@ KILLED_WRITER = """
 import os, sys
 sys.path.insert(0, {root!r})
 from benchmarks.storage import point_commits, started
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 from tests.storage.test_hdf5 import SMALL
 r = Recorder.create({path!r}, started(SMALL))
 for i in range({n}):

@@ -18,7 +18,7 @@ from benchmarks.storage import point_commits, started
 from noisebo.campaign import engine
 from noisebo.config import CampaignConfig
 from noisebo.events import Status, StatusChanged
-from storage.hdf5 import (
+from noisebo.storage.hdf5 import (
     CampaignFileError,
     read_campaign,
     read_failures,
@@ -26,7 +26,7 @@ from storage.hdf5 import (
     read_spectra,
     write_snapshot,
 )
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = CampaignConfig().with_overrides(
@@ -135,7 +135,7 @@ CHILD = """
 import os, sys
 from pathlib import Path
 from benchmarks.storage import point_commits, started
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 from tests.storage.test_hdf5 import SMALL, FAIL_EVERY, REJECT_EVERY
 path, n, at = Path(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 recorder = Recorder.create(path, started(SMALL))

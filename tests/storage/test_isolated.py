@@ -7,8 +7,8 @@ import signal
 import h5py
 import pytest
 
-from storage.hdf5 import CampaignFileError, read_campaign
-from storage.isolated import call_isolated
+from noisebo.storage.hdf5 import CampaignFileError, read_campaign
+from noisebo.storage.isolated import call_isolated
 
 
 def test_the_result_comes_back():

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from storage import journal
-from storage.journal import JournalError, JournalWriter, Record
+from noisebo.storage import journal
+from noisebo.storage.journal import JournalError, JournalWriter, Record
 
 
 def records():

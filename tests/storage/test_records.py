@@ -20,9 +20,9 @@ from noisebo.events import (
 )
 from noisebo.reduction import Reading, ShotValue, shot_value
 from noisebo.state import Point
-from storage import journal, records
-from storage.journal import Record
-from storage.records import CorruptJournal, rebuild
+from noisebo.storage import journal, records
+from noisebo.storage.journal import Record
+from noisebo.storage.records import CorruptJournal, rebuild
 
 POINT = Point(x=0.1, t=1.0, value=2.0, shot_std=0.5, n_shots=2, noise=0.5, noise_measured=True)
 START = Started(CampaignConfig(), 7, DriverInfo("forrester", "1.0", {"a0": 0.1}), {"python": "3"}, "2026-01-01T00:00:00+00:00")
@@ -45,7 +45,7 @@ def decision():
 
 
 def pfm_point():
-    from instruments.pfm import PFMInstrument, PFMSettings
+    from noisebo.instruments.pfm import PFMInstrument, PFMSettings
 
     reading = PFMInstrument(PFMSettings(profile={"source": "synthetic"})).simulate(np.array([0.3]), 0.2, np.random.default_rng(0))
     value = shot_value(reading, ReductionConfig())

@@ -12,9 +12,9 @@ import h5py
 import numpy as np
 import pytest
 
-from storage import steps
-from storage.hdf5 import SCHEMA_VERSION, read_campaign
-from storage.recorder import rebuild_file
+from noisebo.storage import steps
+from noisebo.storage.hdf5 import SCHEMA_VERSION, read_campaign
+from noisebo.storage.recorder import rebuild_file
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 POINT_STEPS = [0, 0, 0, 1, 2, 3, 4]  # 3 seed points, then BO steps 1..4

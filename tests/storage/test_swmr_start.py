@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from storage.live import start_swmr
+from noisebo.storage.live import start_swmr
 
 
 @pytest.fixture

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from prefect import flow
 
-from flows.campaign import start_campaign
-from instruments import build
+from noisebo.flows.campaign import start_campaign
+from noisebo.instruments import build
 from noisebo import sho
 from noisebo.campaign import driver, engine, steps
 from noisebo.events import Decided, DecisionDue, Request, ShotError, ShotFailed
@@ -14,8 +14,8 @@ from noisebo.failures import InstrumentError
 from noisebo.keys import MEASURE, numpy_rng
 from noisebo.models.fitting import NoiseFit, PrimaryFit
 from noisebo.reduction import Reading
-from storage import journal
-from tasks import campaign as ops
+from noisebo.storage import journal
+from noisebo.tasks import campaign as ops
 
 REQUEST = Request(point=2, step=-1, x=(0.3,), t=2.0, wanted=5, taken=1, model_noise=None)
 

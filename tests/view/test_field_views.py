@@ -4,16 +4,16 @@ inspect summarises the map; an x-independent campaign has neither."""
 import numpy as np
 import pytest
 
-from cli.main import inspect_summary
-from instruments.forrester import ForresterInstrument, ForresterSettings
+from noisebo.cli.main import inspect_summary
+from noisebo.instruments.forrester import ForresterInstrument, ForresterSettings
 from noisebo.campaign import engine
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
 from noisebo.events import DriverInfo
-from storage.hdf5 import read_campaign, write_snapshot
-from storage.records import encode, rebuild
-from view.recording import true_optimal_map
-from view.report import _t_map, campaign_report
+from noisebo.storage.hdf5 import read_campaign, write_snapshot
+from noisebo.storage.records import encode, rebuild
+from noisebo.view.recording import true_optimal_map
+from noisebo.view.report import _t_map, campaign_report
 
 SETTINGS = ForresterSettings(a0=0.1, a1=1.0, law="quadrature", patch_a0=4.0)
 CONFIG = CampaignConfig(

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from noisebo.config import CampaignConfig
-from view.frames import frame_at, frames, n_frames, normalised_reward
+from noisebo.view.frames import frame_at, frames, n_frames, normalised_reward
 
 CONFIG = CampaignConfig().with_overrides(space={"n_x": 3, "n_t": 2, "t_min": 1.0, "t_max": 2.0},
                                          schedule={"n_seed": 2, "n_steps": 2})

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from noisebo.config import parse_config
-from storage.hdf5 import read_campaign
-from storage.recorder import rebuild_file
-from view.frames import frames
-from view.report import _first_converged, figures_from_file, write_summary
+from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.recorder import rebuild_file
+from noisebo.view.frames import frames
+from noisebo.view.report import _first_converged, figures_from_file, write_summary
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 

@@ -4,7 +4,7 @@ time and shots where the answer is known, and a campaign that spends a budget wi
 import jax.numpy as jnp
 import numpy as np
 
-from instruments.forrester import ForresterInstrument
+from noisebo.instruments.forrester import ForresterInstrument
 from noisebo.acquisition import information
 from noisebo.acquisition.policies import acquisition_map, point_scores
 from noisebo.campaign.driver import run_campaign

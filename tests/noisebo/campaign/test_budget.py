@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from instruments.forrester import ForresterInstrument
+from noisebo.instruments.forrester import ForresterInstrument
 from noisebo.acquisition.proposal import affordable, cheapest_point_s
 from noisebo.campaign import engine
 from noisebo.campaign.driver import drive, in_memory, run_campaign
@@ -14,7 +14,7 @@ from noisebo.config import CampaignConfig, ConfigError, parse_config
 from noisebo.events import BudgetChanged, DriverInfo, Status
 from noisebo.models import noise_model
 from noisebo.models.grids import grids
-from storage.records import decode, encode, rebuild
+from noisebo.storage.records import decode, encode, rebuild
 
 
 def budgeted(tiny_config, budget_s, overhead_s=2.0, n_steps=100):

@@ -5,7 +5,7 @@ every point's replicate scatter."""
 import numpy as np
 import pytest
 
-from instruments.forrester import ForresterInstrument
+from noisebo.instruments.forrester import ForresterInstrument
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import ConfigError, parse_config
 from noisebo.models.fitting import fit_key, fit_noise_model

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from instruments import build
+from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.campaign.steps import make_point, seed_points
 from noisebo.config import CampaignConfig
@@ -104,7 +104,7 @@ def test_outlier_clipping_by_hand(values, clip, rejected):
 def test_clipping_ignores_shots_already_rejected_and_the_point_uses_the_rest():
     import math
 
-    from instruments.base import Reading
+    from noisebo.instruments.base import Reading
     from noisebo.campaign.steps import make_point
     from noisebo.config import ReductionConfig
 

@@ -5,7 +5,7 @@ travel through the journal and the file; the paired seeds; and a field with NUTS
 import numpy as np
 import pytest
 
-from instruments.forrester import ForresterInstrument, ForresterSettings
+from noisebo.instruments.forrester import ForresterInstrument, ForresterSettings
 from noisebo.campaign import engine
 from noisebo.campaign.driver import run_campaign
 from noisebo.campaign.steps import paired_positions, seed_points
@@ -14,8 +14,8 @@ from noisebo.events import DriverInfo
 from noisebo.models.convergence import converged, converged_map
 from noisebo.models.grids import grids
 from noisebo.models.reward import true_optimal_t
-from storage.hdf5 import read_campaign, write_snapshot
-from storage.records import decode, encode, rebuild
+from noisebo.storage.hdf5 import read_campaign, write_snapshot
+from noisebo.storage.records import decode, encode, rebuild
 
 # Quadrature law sqrt(A1^2/t + A0^2), A1 = 1, A0 = 0.1 off the patch and 4.1 on it (x = 0.5,
 # width 0.05): t* = 1.90 s off it, 1.06 s on it for alpha 0.1, beta 2.

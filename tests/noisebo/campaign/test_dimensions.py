@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from instruments import build
+from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.campaign.steps import seed_points
 from noisebo.config import CampaignConfig

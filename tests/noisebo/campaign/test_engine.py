@@ -4,7 +4,7 @@ giving one campaign through every driver."""
 import numpy as np
 import pytest
 
-from instruments import build
+from noisebo.instruments import build
 from noisebo.campaign import driver, engine
 from noisebo.campaign.engine import EngineError
 from noisebo.campaign.steps import seed_points

@@ -10,14 +10,14 @@ import h5py
 import numpy as np
 import pytest
 
-from cli.main import inspect_summary
-from flows.campaign import decision_lines
-from instruments import build
-from instruments.registry import driver_info, validated
+from noisebo.cli.main import inspect_summary
+from noisebo.flows.campaign import decision_lines
+from noisebo.instruments import build
+from noisebo.instruments.registry import driver_info, validated
 from noisebo.campaign import driver, engine
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import NoiseProfile, ParameterPosterior, ProfileDriver, load_config
-from storage.recorder import Recorder
+from noisebo.storage.recorder import Recorder
 
 ROOT = Path(__file__).resolve().parents[3]
 T_STAR_STALE = 1.9037  # s, A0 = 0.5, A1 = 1

@@ -4,7 +4,7 @@ import threading
 
 import numpy as np
 
-from instruments import build
+from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
 

@@ -1,0 +1,63 @@
+"""The commands that need no model start without Prefect, JAX or numpyro: each imports what it
+uses when it runs (cli/main.py). Checked in fresh interpreters; benchmarks/cli.py times them."""
+
+import importlib.metadata
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+HEAVY = ["jax", "prefect", "numpyro", "fastapi", "matplotlib", "rerun"]
+LOADED_AFTER = """
+import json, sys
+from noisebo.cli.main import main
+try:
+    code = main(sys.argv[1:])
+except SystemExit as stop:
+    code = stop.code
+print(json.dumps({"code": code, "loaded": [m for m in %r if m in sys.modules]}))
+""" % HEAVY
+
+
+def loaded_after(args: list[str], cwd: Path) -> dict:
+    out = subprocess.run([sys.executable, "-c", LOADED_AFTER, *args], cwd=cwd, capture_output=True, text=True,
+                         timeout=300, check=False)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def started_file(tmp_path_factory):
+    """A campaign measured by hand, as `noisebo start` makes it (running, nothing measured)."""
+    where = tmp_path_factory.mktemp("started")
+    subprocess.run([sys.executable, "-m", "noisebo.cli", "start", str(ROOT / "data" / "configs" / "forrester_manual.yaml"),
+                    "--out", str(where)], capture_output=True, text=True, timeout=300, check=True)
+    return next(where.glob("*.h5"))
+
+
+@pytest.mark.parametrize("args", [["--help"], ["--version"], ["instruments"], ["run", "--help"], ["tell", "--help"]])
+def test_a_command_that_needs_no_model_loads_none(tmp_path, args):
+    found = loaded_after(args, tmp_path)
+    assert found == {"code": 0, "loaded": []}
+
+
+def test_inspect_loads_no_model(started_file):
+    found = loaded_after(["inspect", str(started_file)], started_file.parent)
+    assert found == {"code": 0, "loaded": []}
+
+
+def test_a_bad_config_is_still_one_line_and_exit_2(tmp_path):
+    """ConfigError is caught although the CLI imports noisebo.config only when a command loads one."""
+    (tmp_path / "bad.yaml").write_text("name: bad\nspace: {n_x: -1}\n")
+    out = subprocess.run([sys.executable, "-m", "noisebo.cli", "run", "bad.yaml"], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300, check=False)
+    assert out.returncode == 2
+    assert out.stderr.startswith("noisebo: error: bad.yaml") and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_version_is_the_installed_distributions():
+    out = subprocess.run([sys.executable, "-m", "noisebo.cli", "--version"], capture_output=True, text=True,
+                         timeout=120, check=True)
+    assert out.stdout.strip() == f"noisebo {importlib.metadata.version('noisebo')}"
