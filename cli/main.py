@@ -514,6 +514,8 @@ def _start(args) -> int:
 def _ask(args) -> int:
     from noisebo.bridge import manual
 
+    _runtime().configure()  # a decision that is due loads its compiled programs from the cache
+
     state, step = _manually(lambda: manual.ask(Path(args.file), _warn, resume=args.resume))
     _show_next(args, state, step)
     return 0
@@ -521,8 +523,9 @@ def _ask(args) -> int:
 
 def _tell(args) -> int:
     from noisebo.bridge import manual
-    from noisebo.flows.campaign import progress_lines
+    from noisebo.campaign.progress import progress_lines
 
+    _runtime().configure()  # a point completed here is decided with the compiled programs of the cache
     path = Path(args.file)
     given = sum(bool(v) for v in (args.values, args.spectrum, args.error))
     if given != 1:

@@ -25,17 +25,13 @@ from noisebo.flows.reporting import RunReport, run_name
 from noisebo.instruments import build, registry
 from noisebo.campaign.driver import drive, now_utc
 from noisebo.campaign.engine import KEEP_BUDGET, EngineState, advance, ask, new_campaign
+from noisebo.campaign.progress import progress_lines
 from noisebo.config import CampaignConfig, load_config
 from noisebo.events import (
-    Decided,
     Event,
-    MoreShots,
-    PointCommitted,
     Status,
-    StatusChanged,
 )
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
-from noisebo.state import format_position
 from noisebo.storage.recorder import Recorder, campaign_path, package_versions, read_started
 from noisebo.tasks import campaign as ops
 
@@ -50,39 +46,6 @@ def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> C
     cfg = config if isinstance(config, CampaignConfig) else load_config(config)
     cfg = registry.validated(cfg, str(config) if not isinstance(config, CampaignConfig) else "config")
     return cfg.with_overrides(acquisition={"policy": policy}) if policy else cfg
-
-
-def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
-    """What a person watching the campaign is told about ``events`` (committed after ``state``)."""
-    lines, n_steps = [], state.config.schedule.n_steps
-    for event in events:
-        if isinstance(event, PointCommitted):
-            p = event.point
-            label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
-            budget = "" if state.budget_s is None else f" ({state.spent_s:.4g} of {state.budget_s:.4g} s spent)"
-            lines.append(f"{label}: x={format_position(p.x)} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} "
-                         f"noise={p.noise:.3g}{budget}")
-        elif isinstance(event, MoreShots):
-            lines.append(f"point {event.point}: {event.reason}; taking more shots ({event.wanted} in all)")
-        elif isinstance(event, Decided):
-            lines += decision_lines(state, event.decision)
-        elif isinstance(event, StatusChanged) and event.status is Status.BUDGET_SPENT:
-            lines.append(event.reason)
-    return lines
-
-
-def decision_lines(state: EngineState, decision) -> list[str]:
-    """What a decision tells a person: the noise profile dropped (first time only), the noise
-    model converged (first time only)."""
-    lines = []
-    dropped = state.config.noise_model.profile is not None and not decision.profile_in_use
-    if dropped and state.data.profile_dropped_step is None:
-        lines.append(f"noise profile contradicted at step {decision.step + 1} (posterior predictive p = "
-                     f"{decision.profile_p:.2g} < {state.config.noise_model.profile_alpha:g} on the replicate "
-                     "scatter): its prior is dropped and the noise law is learned afresh")
-    if decision.converged and not state.data.is_converged:
-        lines.append(f"noise model converged at step {decision.step + 1}: t_opt = {decision.t_opt:.4g} s")
-    return lines
 
 
 def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda state: None,

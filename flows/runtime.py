@@ -55,10 +55,18 @@ def configure() -> None:
         cache = str(base / "data" / "cache" / f"jax-{_jaxlib_version()}-{cpu_fingerprint()}")
     if cache:
         os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
-        import jax
+        _jax_setting("jax_compilation_cache_dir", cache)
+        _jax_setting("jax_persistent_cache_min_compile_time_secs", 0.0)
 
-        jax.config.update("jax_compilation_cache_dir", cache)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+def _jax_setting(name: str, value) -> None:
+    """Set a JAX flag without importing JAX (0.3-0.5 s): JAX reads JAX_<NAME> from the environment
+    when it loads, so a command that never computes never loads it; if it is loaded already, the
+    flag is updated in place."""
+    if "jax" in sys.modules:
+        sys.modules["jax"].config.update(name, value)
+    else:
+        os.environ[name.upper()] = str(value)
 
 
 def _jaxlib_version() -> str:

@@ -16,7 +16,8 @@ from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, ValidationInfo, field_validator,
+                      model_validator)
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from noisebo import registry
@@ -64,10 +65,13 @@ def _strict(expected: str):
     return check
 
 
+LOAD_PLUGINS = "load_plugins"  # validation context: False checks plug-ins by name only (parse_config)
+
+
 def _installed(group: str):
-    def check(value: Any) -> Any:
+    def check(value: Any, info: ValidationInfo) -> Any:
         try:
-            return registry.checked(group, value)
+            return registry.checked(group, value, load_it=(info.context or {}).get(LOAD_PLUGINS, True))
         except ValueError as error:  # not installed, or broken: one line naming what is installed
             raise PydanticCustomError("not_installed", "{reason}", {"reason": str(error)}) from None
     return check
@@ -804,18 +808,22 @@ def _inline_profile(data: dict, base: Path | None, source: str) -> dict:
     return {**data, "noise_model": {**noise, "profile": read_profile(path, source)}}
 
 
-def parse_config(data: Any, source: str = "config", base: Path | None = None) -> CampaignConfig:
+def parse_config(data: Any, source: str = "config", base: Path | None = None,
+                 load_plugins: bool = True) -> CampaignConfig:
     """Validate a mapping into a ``CampaignConfig`` (a schema-1 mapping is migrated first); raise
     ``ConfigError`` naming the field. The instrument's settings are checked by its driver (see
     ``instruments.registry.validated``). A ``noise_model.profile`` given as a path is read
-    (``read_profile``; relative to ``base``, default the working folder)."""
+    (``read_profile``; relative to ``base``, default the working folder). The policy and noise law
+    are loaded to check them, or with ``load_plugins`` false only looked up by name: a config read
+    back from a campaign's own journal was checked when the campaign began, and its plug-ins (JAX
+    code) load with the first decision, so that reading a campaign (``ask``) does not wait for JAX."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a mapping of settings, got {type(data).__name__}")
     if data.get("schema_version") == 1 and not isinstance(data["schema_version"], bool):
         data = migrate_v1(data)
     data = _inline_profile(data, base, source)
     try:
-        return CampaignConfig.model_validate(data)
+        return CampaignConfig.model_validate(data, context={LOAD_PLUGINS: load_plugins})
     except ValidationError as error:
         raise ConfigError(f"{source}: {describe_errors(error)}") from None
 

@@ -6,8 +6,12 @@ seed, and a resumed campaign draws what the uninterrupted one would have.
 
 from __future__ import annotations
 
-import jax
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    import jax
 
 # Purposes separate streams that share a (seed, step) pair.
 SEED_POINTS = 1
@@ -27,6 +31,8 @@ def numpy_rng(seed: int, purpose: int, *path: int) -> np.random.Generator:
 
 def jax_key(seed: int, purpose: int, *path: int) -> jax.Array:
     """A JAX PRNG key for one (seed, purpose, *path) address."""
+    import jax  # here, so that the NumPy streams (seed points, shots) do not load JAX
+
     key = jax.random.PRNGKey(int(seed))
     for part in (purpose, *path):
         key = jax.random.fold_in(key, int(part))

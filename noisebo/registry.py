@@ -153,12 +153,15 @@ def working_policies() -> tuple[str, ...]:
     return paper + tuple(name for name, _ in _loadable_policies() if name not in paper)
 
 
-def checked(group: str, name: object) -> str:
-    """``name`` when it names a loadable plug-in of ``group``; ValueError with one line otherwise
-    (a config's validator)."""
+def checked(group: str, name: object, load_it: bool = True) -> str:
+    """``name`` when it names a loadable plug-in of ``group`` (with ``load_it`` false: an
+    installed one, not loaded yet); ValueError with one line otherwise (a config's validator)."""
     if not isinstance(name, str):
         raise PluginNotInstalled(f"expected the name of a {KINDS[group]}, got {name!r}")
-    load(group, name)
+    if load_it:
+        load(group, name)
+    elif (group, name) not in _FOUND and name not in installed(group):
+        raise PluginNotInstalled(not_installed(group, name))
     return name
 
 

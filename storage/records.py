@@ -122,7 +122,7 @@ def decode(record: Record) -> Event:
     try:
         if record.type == "campaign":
             driver = DriverInfo(**f["driver"])
-            return Started(parse_config(f["config"], "journal"), f["seed"], driver, f["versions"], f["created_utc"])
+            return Started(parse_config(f["config"], "journal", load_plugins=False), f["seed"], driver, f["versions"], f["created_utc"])
         if record.type == "shot":
             reading = Reading(f["value"], a.get("spectrum"), f.get("reduction"))
             return ShotTaken(f["point"], f["shot"], tuple(f["x"]), f["t"], reading)

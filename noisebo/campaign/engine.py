@@ -15,12 +15,9 @@ and journals the events it gets back; replaying those events rebuilds the same s
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Mapping, NamedTuple, Sequence
+from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
 
-from noisebo.acquisition.proposal import cheapest_point_s
 from noisebo.acquisition.records import Decision
-from noisebo.campaign.decision import StepInputs
-from noisebo.campaign.stages import PLAIN, Stages, run_decision
 from noisebo.campaign.steps import make_point, seed_points
 from noisebo.config import CampaignConfig
 from noisebo.events import (
@@ -46,6 +43,10 @@ from noisebo.events import (
 from noisebo.failures import budget_message
 from noisebo.reduction import NoUsableShots, Reading
 from noisebo.state import CampaignState
+
+if TYPE_CHECKING:  # the models load with the first decision: asking what to measure needs none
+    from noisebo.campaign.decision import StepInputs
+    from noisebo.campaign.stages import Stages
 
 
 class EngineError(ValueError):
@@ -205,6 +206,8 @@ def ask(state: EngineState) -> Request | DecisionDue | Done:
         return DecisionDue(len(state.decisions), final=True, budget=short) if short else request
     sched = state.config.schedule
     if len(state.decisions) < sched.n_steps:
+        from noisebo.acquisition.proposal import cheapest_point_s
+
         cheapest = cheapest_point_s(state.config)
         short = _unaffordable(state, cheapest, f"the cheapest point costs {cheapest:.4g} s")
         return DecisionDue(len(state.decisions), final=True, budget=short) if short else DecisionDue(len(state.decisions))
@@ -305,14 +308,17 @@ def _budget(state: EngineState) -> list[Event]:
     return [] if message is None else [StatusChanged(Status.FAILED, message)]
 
 
-def advance(state: EngineState, stages: Stages = PLAIN) -> tuple[Event, ...]:
+def advance(state: EngineState, stages: Stages | None = None) -> tuple[Event, ...]:
     """The events of the decision that is due: the next BO step (fits, prediction, acquisition;
     key (seed, step)), or after the last step the final summary and the status "completed", or
     the reduction of a point whose shots are all in. Nothing when no decision is due. Each
     stage runs through ``stages`` (``noisebo.campaign.stages``; default plain calls)."""
+    from noisebo.campaign.stages import PLAIN, run_decision
+
     due = ask(state)
     if not isinstance(due, DecisionDue):
         return ()
+    stages = PLAIN if stages is None else stages
     if due.reduce:
         return tuple(_reduce(state, _point_under_way(state), stages.reduce))
     if due.final:
@@ -326,6 +332,8 @@ def advance(state: EngineState, stages: Stages = PLAIN) -> tuple[Event, ...]:
 def step_inputs(state: EngineState) -> StepInputs:
     """What the due BO step decides from: the points, the keys' seed and step, the previous
     step's hyperparameters and the budget left."""
+    from noisebo.campaign.decision import StepInputs
+
     previous = state.decisions[-1].hyperparameters if state.decisions else None
     return StepInputs(state.config, state.data, state.seed, len(state.decisions), previous, budget_left(state))
 

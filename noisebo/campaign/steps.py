@@ -8,13 +8,10 @@ from typing import Sequence
 
 import numpy as np
 
-from noisebo.acquisition.policies import policy_of
 from noisebo.config import CampaignConfig, ReductionConfig
 from noisebo.events import Summary
 from noisebo.keys import SEED_POINTS, numpy_rng
-from noisebo.models.fitting import fit_key, fit_models, hyperparameters
 from noisebo.models.grids import grids
-from noisebo.models.prediction import predict
 from noisebo.reduction import (
     ShotValue,
     clip_outliers,
@@ -96,6 +93,10 @@ def make_point(
 def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summary:
     """Fit both models on every point (key for the step after the last decision: ``n_steps``
     unless the instrument-time budget ended the campaign sooner) and summarise them."""
+    from noisebo.acquisition.policies import policy_of  # the models load with the first fit, not to ask
+    from noisebo.models.fitting import fit_key, fit_models, hyperparameters
+    from noisebo.models.prediction import predict
+
     fitted = fit_models(config, state, fit_key(seed, len(state.t_opt_history)))
     pred = predict(config, fitted, state, policy_of(config.acquisition).uses_spread)
     return Summary(

@@ -43,9 +43,21 @@ def test_a_command_that_needs_no_model_loads_none(tmp_path, args):
     assert found == {"code": 0, "loaded": []}
 
 
-def test_inspect_loads_no_model(started_file):
-    found = loaded_after(["inspect", str(started_file)], started_file.parent)
+@pytest.mark.parametrize("command", ["inspect", "ask"])
+def test_reading_a_campaign_loads_no_model(started_file, command):
+    """ask: the point is decided already (a seed point), so no policy or noise law is loaded."""
+    found = loaded_after([command, str(started_file)], started_file.parent)
     assert found == {"code": 0, "loaded": []}
+
+
+def test_a_journals_config_is_checked_by_name_without_loading_its_plugins(tiny_config):
+    from noisebo.config import ConfigError, parse_config
+
+    stored = tiny_config.model_dump(mode="json")
+    assert parse_config(stored, "journal", load_plugins=False) == tiny_config
+    stored["acquisition"]["policy"] = "no_such_policy"
+    with pytest.raises(ConfigError, match="journal: acquisition.policy: no installed policy 'no_such_policy'; installed: "):
+        parse_config(stored, "journal", load_plugins=False)
 
 
 def test_a_bad_config_is_still_one_line_and_exit_2(tmp_path):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from noisebo.cli.main import inspect_summary
-from noisebo.flows.campaign import decision_lines
+from noisebo.campaign.progress import decision_lines
 from noisebo.instruments import build
 from noisebo.instruments.registry import driver_info, validated
 from noisebo.campaign import driver, engine

@@ -1,0 +1,46 @@
+"""What a person watching a campaign is told as its events are committed: one line per point,
+per extra shots asked for, per first convergence or dropped noise profile, and when the budget is
+spent. Pure text from the state and the events: the campaign flow and ``noisebo tell`` print it."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Sequence
+
+from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status, StatusChanged
+from noisebo.state import format_position
+
+if TYPE_CHECKING:
+    from noisebo.campaign.engine import EngineState
+
+
+def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
+    """What a person watching the campaign is told about ``events`` (committed after ``state``)."""
+    lines, n_steps = [], state.config.schedule.n_steps
+    for event in events:
+        if isinstance(event, PointCommitted):
+            p = event.point
+            label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
+            budget = "" if state.budget_s is None else f" ({state.spent_s:.4g} of {state.budget_s:.4g} s spent)"
+            lines.append(f"{label}: x={format_position(p.x)} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} "
+                         f"noise={p.noise:.3g}{budget}")
+        elif isinstance(event, MoreShots):
+            lines.append(f"point {event.point}: {event.reason}; taking more shots ({event.wanted} in all)")
+        elif isinstance(event, Decided):
+            lines += decision_lines(state, event.decision)
+        elif isinstance(event, StatusChanged) and event.status is Status.BUDGET_SPENT:
+            lines.append(event.reason)
+    return lines
+
+
+def decision_lines(state: EngineState, decision) -> list[str]:
+    """What a decision tells a person: the noise profile dropped (first time only), the noise
+    model converged (first time only)."""
+    lines = []
+    dropped = state.config.noise_model.profile is not None and not decision.profile_in_use
+    if dropped and state.data.profile_dropped_step is None:
+        lines.append(f"noise profile contradicted at step {decision.step + 1} (posterior predictive p = "
+                     f"{decision.profile_p:.2g} < {state.config.noise_model.profile_alpha:g} on the replicate "
+                     "scatter): its prior is dropped and the noise law is learned afresh")
+    if decision.converged and not state.data.is_converged:
+        lines.append(f"noise model converged at step {decision.step + 1}: t_opt = {decision.t_opt:.4g} s")
+    return lines
