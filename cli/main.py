@@ -17,7 +17,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from noisebo.cli import noise_profile
+from noisebo.cli import configs, noise_profile
+from noisebo.cli.configs import config_path
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
 from noisebo.storage.integrity import CampaignFileError
 
@@ -96,7 +97,7 @@ def _validated(path) -> CampaignConfig:
     from noisebo.config import load_config
     from noisebo.instruments.registry import validated
 
-    return validated(load_config(path), str(path))
+    return validated(load_config(config_path(path)), str(path))
 
 
 def _run(args) -> int:
@@ -252,7 +253,7 @@ def _serve(args) -> int:
     _runtime().configure()
     from noisebo.flows.deployments import deployments_for, serve_all
 
-    deployments = [d for path in args.config
+    deployments = [d for path in map(config_path, args.config)
                    for d in deployments_for(path, args.out, seeds, policies, args.cron, args.interval)]
     names = ", ".join(f"{d.flow_name}/{d.name}" for d in deployments)
     print(f"serving {names} on {os.environ['PREFECT_API_URL']} (Ctrl-C stops)", flush=True)
@@ -267,7 +268,7 @@ def _deploy(args) -> int:
     _runtime().configure()
     from noisebo.flows.workers import deploy_campaign
 
-    for path in args.config:
+    for path in map(config_path, args.config):
         name = deploy_campaign(path, args.pool, args.out)
         print(f"deployed {name} to work pool {args.pool!r}; start workers with: prefect worker start --pool {args.pool}")
     return 0
@@ -603,6 +604,9 @@ def _view_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-rrd", action="store_true", help="do not write the FILE.rrd recording")
 
 
+CONFIG_HELP = "a campaign YAML, or a shipped config by name, e.g. forrester (`noisebo config` lists them)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     import noisebo
 
@@ -611,7 +615,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = commands.add_parser("run", help="run one campaign through the Prefect flow")
-    run.add_argument("config", help="campaign YAML, e.g. data/configs/forrester.yaml")
+    run.add_argument("config", help=CONFIG_HELP)
     run.add_argument("--seed", type=int, default=0)
     run.add_argument("--policy", choices=_policy_choices(), default=None)
     run.add_argument("--out", type=Path, default=Path("data/runs"))
@@ -654,7 +658,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.set_defaults(handler=_report)
 
     sweep = commands.add_parser("sweep", help="run campaigns over seeds and policies in parallel")
-    sweep.add_argument("config")
+    sweep.add_argument("config", help=CONFIG_HELP)
     sweep.add_argument("--seeds", required=True, help="N, A-B or A,B,C")
     sweep.add_argument("--policy", choices=_policy_choices("both", "all"), default="both",
                        help="an installed policy, both (the paper's two) or all (every installed one)")
@@ -667,7 +671,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.set_defaults(handler=_sweep)
 
     start = commands.add_parser("start", help="create a campaign's file without running it (to measure by hand)")
-    start.add_argument("config", help="campaign YAML, e.g. data/configs/forrester_manual.yaml")
+    start.add_argument("config", help=CONFIG_HELP)
     start.add_argument("--seed", type=int, default=0)
     start.add_argument("--policy", choices=_policy_choices(), default=None)
     start.add_argument("--out", type=Path, default=Path("data/runs"))
@@ -704,6 +708,7 @@ def build_parser() -> argparse.ArgumentParser:
     instruments.set_defaults(handler=_instruments)
 
     noise_profile.add_parser(commands)
+    configs.add_parser(commands)
 
     policies = commands.add_parser("policies", help="list the installed policies and noise laws")
     policies.set_defaults(handler=_policies_listed)

@@ -13,10 +13,10 @@ import numpy as np
 from pydantic import Field, model_validator
 from scipy import ndimage
 
-from noisebo.instruments.pfm_scan import DEFAULT_SCAN, PROJECT_ROOT, ProfileError, dominant_phase, read_scan, signed_response
+from noisebo.instruments.pfm_scan import DEFAULT_SCAN, ProfileError, dominant_phase, read_scan, signed_response
 from noisebo.config import Count, FrozenModel, NonNegativeFloat, Number, PositiveFloat
 
-__all__ = ["PROJECT_ROOT", "ProfileError", "dominant_phase", "ScanProfileConfig", "SyntheticProfileConfig",
+__all__ = ["ProfileError", "dominant_phase", "ScanProfileConfig", "SyntheticProfileConfig",
            "ProfileConfig", "Profile", "scan_profile", "synthetic_profile", "build_profile", "ChannelIndex"]
 
 ChannelIndex = Annotated[Count, Field(ge=0)]

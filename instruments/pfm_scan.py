@@ -20,7 +20,6 @@ import h5py
 import numpy as np
 from scipy import ndimage
 
-PROJECT_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SCAN = "data/pfm/PTO_Funakubo0003.h5"
 MEASUREMENT = "Measurement_000"
 # quantity (lower case) -> units the channel must have
@@ -62,9 +61,23 @@ class Scan:
 
 
 def resolve(file: str) -> Path:
-    """``file`` as given when absolute, else relative to the project root."""
-    path = Path(file)
-    return path if path.is_absolute() else PROJECT_ROOT / path
+    """Where the scan ``file`` is: as given when absolute or found from the working folder;
+    otherwise the scan shipped with noisebo of that file name (package data ``noisebo.scans``:
+    the shipped configs name data/pfm/PTO_Funakubo0003.h5), if there is one; otherwise ``file``
+    as given, for the reader to report."""
+    path = Path(file).expanduser()
+    if path.is_absolute() or path.exists():
+        return path
+    shipped = shipped_scan(path.name)
+    return path if shipped is None else shipped
+
+
+def shipped_scan(name: str) -> Path | None:
+    """The path of the scan ``name`` shipped with noisebo, or None."""
+    from importlib import resources
+
+    found = resources.files("noisebo.scans") / name
+    return Path(str(found)) if name.endswith(".h5") and found.is_file() else None
 
 
 def _text(value) -> str:

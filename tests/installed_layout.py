@@ -18,8 +18,10 @@ def package_dirs() -> dict[str, str]:
 
 
 def adapters() -> list[str]:
-    """The subpackages mapped in from folders beside noisebo/ (noisebo.flows, ...)."""
-    return sorted(name for name in package_dirs() if name != "noisebo")
+    """The code subpackages mapped in from folders beside noisebo/ (noisebo.flows, ...); the
+    package data under data/ (noisebo.configs, noisebo.scans) is not among them."""
+    return sorted(name for name, folder in package_dirs().items()
+                  if name != "noisebo" and not folder.startswith("data/"))
 
 
 def assemble(dest: Path, core: Path | None = None) -> Path:

@@ -4,6 +4,8 @@ the noisy walls that the landing jitter makes), the line unchanged, and data/con
 
 import h5py
 import numpy as np
+from pathlib import Path
+
 import pytest
 import yaml
 from scipy import ndimage
@@ -12,10 +14,12 @@ from noisebo.instruments.faults import FaultyInstrument
 from noisebo.instruments.pfm import PFMInstrument, PFMSettings
 from noisebo.instruments.pfm_area import ScanAreaConfig, SyntheticAreaConfig
 from noisebo.instruments.pfm_profile import ScanProfileConfig, SyntheticProfileConfig
-from noisebo.instruments.pfm_scan import PROJECT_ROOT, ProfileError, dominant_phase
+from noisebo.instruments.pfm_scan import ProfileError, dominant_phase
 from noisebo.instruments.registry import build, validated
 from noisebo.config import ConfigError, FaultsConfig, InstrumentConfig, ReductionConfig, parse_config
 from noisebo.reduction import shot_value
+
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
 PITCH = 1 / 255  # um: the shipped scan's 256 pixels over 1 um
 TUNED = ReductionConfig(sho={"nominal_resonance_hz": 372_000.0, "nominal_q": 250.0})

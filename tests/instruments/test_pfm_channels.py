@@ -10,7 +10,9 @@ import pytest
 from noisebo.instruments.pfm import PFMInstrument, PFMSettings
 from noisebo.instruments.pfm_area import ScanAreaConfig
 from noisebo.instruments.pfm_profile import ScanProfileConfig, scan_profile
-from noisebo.instruments.pfm_scan import PROJECT_ROOT, ChannelError, ProfileError, read_scan
+from noisebo.instruments.pfm_scan import ChannelError, ProfileError, read_scan
+
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
 SHIPPED = PROJECT_ROOT / "data" / "pfm" / "PTO_Funakubo0003.h5"
 # The 0001 scan lives beside the project (the shared data folder), not in data/pfm.
