@@ -46,7 +46,7 @@ from h5py import h5s
 from noisebo.storage import manifest
 from noisebo.storage import steps as numbering
 from noisebo.storage.faults import crash_point
-from noisebo.storage.hdf5 import (
+from noisebo.storage.layout import (
     ARRAY_COLUMNS,
     FAILURE_COLUMNS,
     FAILURE_TEXT,
@@ -62,7 +62,6 @@ from noisebo.storage.hdf5 import (
     SPECTRA_DESCRIPTION,
     SPECTRA_ROWS,
     STEP_COLUMNS,
-    CampaignFileError,
     array_dtype,
     array_shapes,
     column_dtype,
@@ -79,6 +78,7 @@ from noisebo.storage.hdf5 import (
     temporary_path,
     x_tail,
 )
+from noisebo.storage.integrity import CampaignFileError
 from noisebo.storage.journal import _fsync_dir
 
 if TYPE_CHECKING:  # reading a running file needs no model

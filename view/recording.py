@@ -107,13 +107,8 @@ class CampaignRecording:
         needs: the per-step arrays by reference and the shots added point by point, so a frame of
         a long campaign costs what is new, not a copy of everything (the finished campaign's
         summary frame, once, takes the whole tables)."""
-        from noisebo.storage.hdf5 import (
-            array_shapes,
-            campaign_tables,
-            hyperparameter_names,
-            point_rows,
-            step_rows,
-        )
+        from noisebo.storage.hdf5 import campaign_tables
+        from noisebo.storage.layout import array_shapes, hyperparameter_names, point_rows, step_rows
 
         if state.summary is not None:
             return campaign_tables(state)

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from noisebo.storage import steps
-from noisebo.storage.hdf5 import SCHEMA_VERSION, read_campaign
+from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.layout import SCHEMA_VERSION
 from noisebo.storage.recorder import rebuild_file
 
 DATA = Path(__file__).resolve().parents[1] / "data"
