@@ -240,6 +240,11 @@ class Exchange:
             raise WireError(409, f"attempt {handed.attempt} at point {point} shot {shot}: the current attempt is "
                                  f"{attempts}")
 
+    def campaign(self) -> EngineState | None:
+        """The campaign as last committed (None before it starts), for the operator's page."""
+        with self._cond:
+            return self._state
+
     def status(self) -> dict:
         """Progress for a person at the instrument."""
         with self._cond:

@@ -15,7 +15,6 @@ reading the answer (Python's urllib) sees the 413 rather than a reset connection
 
 from __future__ import annotations
 
-import html
 import secrets
 import socket
 import threading
@@ -27,6 +26,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from noisebo.bridge import page as page_html
 from noisebo.bridge.exchange import Exchange
 from noisebo.bridge.wire import ReadingBody, WireError, parse_body
 
@@ -101,7 +101,7 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
 
     @app.get("/", dependencies=[Depends(page_authorised)], response_class=HTMLResponse, include_in_schema=False)
     async def page():
-        return status_page(exchange.status())
+        return await run_in_threadpool(lambda: page_html.render(exchange.status(), exchange.campaign()))
 
     return app
 
@@ -166,21 +166,6 @@ class Drained:
             pending[0] = message["type"] == "http.request" and message.get("more_body", False)
             drained += len(message.get("body", b""))
         return not pending[0]
-
-
-def status_page(status: dict) -> str:
-    """The status as a small self-refreshing HTML page."""
-    rows = []
-    for key, value in status.items():
-        if isinstance(value, dict):
-            value = ", ".join(f"{k}: {v}" for k, v in value.items())
-        rows.append(f"<tr><th>{html.escape(str(key))}</th><td>{html.escape(str(value))}</td></tr>")
-    done, total = status.get("points", 0), status.get("points_total") or 1
-    return ("<!doctype html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='2'>"
-            "<title>noisebo campaign</title><style>body{font-family:sans-serif;margin:2em}th{text-align:left;"
-            "padding-right:1em}</style></head><body><h1>noisebo campaign</h1>"
-            f"<progress value='{done}' max='{total}'></progress> {done}/{total} points"
-            f"<table>{''.join(rows)}</table></body></html>")
 
 
 class BridgeServer:
