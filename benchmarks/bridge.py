@@ -23,8 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-
 from noisebo.bridge.client import Spectrum, serve_instrument
 from noisebo.instruments import build
 from noisebo.instruments.registry import driver_info, validated
@@ -36,6 +34,7 @@ from noisebo.keys import MEASURE, numpy_rng
 from noisebo.reduction import Reading
 from noisebo.storage.recorder import Recorder
 
+ROOT = Path(__file__).resolve().parents[1]
 TOKEN = "benchmark-token"
 DISTINCT = 16  # distinct prerecorded readings, cycled
 

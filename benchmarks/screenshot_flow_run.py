@@ -41,9 +41,9 @@ from pathlib import Path
 import httpx
 from PIL import Image
 
-ROOT = Path(__file__).resolve().parents[1]
-
 from noisebo.flows.processes import local_server, wait_for
+
+ROOT = Path(__file__).resolve().parents[1]
 
 WINDOW = (1600, 1000)
 MAX_BYTES = 400_000

@@ -85,7 +85,7 @@ def main(argv=None) -> int:
                 logs = [tmp / f"worker{i}.log" for i in (1, 2)]
                 workers = [start([str(BIN / "prefect"), "worker", "start", "--pool", "bench", "--limit", "1"],
                                  env, log) for log in logs]
-                wait_for(lambda: all("started" in log.read_text() for log in logs), 120, "two workers", logs)
+                wait_for(lambda logs=logs: all("started" in log.read_text() for log in logs), 120, "two workers", logs)
             started = time.perf_counter()
             done = subprocess.run([str(BIN / "noisebo"), "sweep", args.config, "--seeds", args.seeds, "--policy",
                                    args.policy, "--out", str(folder), *options], env=env, capture_output=True, text=True)

@@ -232,7 +232,7 @@ class PFMInstrument:
     def _samples(self, t: np.ndarray) -> np.ndarray:
         return np.maximum(MIN_SAMPLES, np.round(self.config.sample_rate_hz * t)).astype(int)
 
-    @lru_cache(maxsize=4096)
+    @lru_cache(maxsize=4096)  # noqa: B019 - one instrument per campaign: the cache lives as long as it
     def _fit_variance(self, n: int) -> float:
         c = self.config
         freq = np.linspace(c.resonance_hz - c.sweep_half_span_hz, c.resonance_hz + c.sweep_half_span_hz, n)
@@ -277,6 +277,6 @@ class PFMInstrument:
                              indexing="ij")
         return np.stack([gx.ravel(), gy.ravel()], axis=-1)
 
-    @lru_cache(maxsize=1)
+    @lru_cache(maxsize=1)  # noqa: B019 - one instrument per campaign: the cache lives as long as it
     def _jitter_variance(self) -> float:
         return float(np.mean(self.static_sd(self.averaging_positions()) ** 2))

@@ -68,7 +68,7 @@ def true_optimal_map(config: CampaignConfig, instrument=None) -> tuple[np.ndarra
             instrument = build(config.instrument)
         if not hasattr(instrument, "noise_law_at"):
             return None
-        s, rew = config.space, config.reward
+        rew = config.reward
         x = grids(config).x
         t = grids(config).t_fine
         noise = np.asarray(instrument.noise_law_at(x.reshape(len(x), -1), t), dtype=np.float64)

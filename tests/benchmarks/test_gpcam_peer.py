@@ -86,4 +86,4 @@ def test_same_seed_same_campaign(records):
 
 def test_leaves_the_warning_filters_as_they_were(records):
     with pytest.raises(UserWarning):  # pyproject's filterwarnings = error still holds after gpCAM ran
-        warnings.warn("after gpCAM", UserWarning)
+        warnings.warn("after gpCAM", UserWarning, stacklevel=1)

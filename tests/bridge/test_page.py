@@ -7,9 +7,7 @@ import numpy as np
 import pytest
 
 from noisebo.bridge.page import number, plot, render, ticks
-from noisebo.campaign import engine
 from noisebo.campaign.driver import run_campaign
-from noisebo.events import DriverInfo
 from noisebo.instruments import build
 
 RUNNING = {"status": "running", "reason": "", "campaign": "tiny/reward/s3@2026", "points": 7, "points_total": 7,

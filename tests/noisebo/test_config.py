@@ -5,7 +5,7 @@ from typing import Literal
 import h5py
 import numpy as np
 import pytest
-from pydantic import BaseModel
+from pydantic import BaseModel, ValidationError
 
 from noisebo.config import CampaignConfig, ConfigError, Count, Flag, Number, lax_fields, load_config, parse_config
 
@@ -25,7 +25,7 @@ def test_shipped_forrester_config_has_the_papers_settings():
 
 def test_config_is_frozen_and_hashable():
     cfg = CampaignConfig()
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError, match="frozen"):
         cfg.name = "other"
     assert hash(cfg) == hash(CampaignConfig())
     one = cfg.with_overrides(instrument={"settings": {"a0": 0.2, "a1": 1.0}})

@@ -201,7 +201,7 @@ def test_checksums_are_in_the_file_for_every_table_and_text_column(sources):
         with h5py.File(sources[name], "r", swmr=name.startswith("killed")) as f:
             assert f.attrs["schema_version"] == 4 and "integrity" in f
             datasets = []
-            f.visititems(lambda n, o: datasets.append((n, o)) if isinstance(o, h5py.Dataset) else None)
+            f.visititems(lambda n, o, found=datasets: found.append((n, o)) if isinstance(o, h5py.Dataset) else None)
             for path, ds in datasets:
                 assert ds.fletcher32 or "crc32" in ds.attrs or ds.shape == (), f"{name}: {path}"
 

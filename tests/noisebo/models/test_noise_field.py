@@ -32,7 +32,10 @@ def measure(x, t, sd, rng, shots=SHOTS):
     return sd * np.sqrt(rng.chisquare(shots - 1, size=np.shape(t)) / (shots - 1))
 
 
-def fit(x, t, s, cfg=QUADRATURE, field=noise_field.NoiseFieldConfig(), laplace=32, **kwargs):
+DEFAULT_FIELD = noise_field.NoiseFieldConfig()
+
+
+def fit(x, t, s, cfg=QUADRATURE, field=DEFAULT_FIELD, laplace=32, **kwargs):
     data, scale, _ = noise_field.prepare(x, t, s, np.full(len(t), SHOTS), cfg, field, T_MIN, T_MAX, 256)
     samples, data = noise_field.fit(data, cfg, field, jax.random.PRNGKey(0), 2, laplace, **kwargs)
     return samples, data, scale

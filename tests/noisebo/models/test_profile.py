@@ -11,7 +11,10 @@ from noisebo.models.profile import NotDistillable, distil
 CONFIG = CampaignConfig()
 
 
-def law_measurements(a0=0.1, a1=2.0, n=30, ts=np.geomspace(0.3, 8.0, 16)):
+TIMES = np.geomspace(0.3, 8.0, 16)
+
+
+def law_measurements(a0=0.1, a1=2.0, n=30, ts=TIMES):
     """Sample sds whose unbiased value (sd / c4(n)) is exactly A1/sqrt(t) + A0 at each t."""
     shots = np.full(ts.size, n, dtype=float)
     return ts, (a1 / np.sqrt(ts) + a0) * c4(shots), shots
