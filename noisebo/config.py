@@ -12,7 +12,7 @@ import json
 import math
 import types
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union, get_args, get_origin
+from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin
 
 import numpy as np
 import yaml
@@ -445,7 +445,7 @@ class ProfileCampaign(FrozenModel):
     noise_points: Count
 
 
-PROFILE_KIND = "noisebo.noise_profile"
+PROFILE_KIND: Final = "noisebo.noise_profile"
 
 
 class NoiseProfile(FrozenModel):

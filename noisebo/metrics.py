@@ -71,7 +71,7 @@ def campaign_figures(
         "t_opt_pred": history + [float(t_opt_final)],
         "t_star": t_star,
         "t_opt_rel_error": None if t_star is None else relative_error(t_opt_final, t_star),
-        "rmse_f": None if truth is None else rmse(predicted, truth),
+        "rmse_f": None if truth is None or predicted is None else rmse(predicted, truth),
         "total_measurement_time": float(np.sum(shot_t)),
         "step_latency_s": [float(v) for v in latencies_s],
     }

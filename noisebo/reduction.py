@@ -33,7 +33,7 @@ class Reading:
             self.value is not None and other.value is not None and np.isnan(self.value) and np.isnan(other.value))
         return same_value and self.reduction == other.reduction and same_spectrum
 
-    __hash__ = None
+    __hash__ = None  # type: ignore[assignment]  # compared by value, with arrays: not hashable
 
 
 class ShotValue(NamedTuple):
@@ -63,7 +63,7 @@ def sho_value(spectrum: np.ndarray, config: SHOReductionConfig) -> ShotValue:
     nominal = None
     if config.nominal_resonance_hz is not None and config.nominal_q is not None:
         nominal = (config.nominal_resonance_hz, config.nominal_q)
-    fit = fit_sho(spectrum[0], spectrum[1], phase, tuple(config.q_bounds), 0.0, nominal)
+    fit = fit_sho(spectrum[0], spectrum[1], phase, (config.q_bounds[0], config.q_bounds[1]), 0.0, nominal)
     return ShotValue(fit.value if fit.ok else float("nan"), fit.ok, fit.reason if not fit.ok else "", fit)
 
 
@@ -88,7 +88,7 @@ def register_reduction(name: str, reduce: Callable[[np.ndarray], float]) -> None
             return ShotValue(float("nan"), False, f"{name}: non-finite value", None)
         return ShotValue(value, True, "", None)
 
-    reduction.user_function = reduce
+    reduction.user_function = reduce  # type: ignore[attr-defined]  # what the registry wraps, for its name
     REDUCTIONS[name] = reduction
 
 
@@ -150,7 +150,7 @@ class Reduced(NamedTuple):
     n_shots: int
 
 
-def reduce_shots(values: Sequence[float]) -> Reduced:
+def reduce_shots(values: Sequence[float] | np.ndarray) -> Reduced:
     """Mean and sample standard deviation of one point's repeated shots."""
     arr = np.asarray(values, dtype=np.float64)
     if arr.ndim != 1 or arr.size == 0:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 from importlib.metadata import entry_points
 
 POLICIES = "noisebo.policies"
@@ -129,7 +130,7 @@ def noise_law_names() -> tuple[str, ...]:
     return names(NOISE_LAWS)
 
 
-def _loadable_policies() -> list[tuple[str, object]]:
+def _loadable_policies() -> list[tuple[str, Any]]:
     out = []
     for name in policy_names():
         try:

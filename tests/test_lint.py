@@ -1,5 +1,5 @@
-"""The lint rules of pyproject.toml ([tool.ruff.lint]) hold for the whole repository, and a
-breach is caught: CI runs them through this test."""
+"""The lint rules of pyproject.toml ([tool.ruff.lint]) hold for the whole repository and the core
+package type-checks ([tool.mypy]), and a breach of each is caught: CI runs them through this test."""
 
 import subprocess
 import sys
@@ -24,3 +24,23 @@ def test_a_breach_is_caught(tmp_path):
     out = ruff(cwd=tmp_path)
     assert out.returncode == 1
     assert "F401" in out.stdout and "B006" in out.stdout
+
+
+def mypy(*args: str, cwd: Path = ROOT, cache: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "mypy", "--cache-dir", str(cache), *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=600, check=False)
+
+
+def test_the_core_type_checks(tmp_path):
+    out = mypy(cache=tmp_path / "cache")
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.startswith("Success: no issues found")
+
+
+def test_a_type_error_in_the_core_is_caught(tmp_path):
+    (tmp_path / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text())
+    (tmp_path / "noisebo").mkdir()
+    (tmp_path / "noisebo" / "__init__.py").write_text("")
+    (tmp_path / "noisebo" / "wrong.py").write_text("def half(x: float) -> float:\n    return x / 2\n\n\nhalf('one')\n")
+    out = mypy(cwd=tmp_path, cache=tmp_path / "cache")
+    assert out.returncode == 1 and 'Argument 1 to "half" has incompatible type "str"' in out.stdout

@@ -173,6 +173,7 @@ def acquire(
         found = _propose(config, fitted, post, key, shots, jnp.asarray(allowed))
         if best is None or found[2] > best[2]:
             best = found + (shots,)
+    assert best is not None  # options is never empty: it holds the wanted count
     x, j, acq_value, acq_map, noise_at_t, shots = best
     g = grids(config)
     if sched.noise_t == "informative" and not now_converged and shots >= 2:
@@ -228,6 +229,8 @@ def informative_t(prediction: Prediction, j: int, shots: int, config: CampaignCo
     """``schedule.noise_t: informative``: the index of the affordable t on the t grid whose
     noise measurement of ``shots`` shots narrows the posterior of the optimal t most per second
     (``information.t_opt_rate``); the policy's index j when no draw disagrees about t*."""
+    if prediction.t_draws is None or prediction.noise_draws is None:
+        return j
     allowed, _ = affordable(config, shots, budget_left)
     t = grids(config).t
     rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws, jnp.asarray(t),

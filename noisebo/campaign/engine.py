@@ -320,7 +320,9 @@ def advance(state: EngineState, stages: Stages | None = None) -> tuple[Event, ..
         return ()
     stages = PLAIN if stages is None else stages
     if due.reduce:
-        return tuple(_reduce(state, _point_under_way(state), stages.reduce))
+        under_way = _point_under_way(state)
+        assert under_way is not None  # a reduction is due only for a point being measured
+        return tuple(_reduce(state, under_way, stages.reduce))
     if due.final:
         status = StatusChanged(Status.BUDGET_SPENT if due.budget else Status.COMPLETED, due.budget)
         if len(state.points) < MIN_POINTS_TO_SUMMARISE:  # a budget that paid for less has no models to give
@@ -348,13 +350,16 @@ def stop(state: EngineState, status: Status, reason: str) -> tuple[Event, ...]:
 KEEP_BUDGET = object()
 
 
-def resumed(state: EngineState, budget_s: float | None = KEEP_BUDGET) -> tuple[Event, ...]:
+def resumed(state: EngineState, budget_s: float | None | object = KEEP_BUDGET) -> tuple[Event, ...]:
     """The events that restart an unfinished campaign: its new instrument-time budget (when
     ``budget_s`` is given: seconds in all, or None for none), then status running with a fresh
     failure budget; nothing for a completed one."""
     if state.status is Status.COMPLETED:
         return ()
-    budget = () if budget_s is KEEP_BUDGET or budget_s == state.budget_s else (BudgetChanged(budget_s),)
+    if budget_s is KEEP_BUDGET or budget_s == state.budget_s:
+        return (StatusChanged(Status.RUNNING, "resumed"),)
+    assert budget_s is None or isinstance(budget_s, (int, float))
+    budget = (BudgetChanged(None if budget_s is None else float(budget_s)),)
     return (*budget, StatusChanged(Status.RUNNING, "resumed"))
 
 

@@ -85,7 +85,7 @@ def make_point(
         value=reduced.value,
         shot_std=reduced.shot_std,
         n_shots=reduced.n_shots,
-        noise=reduced.shot_std if measured else float(model_noise),
+        noise=reduced.shot_std if model_noise is None else float(model_noise),
         noise_measured=measured,
     ), shots
 

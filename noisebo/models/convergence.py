@@ -34,7 +34,7 @@ def converged_map(t_opt_maps: Sequence[np.ndarray], window: int, threshold: floa
     return float(np.mean(np.var(recent, axis=0))) < threshold
 
 
-def t_interval(t_draws: Sequence[float]) -> float:
+def t_interval(t_draws: Sequence[float] | np.ndarray) -> float:
     """Half the width of the 95 % interval of the optimal t over posterior draws, relative to
     their median: 1.96 standard deviations of the draws over their median. With a few dozen
     draws the 2.5 and 97.5 percentiles are the extreme draws and jump from step to step; the

@@ -112,13 +112,15 @@ def fit_field(
     nm, s, inf = config.noise_model, config.space, config.inference
     x, t, std, shots = training_inputs(config, state, scaled_positions)
     distinct = min(int(np.unique(t).size), inf.max_inputs)
-    data, scale, groups = noise_field.prepare(x, t, std, shots, nm, nm.field, s.t_min, s.t_max, inf.max_inputs,
+    field = nm.field
+    assert field is not None  # fit_field runs for a noise field only
+    data, scale, groups = noise_field.prepare(x, t, std, shots, nm, field, s.t_min, s.t_max, inf.max_inputs,
                                               capacity, t_capacity(distinct))
     hyper = previous_field(previous, data)
     if hyper is not None:
         data = noise_field.set_field(data, hyper)
     law = previous_law(previous, data, scale)
-    samples, data = noise_field.fit(data, nm, nm.field, key, FIELD_RESTARTS, inf.laplace_samples,
+    samples, data = noise_field.fit(data, nm, field, key, FIELD_RESTARTS, inf.laplace_samples,
                                     guesses=[law] if law else (), draws=not warm, scan=not (warm and hyper is not None))
     return samples, data, scale, groups.count.size, groups.binned
 

@@ -163,9 +163,9 @@ def fit_noise_model(
     k_noise = key
     warm = warm and bool(_previous_guesses(previous, "primary", 1.0))
     if config.noise_model.field is not None:
-        samples, data, scale, inputs, binned = field_fit.fit_field(config, state, scaled(s, x), k_noise, previous, warm,
-                                                                   capacity)
-        return NoiseFit(samples, data, scale, inputs, binned, warm)
+        samples, field_data, scale, inputs, binned = field_fit.fit_field(config, state, scaled(s, x), k_noise, previous,
+                                                                         warm, capacity)
+        return NoiseFit(samples, field_data, scale, inputs, binned, warm)
     cfg = config.noise_model
     train = state.noise_training_mask(cfg.learn_after_convergence, config.schedule.shots_after)
     t_train, std_train, n_train = t[train], state.column("shot_std")[train], n_shots[train]
@@ -218,7 +218,7 @@ def fit_keys(key: jax.Array) -> tuple[jax.Array, jax.Array]:
 def hyperparameters(fitted: Fitted) -> dict[str, float]:
     """Point summaries of the fitted hyperparameters (MAP, or the posterior or quadrature mean),
     A0/A1 in value units."""
-    out = {}
+    out: dict[str, float] = {}
     for prefix, samples in (("primary", fitted.primary), ("noise", fitted.noise)):
         if prefix == "noise" and isinstance(fitted.noise_data, noise_field.FieldData):
             field_summary = field_fit.hyperparameters(samples, fitted.noise_data, fitted.noise_scale)

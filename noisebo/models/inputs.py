@@ -35,7 +35,7 @@ class Grouped(NamedTuple):
     coord: np.ndarray  # (g,) or (g, d)
     mean: np.ndarray
     var: np.ndarray
-    count: np.ndarray
+    count: np.ndarray  # type: ignore[assignment]  # a field named count, as tuple.count: read as an attribute only
     scatter: np.ndarray
     binned: bool
 

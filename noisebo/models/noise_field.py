@@ -158,7 +158,7 @@ class FieldData(NamedTuple):
     ts: jnp.ndarray
     y: jnp.ndarray
     rel_var: jnp.ndarray
-    count: jnp.ndarray
+    count: jnp.ndarray  # type: ignore[assignment]  # a field named count, as tuple.count: read as an attribute only
     scatter: jnp.ndarray
     mask: jnp.ndarray
     tid: jnp.ndarray
@@ -457,7 +457,7 @@ class _Groups(NamedTuple):
     t: np.ndarray
     y: np.ndarray
     rel: np.ndarray
-    count: np.ndarray
+    count: np.ndarray  # type: ignore[assignment]  # a field named count, as tuple.count: read as an attribute only
     scatter: np.ndarray
     x: np.ndarray  # (g, d)
     phi: np.ndarray  # (g, M)
@@ -620,7 +620,7 @@ def estimate_field(
 
         now = np.clip(np.log(np.concatenate([np.asarray(data.field_amplitude[f:f + 1]),
                                              np.asarray(data.field_lengths[f])])), lo, hi)
-        starts = [now]
+        starts: list[np.ndarray] = [now]
         if from_medians:
             # The evidence can have a mode per shape (round, or long along one axis: a wall), so
             # the best of a few shapes at the current amplitude is a second start.
@@ -629,8 +629,8 @@ def estimate_field(
                 shapes.append(np.where(np.arange(dims) == k, field.length_loc + field.length_scale,
                                        field.length_loc - field.length_scale))
             candidates = [np.clip(np.concatenate([now[:1], shape]), lo, hi) for shape in shapes]
-            values = [fun(c)[0] for c in candidates]
-            scan = candidates[int(np.argmin(values))]
+            losses = [fun(c)[0] for c in candidates]
+            scan = candidates[int(np.argmin(losses))]
             if not np.allclose(scan, now):
                 starts.append(scan)
         best = None
@@ -639,6 +639,7 @@ def estimate_field(
                                     options={"ftol": 1e-6})
             if best is None or res.fun < best.fun:
                 best = res
+        assert best is not None  # starts holds the current point at least
         theta = np.exp(best.x)
         prefix = ("g0", "g1")[f]
         out[f"{prefix}_amplitude"] = float(theta[0])
@@ -695,7 +696,7 @@ def initial_guess(data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfi
     4. a0 and a1 refitted on a grid of factors with the fields fixed.
     """
     given = base is not None
-    base = dict(base) if given else law_guess(_precision_weighted(data), cfg)
+    base = dict(base) if base is not None else law_guess(_precision_weighted(data), cfg)
     n_fields = data.field_amplitude.shape[0]
     m_basis = data.freq.shape[0]
     guess = dict(base) | {f"{prefix}_z": np.zeros(m_basis) for prefix in ("g0", "g1")[:n_fields]}

@@ -11,7 +11,7 @@ measured noise) so the residual priors are relative; A0/A1 priors are rescaled t
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -45,7 +45,7 @@ class NoiseData(NamedTuple):
     ts: jnp.ndarray
     y: jnp.ndarray
     rel_var: jnp.ndarray
-    count: jnp.ndarray
+    count: jnp.ndarray  # type: ignore[assignment]  # a field named count, as tuple.count: read as an attribute only
     scatter: jnp.ndarray
     mask: jnp.ndarray
     bounds: jnp.ndarray
@@ -59,10 +59,10 @@ def c4(n: np.ndarray) -> np.ndarray:
     return np.sqrt(2.0 / (n - 1.0)) * np.exp(gammaln(n / 2.0) - gammaln((n - 1.0) / 2.0))
 
 
-def sampling_rel_var(n: np.ndarray) -> np.ndarray:
+def sampling_rel_var(n: np.ndarray | int) -> np.ndarray:
     """Var[s/c4] / Noise^2 = (1 - c4^2) / c4^2 for the unbiased sample sd of n >= 2 shots (about
     1 / (2 (n - 1)))."""
-    k = c4(n)
+    k = c4(np.asarray(n))
     return (1.0 - k**2) / k**2
 
 
@@ -85,7 +85,7 @@ def make_model(cfg: NoiseModelConfig):
             "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
         )
         length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
-        if data.prior is not None:  # the profile: a normal prior inside the bounds, weighted 1 or 0
+        if data.prior is not None and data.prior_weight is not None:  # the profile: a normal prior, weighted 1 or 0
             values = jnp.stack([a0, a1, jnp.asarray(p, dtype=a0.dtype)])[: 3 if law.infers_exponent else 2]
             rows = data.prior[: values.shape[0]]
             numpyro.factor("profile", data.prior_weight * jnp.sum(dist.Normal(rows[:, 0], rows[:, 1]).log_prob(values)))
@@ -99,7 +99,26 @@ def make_model(cfg: NoiseModelConfig):
     return noise_model
 
 
-def group_log_factor(m: jnp.ndarray, data: NoiseData) -> jnp.ndarray:
+
+class Replicates(Protocol):
+    """What the law's likelihood and its starting points read: ``NoiseData``, or a noise field's
+    ``noise_field.FieldData``, which carries the same groups and bounds."""
+
+    @property
+    def t(self) -> jnp.ndarray: ...
+    @property
+    def y(self) -> jnp.ndarray: ...
+    @property
+    def count(self) -> jnp.ndarray: ...
+    @property
+    def scatter(self) -> jnp.ndarray: ...
+    @property
+    def mask(self) -> jnp.ndarray: ...
+    @property
+    def bounds(self) -> jnp.ndarray: ...
+
+
+def group_log_factor(m: jnp.ndarray, data: Replicates) -> jnp.ndarray:
     """log of the product of the groups' within-group likelihoods, up to a constant, for the law
     m (n,) at the groups' t: sum of -scatter / (2 m^2) - (count - 1) log m over real groups."""
     safe_m = jnp.where(data.mask, m, 1.0)
@@ -115,7 +134,7 @@ def prior_rows(cfg: NoiseModelConfig, scale: float) -> np.ndarray:
     for name, bounds in (("a0", cfg.a0_prior), ("a1", cfg.a1_prior), ("p", cfg.p_prior)):
         unit = scale if name != "p" else 1.0
         floor = 1e-6 * (bounds.high - bounds.low) / unit
-        posterior = cfg.profile.parameters.get(name)
+        posterior = None if cfg.profile is None else cfg.profile.parameters.get(name)
         mean, sd = (0.5 * (bounds.low + bounds.high), 1.0) if posterior is None else (posterior.mean, posterior.sd)
         rows.append([mean / unit, max(sd / unit, floor)])
     return np.asarray(rows)
@@ -161,7 +180,7 @@ def prepare(
     return data, scale, groups
 
 
-def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
+def initial_guess(data: Replicates, cfg: NoiseModelConfig) -> dict[str, float]:
     """A data-driven starting point for the MAP fit: the law fitted by non-negative least squares
     (over a grid of exponents for a law that infers p; on the law's ``sources_power``, e.g. squared
     for "quadrature"), residual GP at its prior median. Scaled units."""
@@ -181,6 +200,7 @@ def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
         coef, residual = optimize.nnls(design * weight[:, None], weight)
         if best is None or residual < best[0]:
             best = (residual, coef ** (1.0 / power), p)
+    assert best is not None  # exponents holds 29 values or one
     _, (a0, a1), p = best
     eps = 1e-6
     guess = {
@@ -197,7 +217,7 @@ def initial_guess(data: NoiseData, cfg: NoiseModelConfig) -> dict[str, float]:
 def profile_guess(data: NoiseData, cfg: NoiseModelConfig) -> list[dict[str, float]]:
     """The profile's means as a starting point of the MAP fit (scaled units), while it is in use;
     none otherwise."""
-    if data.prior is None or float(data.prior_weight) == 0.0:
+    if data.prior is None or data.prior_weight is None or float(data.prior_weight) == 0.0:
         return []
     law = registry.noise_law(cfg.mean)
     bounds, prior = np.asarray(data.bounds), np.asarray(data.prior)

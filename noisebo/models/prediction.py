@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from noisebo.config import CampaignConfig, RewardConfig, SpaceConfig
-from noisebo.models import field_fit, inference, noise_model, primary
+from noisebo.models import field_fit, inference, noise_field, noise_model, primary
 from noisebo.models.fitting import Fitted
 from noisebo.models.grids import N_FINE, integration_points, scaled, space_grids
 from noisebo.models.reward import optimal_index, reward
@@ -87,6 +87,7 @@ def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first:
     (their spread widens the grid variance; the mean is the MAP point's), so the draws predict
     there alone."""
     params, data, weights = fitted.noise.params, fitted.noise_data, fitted.noise.weights
+    assert isinstance(data, noise_model.NoiseData)  # a noise field predicts through field_rows
     if not map_first:
         means, grid_vars = noise_model.predict_samples(kind, params, data, t_all, ts_all, n_t)
         mean, _ = inference.combine(means, jnp.zeros_like(means), False, weights)
@@ -105,6 +106,7 @@ def _t_draws(kind: str, fitted: Fitted, s: SpaceConfig, rew: RewardConfig) -> tu
     (S, n_t), raw units."""
     g = space_grids(s)
     t_all = jnp.asarray(np.concatenate([g.t, g.t_fine]))
+    assert isinstance(fitted.noise_data, noise_model.NoiseData)  # a noise field's draws: field_fit
     means, _ = noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t_all,
                                            (t_all - s.t_min) / (s.t_max - s.t_min), 0)
     means = means * fitted.noise_scale
@@ -123,6 +125,7 @@ def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs:
     g = space_grids(s)
     t, t_fine = jnp.asarray(g.t), jnp.asarray(g.t_fine)
     span = s.t_max - s.t_min
+    assert isinstance(fitted.noise_data, noise_field.FieldData)
     return field_fit.rows(kind, fitted.noise, fitted.noise_data, fitted.noise_scale, xs, t, (t - s.t_min) / span,
                                t_fine, (t_fine - s.t_min) / span, rew.alpha, rew.beta)
 
@@ -136,6 +139,7 @@ def _field_prediction(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitt
     t, t_fine = jnp.asarray(space_grids(s).t), jnp.asarray(space_grids(s).t_fine)
     noise_fine = jnp.mean(rows.fine, axis=0)
     best_i = optimal_index(t_fine, noise_fine, rew.alpha, rew.beta)
+    assert isinstance(fitted.noise_data, noise_field.FieldData)
     best_reward = field_fit.best_training_reward(kind, fitted.noise, fitted.noise_data, fitted.noise_scale, t,
                                                       s.t_min, s.t_max, rew.alpha, rew.beta)
     post = Posterior(f_mean=f_mean, f_var=f_var, noise_mean=rows.mean, noise_var=rows.var, t=t,

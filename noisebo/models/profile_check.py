@@ -28,7 +28,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from noisebo import registry
-from noisebo.config import NoiseModelConfig
+from noisebo.config import NoiseModelConfig, NoiseProfile
 
 NODES = 5  # Gauss-Hermite nodes per profile parameter
 TINY_NOISE = 1e-12  # a law's noise is kept above this (a profile with A0 = A1 = 0 predicts none)
@@ -47,9 +47,15 @@ class ProfileCheck(NamedTuple):
 NO_PROFILE = ProfileCheck(float("nan"), False)
 
 
+def _profile(cfg: NoiseModelConfig) -> NoiseProfile:
+    if cfg.profile is None:
+        raise ValueError("the noise model has no profile to check")
+    return cfg.profile
+
+
 def _nodes(cfg: NoiseModelConfig) -> tuple[list[dict[str, float]], np.ndarray]:
     """The profile's parameter sets (a grid of ``NODES`` per parameter) and their weights."""
-    profile = cfg.profile
+    profile = _profile(cfg)
     names = list(profile.parameters)
     z, w = np.polynomial.hermite_e.hermegauss(NODES)
     w = w / w.sum()
@@ -82,7 +88,7 @@ def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof
     def loss(theta: np.ndarray) -> float:
         return -_log_likelihood(_law_sigma(law, t, dict(zip(names, theta))), s, dof)
 
-    starts = [[cfg.profile.parameters[n].mean for n in names]]
+    starts = [[_profile(cfg).parameters[n].mean for n in names]]
     scale = float(np.median(s)) if np.median(s) > 0 else 1.0
     starts += [[scale * f0, scale * f1] + ([0.5] if law.infers_exponent else []) for f0, f1 in
                ((0.5, 0.5), (0.05, 1.0), (1.0, 0.05))]
@@ -105,7 +111,7 @@ def p_value(cfg: NoiseModelConfig, t: np.ndarray, shot_std: np.ndarray, n_shots:
         return float("nan")
     law = registry.noise_law(cfg.mean)
     best = best_log_likelihood(cfg, t, s, dof)
-    free = min(len(cfg.profile.parameters), np.unique(t).size)
+    free = min(len(_profile(cfg).parameters), np.unique(t).size)
     sets, weights = _nodes(cfg)
     ratios = np.asarray([2.0 * (best - _log_likelihood(_law_sigma(law, t, values), s, dof)) for values in sets])
     return float(np.sum(weights * stats.chi2.sf(np.maximum(ratios, 0.0), free)))
