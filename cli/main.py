@@ -373,14 +373,14 @@ def _sweep(args) -> int:
     return 0
 
 
-def _profile_summary(config: dict, steps: dict) -> dict | None:
+def _profile_summary(record) -> dict | None:
     """The noise profile a campaign started from (None: none) and the first BO step (from 1)
     whose check dropped it (None: in use throughout)."""
-    profile = (config.get("noise_model") or {}).get("profile")
+    profile = (record.config.get("noise_model") or {}).get("profile")
     if profile is None:
         return None
-    in_use = [bool(v) for v in steps.get("profile_in_use", [])]
-    dropped = next((int(s) for s, used in zip(steps["step"], in_use) if not used), None)
+    steps = record.steps
+    dropped = next((int(s) for s, used in zip(steps.step, steps.profile_in_use) if not used), None)
     law = ", ".join(f"{name} = {p['mean']:.4g} ± {p['sd']:.2g}" for name, p in profile["parameters"].items())
     return {"law": profile["law"], "parameters": law, "driver": profile["driver"]["name"],
             "campaigns": len(profile.get("campaigns", ())), "dropped_at_step": dropped}
@@ -391,61 +391,51 @@ def inspect_summary(path: Path) -> dict:
     import numpy as np
 
     from noisebo.state import as_position
-    from noisebo.storage.hdf5 import read_campaign, read_failures
+    from noisebo.storage.record import read_record
 
-    data = read_campaign(path)
-    attrs, points, steps = data["attrs"], data["points"], data["steps"]
-    t_opt = {int(s): float(v) for s, v in zip(steps["step"], steps["t_opt"], strict=True)}
+    record = read_record(path)
+    points, summary = record.points, record.summary
+    t_opt = {int(s): float(v) for s, v in zip(record.steps.step, record.steps.t_opt, strict=True)}
     rows = []
-    for i in range(len(points["x"])):
-        step = int(points["step"][i])  # 0: a seed point; BO steps from 1 (storage.steps)
+    for i in range(len(points)):
+        step = int(points.step[i])  # 0: a seed point; BO steps from 1 (storage.steps)
         rows.append({
             "point": i,
             "step": step,
-            "x": list(as_position(points["x"][i])) if np.ndim(points["x"][i]) else float(points["x"][i]),
-            "t": float(points["t"][i]),
-            "n_shots": int(points["n_shots"][i]),
-            "value": float(points["value"][i]),
-            "noise": float(points["noise"][i]),
-            "noise_measured": bool(points["noise_measured"][i]),
+            "x": list(as_position(points.x[i])) if np.ndim(points.x[i]) else float(points.x[i]),
+            "t": float(points.t[i]),
+            "n_shots": int(points.n_shots[i]),
+            "value": float(points.value[i]),
+            "noise": float(points.noise[i]),
+            "noise_measured": bool(points.noise_measured[i]),
             "t_opt": t_opt.get(step),
         })
-    converged = int(attrs["converged_step"])
-    summary = data["summary"] or {}
     field = None
-    if np.size(summary.get("t_opt_map", ())):
-        t_map, noise_map = np.asarray(summary["t_opt_map"]), np.asarray(summary["noise_map"])
+    if summary is not None and summary.t_opt_map.size:
+        t_map, noise_map = summary.t_opt_map, summary.noise_map
         field = {"t_opt_min": float(t_map.min()), "t_opt_median": float(np.median(t_map)),
                  "t_opt_max": float(t_map.max()), "noise_at_t_opt_min": float(noise_map.min()),
                  "noise_at_t_opt_max": float(noise_map.max()),
-                 "x_at_shortest_t_opt": as_position(data["grid"]["x"][int(np.argmin(t_map))])}
+                 "x_at_shortest_t_opt": as_position(record.grid["x"][int(np.argmin(t_map))])}
     return {
         "file": str(path),
-        "noise_profile": _profile_summary(attrs["config"], steps),
-        "status": attrs["status"],
-        "status_reason": attrs["status_reason"],
-        "seed": int(attrs["seed"]),
-        "policy": attrs["policy"],
-        "driver": attrs["driver"],
-        "schema_version": int(attrs["schema_version"]),
-        "config": attrs["config"],
-        "first_converged_step": None if converged < 1 else converged,
-        "final_t_opt": None if data["summary"] is None else data["summary"]["t_opt"],
+        "noise_profile": _profile_summary(record),
+        "status": record.status,
+        "status_reason": record.status_reason,
+        "seed": record.seed,
+        "policy": record.policy,
+        "driver": record.driver,
+        "schema_version": record.schema_version,
+        "config": record.config,
+        "first_converged_step": record.converged_step,
+        "final_t_opt": None if summary is None else summary.t_opt,
         "noise_field": field,
-        "n_shots": int(attrs["n_shots"]),
-        "measurement_time_s": float(sum(data["shots"]["t"])),
-        "budget_s": None if float(attrs.get("budget_s", -1.0)) < 0 else float(attrs["budget_s"]),
-        "spent_s": _spent_s(data, read_failures(path)),
+        "n_shots": record.n_shots,
+        "measurement_time_s": record.measurement_time_s,
+        "budget_s": record.budget_s,
+        "spent_s": record.spent_s,
         "points": rows,
     }
-
-
-def _spent_s(data: dict, failures: dict) -> float:
-    """Instrument time spent as a budget counts it: every shot and failed attempt at its t, and
-    the point overhead for every point begun."""
-    shots, overhead = data["shots"], data["attrs"]["config"]["schedule"].get("point_overhead_s", 0.0)
-    begun = len(set(int(p) for p in shots["point"]) | set(int(p) for p in failures["point"]))
-    return float(sum(shots["t"]) + sum(failures["t"]) + overhead * begun)
 
 
 def _inspect(args) -> int:

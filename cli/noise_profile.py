@@ -15,17 +15,17 @@ def noise_measurements(path: Path) -> dict:
     the points whose noise was measured (t, sample sd, shots)."""
     import numpy as np
 
-    from noisebo.storage.hdf5 import read_campaign
+    from noisebo.storage.record import read_record
 
-    data = read_campaign(path)
-    attrs, points = data["attrs"], data["points"]
-    measured = np.asarray(points["noise_measured"], dtype=bool) & (np.asarray(points["n_shots"]) >= 2)
+    record = read_record(path)
+    points = record.points
+    measured = points.noise_measured.astype(bool) & (points.n_shots >= 2)
     return {
-        "file": str(path), "config": attrs["config"], "driver": attrs["driver"], "seed": int(attrs["seed"]),
-        "created_utc": str(attrs.get("created_utc", "")),
-        "t": np.asarray(points["t"], dtype=np.float64)[measured],
-        "shot_std": np.asarray(points["shot_std"], dtype=np.float64)[measured],
-        "n_shots": np.asarray(points["n_shots"], dtype=np.float64)[measured],
+        "file": str(path), "config": record.config, "driver": record.driver, "seed": record.seed,
+        "created_utc": str(record.attrs.get("created_utc", "")),
+        "t": points.t.astype(np.float64)[measured],
+        "shot_std": points.shot_std.astype(np.float64)[measured],
+        "n_shots": points.n_shots.astype(np.float64)[measured],
     }
 
 

@@ -1,0 +1,222 @@
+"""A campaign file as typed values, built in one place: what its readers get instead of the HDF5
+layout's nested dict (``read_record``; ``storage.hdf5.read_campaign`` is the layout-level read it
+is built from). A column the file's schema did not have yet is filled with the column's empty
+value (NaN, False or 0), so a reader never needs to know the schema.
+
+Units: x in the config's x units, t in s, values and noise in f units, times in s. Steps as a person
+sees them: seed points at step 0, BO steps from 1 (``storage.steps``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from noisebo.storage.layout import ARRAY_COLUMNS, POINT_COLUMNS, STEP_COLUMNS, column_dtype
+
+
+@dataclass(frozen=True)
+class Points:
+    """The measured points, one row each: x (n,) for one axis or (n, d); t (n,) s; value,
+    shot_std (NaN below 2 shots) and noise (the single-shot sd the GP used) (n,) f units; n_shots
+    (n,); noise_measured (n,): True when noise is the shots' sd; step (n,): 0 a seed point, BO
+    steps from 1."""
+
+    x: np.ndarray
+    t: np.ndarray
+    value: np.ndarray
+    shot_std: np.ndarray
+    n_shots: np.ndarray
+    noise: np.ndarray
+    noise_measured: np.ndarray
+    step: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass(frozen=True)
+class Steps:
+    """One row per BO step (k,), as ``STEP_COLUMNS`` of ``storage.layout`` describes them, with the
+    fitted hyperparameters per step and the per-step arrays (``ARRAY_COLUMNS``: acq_map, f_mean,
+    f_var, noise_mean, noise_var, and for a noise field t_opt_map), each (k, ...)."""
+
+    step: np.ndarray
+    x: np.ndarray
+    t: np.ndarray
+    acq_value: np.ndarray
+    shots: np.ndarray
+    measure_noise: np.ndarray
+    noise_at_t: np.ndarray
+    t_opt: np.ndarray
+    converged: np.ndarray
+    t_opt_interval: np.ndarray
+    latency_s: np.ndarray
+    primary_inputs: np.ndarray
+    noise_inputs: np.ndarray
+    binned: np.ndarray
+    profile_p: np.ndarray
+    profile_in_use: np.ndarray
+    hyperparameters: dict[str, np.ndarray] = field(default_factory=dict)
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.step)
+
+
+@dataclass(frozen=True)
+class Shots:
+    """Every shot (s,): its point and index in it, t (s), value (f units; NaN when rejected) and
+    whether it was usable; ``fits``: a sweep's SHO fit columns (empty for scalar readings)."""
+
+    point: np.ndarray
+    shot: np.ndarray
+    t: np.ndarray
+    value: np.ndarray
+    ok: np.ndarray
+    fits: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Failures:
+    """Every failed attempt at a shot (a,): its point, shot, t (s), kind and reason (text)."""
+
+    point: np.ndarray
+    shot: np.ndarray
+    t: np.ndarray
+    kind: tuple[str, ...]
+    reason: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Summary:
+    """The final models: f_mean, f_var on the grid's x; noise_fine on its fine t grid; the
+    predicted optimal t (s); the hyperparameters; for a noise field t_opt_map and noise_map on the
+    grid's x (empty otherwise)."""
+
+    f_mean: np.ndarray
+    f_var: np.ndarray
+    noise_fine: np.ndarray
+    t_opt: float
+    hyperparameters: dict
+    t_opt_map: np.ndarray
+    noise_map: np.ndarray
+
+
+@dataclass(frozen=True)
+class CampaignRecord:
+    """A campaign file, finished or still being written. ``config`` and ``driver`` as recorded
+    (plain mappings: the config validates with ``noisebo.config.parse_config``);
+    ``converged_step``: the first BO step at which the noise model had converged, None if never;
+    ``budget_s``: the instrument-time budget, None for none; ``grid``: the config's grids (x, t,
+    t_fine); ``attrs``: every root attribute as stored."""
+
+    path: Path
+    schema_version: int
+    config: dict
+    driver: dict
+    status: str
+    status_reason: str
+    seed: int
+    policy: str
+    converged_step: int | None
+    n_shots: int
+    budget_s: float | None
+    grid: dict[str, np.ndarray]
+    points: Points
+    steps: Steps
+    shots: Shots
+    failures: Failures
+    summary: Summary | None
+    attrs: dict[str, Any]
+
+    @property
+    def measurement_time_s(self) -> float:
+        """Instrument time of the shots taken (s)."""
+        return float(np.sum(self.shots.t))
+
+    @property
+    def spent_s(self) -> float:
+        """Instrument time spent as a budget counts it (s): every shot and failed attempt at its t,
+        and the point overhead for every point begun."""
+        overhead = float(self.config["schedule"].get("point_overhead_s", 0.0))
+        begun = len(set(self.shots.point.tolist()) | set(self.failures.point.tolist()))
+        return self.measurement_time_s + float(np.sum(self.failures.t)) + overhead * begun
+
+
+def read_record(path: Path) -> CampaignRecord:
+    """The campaign file at ``path`` as a ``CampaignRecord``; ``CampaignFileError`` (one line)
+    for a missing, damaged or foreign file, as every reader."""
+    from noisebo.storage.hdf5 import read_campaign, read_failures
+
+    return from_tables(Path(path), read_campaign(path), read_failures(path))
+
+
+def from_tables(path: Path, data: dict, failures: dict) -> CampaignRecord:
+    """The record of what ``read_campaign`` and ``read_failures`` read from ``path``."""
+    attrs = data["attrs"]
+    converged = int(attrs["converged_step"])
+    budget = float(attrs.get("budget_s", -1.0))
+    return CampaignRecord(
+        path=path, schema_version=int(attrs["schema_version"]), config=attrs["config"], driver=attrs["driver"],
+        status=str(attrs["status"]), status_reason=str(attrs["status_reason"]), seed=int(attrs["seed"]),
+        policy=str(attrs["policy"]), converged_step=None if converged < 1 else converged,
+        n_shots=int(attrs["n_shots"]), budget_s=None if budget < 0 else budget,
+        grid={name: np.asarray(v) for name, v in data["grid"].items()},
+        points=_points(data["points"]), steps=_steps(data["steps"]), shots=_shots(data["shots"]),
+        failures=_failures(failures), summary=_summary(data["summary"]), attrs=attrs)
+
+
+def _column(table: dict, name: str, units: str, n: int) -> np.ndarray:
+    """A column of ``table``, or the empty value of a column the file's schema did not have."""
+    if name in table:
+        return np.asarray(table[name])
+    dtype = column_dtype(name, units)
+    empty = np.nan if np.issubdtype(dtype, np.floating) else 0
+    return np.full(n, empty, dtype=dtype)
+
+
+def _points(table: dict) -> Points:
+    n = len(table["t"])
+    columns = {name: _column(table, name, units, n) for name, (units, _) in POINT_COLUMNS.items()}
+    return Points(**columns, step=np.asarray(table["step"]))
+
+
+def _steps(table: dict) -> Steps:
+    n = len(table["step"])
+    columns = {name: _column(table, name, units, n) for name, (units, _) in STEP_COLUMNS.items()}
+    arrays = {name: np.asarray(table[name]) for name in ARRAY_COLUMNS if name in table}
+    hyper = {name: np.asarray(v) for name, v in (table.get("hyperparameters") or {}).items()}
+    return Steps(**columns, hyperparameters=hyper, arrays=arrays)
+
+
+def _shots(table: dict) -> Shots:
+    n = len(table["t"])
+    typed = {f.name for f in fields(Shots)} - {"fits"}
+    fits = {name: np.asarray(v) for name, v in table.items() if name not in typed | {"x", "committed", "reason"}}
+    return Shots(point=np.asarray(table["point"]), shot=np.asarray(table["shot"]), t=np.asarray(table["t"]),
+                 value=np.asarray(table["value"]), ok=_column(table, "ok", "bool", n), fits=fits)
+
+
+def _text(values) -> tuple[str, ...]:
+    return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in values)
+
+
+def _failures(table: dict) -> Failures:
+    n = len(table.get("t", ()))
+    return Failures(point=_column(table, "point", "1", n).astype(int), shot=_column(table, "shot", "1", n).astype(int),
+                    t=_column(table, "t", "s", n), kind=_text(table.get("kind", ())),
+                    reason=_text(table.get("reason", ())))
+
+
+def _summary(summary: dict | None) -> Summary | None:
+    if summary is None:
+        return None
+    return Summary(f_mean=np.asarray(summary["f_mean"]), f_var=np.asarray(summary["f_var"]),
+                   noise_fine=np.asarray(summary["noise_fine"]), t_opt=float(summary["t_opt"]),
+                   hyperparameters=dict(summary["hyperparameters"]),
+                   t_opt_map=np.asarray(summary.get("t_opt_map", np.zeros(0))),
+                   noise_map=np.asarray(summary.get("noise_map", np.zeros(0))))
