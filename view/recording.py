@@ -151,12 +151,12 @@ def _latest_sweep(frame: Frame, state) -> tuple[np.ndarray | None, dict | None]:
     return np.asarray(entry.shots[-1].reading.spectrum), None if fit is None else {k: float(getattr(fit, k)) for k in FIT_KEYS}
 
 
-def last_sweep(spectra: Callable[[int], np.ndarray], data: dict, fits: dict, point: int,
+def last_sweep(spectra: Callable[[int], np.ndarray], shot_points: np.ndarray, fits: dict, point: int,
                ) -> tuple[np.ndarray, dict | None]:
     """The last raw sweep (3, N) of ``point`` (``spectra``: point -> its sweeps, from
-    ``storage.hdf5.spectra_reader``) and its fit (every column of ``/shots/fit`` at that shot;
-    None if the point has no shot rows)."""
-    mine = np.flatnonzero(np.asarray(data["shots"]["point"]) == point)
+    ``storage.hdf5.spectra_reader``; ``shot_points``: the point of every shot row) and its fit
+    (every column of ``/shots/fit`` at that shot; None if the point has no shot rows)."""
+    mine = np.flatnonzero(np.asarray(shot_points) == point)
     fit = {k: float(v[mine[-1]]) for k, v in fits.items()} if mine.size else None
     return spectra(point)[-1], fit
 
@@ -179,7 +179,7 @@ def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], No
         for frame in all_frames:
             spectrum, fit = None, None
             if fits is not None and frame.latest_point is not None:
-                spectrum, fit = last_sweep(spectra, data, fits, frame.latest_point)
+                spectrum, fit = last_sweep(spectra, data["shots"]["point"], fits, frame.latest_point)
             view.log(frame, spectrum, fit)
     view.close()
     if not view.enabled:

@@ -19,7 +19,8 @@ from noisebo.config import CampaignConfig, parse_config
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
 from noisebo.models.reward import true_optimal_t
 from noisebo.state import format_position
-from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_shot_fits, read_spectra
+from noisebo.storage.hdf5 import CampaignFileError, read_shot_fits, read_spectra
+from noisebo.storage.record import CampaignRecord, read_record
 from noisebo.view.area import axis_labels, draw_image
 from noisebo.view.recording import instrument_curves, last_sweep, true_optimal_map
 from noisebo.view.style import step_colours
@@ -51,11 +52,11 @@ def _units(config: CampaignConfig) -> tuple[str, str]:
 
 
 def campaign_report(path: Path, out_dir: Path) -> list[Path]:
-    data = read_campaign(path)
-    config = parse_config(data["attrs"]["config"])
-    truth, law = instrument_curves(config, warn=_warn, source=(path, data["attrs"]["driver"]))
+    data = read_record(path)
+    config = parse_config(data.config)
+    truth, law = instrument_curves(config, warn=_warn, source=(path, data.driver))
     out_dir.mkdir(parents=True, exist_ok=True)
-    steps = np.asarray(data["points"]["step"])  # 0: a seed point; BO steps from 1 (storage.steps)
+    steps = data.points.step  # 0: a seed point; BO steps from 1 (storage.steps)
     colours = step_colours(steps, config.schedule.n_steps)
     field = _t_map(data) is not None
     if config.space.dimensions == 1:
@@ -77,97 +78,97 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
             _t_map_image(axes[1, 2], data, config)
         else:
             _points_by_value(axes[1, 2], data, config)
-    a = data["attrs"]
-    fig.suptitle(f"{a['name']}: seed {a['seed']}, {a['policy']} policy, {a['n_points']} points "
-                 f"({a['status']})", fontsize=13)
+    fig.suptitle(f"{data.config['name']}: seed {data.seed}, {data.policy} policy, {len(data.points)} points "
+                 f"({data.status})", fontsize=13)
     written = [out_dir / f"{path.stem}_report.png"]
     fig.savefig(written[0], dpi=DPI)
     fits = read_shot_fits(path)
-    if fits is not None and len(data["points"]["x"]):
+    if fits is not None and len(data.points):
         written.append(_sweep_figure(path, data, fits, out_dir))
     return written
 
 
-def _final_f(data: dict) -> dict | None:
-    if data["summary"] is not None:
-        return data["summary"]
-    steps = data["steps"]
-    return {"f_mean": steps["f_mean"][-1], "f_var": steps["f_var"][-1]} if len(steps["f_mean"]) else None
+def _final_f(data: CampaignRecord) -> tuple[np.ndarray, np.ndarray] | None:
+    """The last model of f, (mean, variance) on the grid: the final one, else the last step's."""
+    if data.summary is not None:
+        return data.summary.f_mean, data.summary.f_var
+    arrays = data.steps.arrays
+    return (arrays["f_mean"][-1], arrays["f_var"][-1]) if len(data.steps) else None
 
 
-def _area_panels(axes, data: dict, config: CampaignConfig, truth) -> None:
+def _area_panels(axes, data: CampaignRecord, config: CampaignConfig, truth) -> None:
     """Two axes: GP mean and sd over the area with the measured points coloured by their t, and
     the truth (or, without one, the last acquisition map's best over t). Beyond two axes, the
     reference points are not a grid: the panels show the first two axes' projection."""
     _, f_label = _units(config)
-    p, final = data["points"], _final_f(data)
-    xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), -1)
+    p, final = data.points, _final_f(data)
+    xy = np.asarray(p.x, dtype=np.float64).reshape(len(p), -1)
     if config.space.dimensions != 2 or final is None:
         for ax in axes:
             ax.set_axis_off()
         axes[0].text(0.5, 0.5, "no model yet" if final is None else
                      f"{config.space.dimensions} axes: see the projection below", ha="center", va="center")
         return
-    draw_image(axes[0], final["f_mean"], config, "f: GP mean, points coloured by t", f_label, points=xy,
-               point_colours=np.log(p["t"]))
-    draw_image(axes[1], np.sqrt(np.maximum(final["f_var"], 0.0)), config, "f: GP sd", f"sd ({f_label})",
+    draw_image(axes[0], final[0], config, "f: GP mean, points coloured by t", f_label, points=xy,
+               point_colours=np.log(p.t))
+    draw_image(axes[1], np.sqrt(np.maximum(final[1], 0.0)), config, "f: GP sd", f"sd ({f_label})",
                cmap="magma", points=xy, point_colours="w")
     if truth is not None:
         draw_image(axes[2], truth, config, "truth (the simulator's)", f_label, points=xy, point_colours="w")
-    elif len(data["steps"]["acq_map"]):
-        draw_image(axes[2], data["steps"]["acq_map"][-1], config, "last acquisition (best over t)", "1",
+    elif len(data.steps):
+        draw_image(axes[2], data.steps.arrays["acq_map"][-1], config, "last acquisition (best over t)", "1",
                    cmap="Greys", points=xy, point_colours="tab:red")
 
 
-def _t_map(data: dict) -> np.ndarray | None:
+def _t_map(data: CampaignRecord) -> np.ndarray | None:
     """A noise field's t*(x) on the grid: the final model's, else the last decision's; None
     for an x-independent noise model."""
-    summary = data["summary"]
-    if summary is not None and np.size(summary.get("t_opt_map", ())):
-        return np.asarray(summary["t_opt_map"], dtype=np.float64)
-    maps = data["steps"].get("t_opt_map")
+    summary = data.summary
+    if summary is not None and summary.t_opt_map.size:
+        return np.asarray(summary.t_opt_map, dtype=np.float64)
+    maps = data.steps.arrays.get("t_opt_map")
     return np.asarray(maps[-1], dtype=np.float64) if maps is not None and len(maps) else None
 
 
-def _field_lines(axes, data: dict, config: CampaignConfig, truth) -> None:
+def _field_lines(axes, data: CampaignRecord, config: CampaignConfig, truth) -> None:
     """One axis, a noise field: t*(x), and the single-shot noise at it, against the simulator's."""
     x_label, f_label = _units(config)
-    x, p = data["grid"]["x"], data["points"]
+    x, p = data.grid["x"], data.points
     t_map = _t_map(data)
     axes[0].plot(x, t_map, color="tab:blue", label="predicted t*(x)")
     if truth is not None:
         axes[0].plot(x, truth[0], color="k", lw=1.2, ls="--", label="the simulator's t*(x)")
-    axes[0].scatter(p["x"], p["t"], s=14, color="0.4", zorder=3, label="measured (x, t)")
+    axes[0].scatter(p.x, p.t, s=14, color="0.4", zorder=3, label="measured (x, t)")
     axes[0].set(xlabel=x_label, ylabel="optimal t (s)", title="optimal time per position (noise field)")
     axes[0].legend(fontsize=8)
-    summary = data["summary"]
-    if summary is not None and np.size(summary.get("noise_map", ())):
-        axes[1].plot(x, summary["noise_map"], color="tab:red", label="predicted Noise(x, t*(x))")
+    summary = data.summary
+    if summary is not None and summary.noise_map.size:
+        axes[1].plot(x, summary.noise_map, color="tab:red", label="predicted Noise(x, t*(x))")
     if truth is not None:
         axes[1].plot(x, truth[1], color="k", lw=1.2, ls="--", label="the simulator's, at its t*(x)")
-    measured = np.asarray(p["noise_measured"], dtype=bool) & np.isfinite(p["shot_std"])
-    axes[1].scatter(p["x"][measured], p["shot_std"][measured], s=16, color="0.3", zorder=3,
+    measured = p.noise_measured.astype(bool) & np.isfinite(p.shot_std)
+    axes[1].scatter(p.x[measured], p.shot_std[measured], s=16, color="0.3", zorder=3,
                     label="measured single-shot sd (at the point's t)")
     axes[1].set(xlabel=x_label, ylabel=f"single-shot noise sd ({f_label})", title="noise per position",
                 ylim=(0, None))
     axes[1].legend(fontsize=8)
 
 
-def _t_map_image(ax, data: dict, config: CampaignConfig) -> None:
-    p = data["points"]
-    xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), -1)
+def _t_map_image(ax, data: CampaignRecord, config: CampaignConfig) -> None:
+    p = data.points
+    xy = np.asarray(p.x, dtype=np.float64).reshape(len(p), -1)
     draw_image(ax, _t_map(data), config, "optimal t per position (noise field); points", "t*(x) (s)",
                cmap="cividis", points=xy, point_colours="w")
 
 
-def _points_by_value(ax, data: dict, config: CampaignConfig) -> None:
+def _points_by_value(ax, data: CampaignRecord, config: CampaignConfig) -> None:
     """The measured points over the first two axes, coloured by value, sized by t."""
     _, f_label = _units(config)
-    p = data["points"]
-    xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), -1)
-    t = np.asarray(p["t"], dtype=np.float64)
+    p = data.points
+    xy = np.asarray(p.x, dtype=np.float64).reshape(len(p), -1)
+    t = np.asarray(p.t, dtype=np.float64)
     size = 10 + 60 * (t - config.space.t_min) / (config.space.t_max - config.space.t_min)
-    dots = ax.scatter(xy[:, 0], xy[:, 1], c=p["value"], s=size, cmap="viridis", edgecolor="k", linewidth=0.4)
+    dots = ax.scatter(xy[:, 0], xy[:, 1], c=p.value, s=size, cmap="viridis", edgecolor="k", linewidth=0.4)
     ax.figure.colorbar(dots, ax=ax, label=f_label, fraction=0.046, pad=0.02)
     labels = axis_labels(config)
     ax.set(xlabel=labels[0], ylabel=labels[1], xlim=(config.space.lows[0], config.space.highs[0]),
@@ -185,83 +186,82 @@ def _step_colourbar(fig_ax, n_steps: int) -> None:
     bar.update_ticks()
 
 
-def _trajectory(ax, data: dict, config: CampaignConfig, colours) -> None:
-    s, p, steps = config.space, data["points"], data["steps"]
+def _trajectory(ax, data: CampaignRecord, config: CampaignConfig, colours) -> None:
+    s, p, steps = config.space, data.points, data.steps
     x_label, _ = _units(config)
-    if len(steps["acq_map"]):
-        acq = np.asarray(steps["acq_map"][-1], dtype=np.float64).T
+    if len(steps):
+        acq = np.asarray(steps.arrays["acq_map"][-1], dtype=np.float64).T
         shown = np.where(np.isfinite(acq), acq, np.nan)
         image = ax.imshow(shown, origin="lower", aspect="auto", cmap="Greys",
                           extent=(s.x_min, s.x_max, s.t_min, s.t_max), alpha=0.8)
-        ax.figure.colorbar(image, ax=ax, label=f"acquisition at step {len(steps['acq_map'])}", fraction=0.05)
-    ax.plot(p["x"], p["t"], color="0.3", lw=0.7, zorder=2)
-    ax.scatter(p["x"], p["t"], c=colours, s=36, edgecolor="k", linewidth=0.5, zorder=3)
+        ax.figure.colorbar(image, ax=ax, label=f"acquisition at step {len(steps)}", fraction=0.05)
+    ax.plot(p.x, p.t, color="0.3", lw=0.7, zorder=2)
+    ax.scatter(p.x, p.t, c=colours, s=36, edgecolor="k", linewidth=0.5, zorder=3)
     ax.set(xlabel=x_label, ylabel="exposure / sweep time t (s)", title="measured points over the acquisition map",
            xlim=(s.x_min, s.x_max), ylim=(s.t_min, s.t_max))
     _step_colourbar(ax, config.schedule.n_steps)
 
 
-def _t_opt(ax, data: dict, config: CampaignConfig, law) -> None:
-    steps, s, r = data["steps"], config.space, config.reward
-    k = np.asarray(steps["step"])
-    ax.plot(k, steps["t_opt"], "o-", color="tab:blue", label="predicted optimal t")
+def _t_opt(ax, data: CampaignRecord, config: CampaignConfig, law) -> None:
+    steps, s, r = data.steps, config.space, config.reward
+    k = steps.step
+    ax.plot(k, steps.t_opt, "o-", color="tab:blue", label="predicted optimal t")
     if law is not None:
         t_star = true_optimal_t(law, s.t_min, s.t_max, r.alpha, r.beta)
         ax.axhline(t_star, color="k", ls="--", lw=1, label=f"true t* = {t_star:.3g} s")
-    converged = int(data["attrs"]["converged_step"])
-    if converged >= 1:
+    converged = data.converged_step
+    if converged is not None:
         ax.axvline(converged, color="tab:green", ls=":", label=f"noise model converged (step {converged})")
-    if data["summary"] is not None:
-        ax.plot([k[-1] + 1 if len(k) else 1], [data["summary"]["t_opt"]], "s", color="tab:red", label="final model")
+    if data.summary is not None:
+        ax.plot([k[-1] + 1 if len(k) else 1], [data.summary.t_opt], "s", color="tab:red", label="final model")
     ax.set(xlabel="BO step", ylabel="predicted optimal t (s)", title="evolution of the predicted optimal t")
     ax.legend(fontsize=8)
 
 
-def _f(ax, data: dict, config: CampaignConfig, truth, colours) -> None:
+def _f(ax, data: CampaignRecord, config: CampaignConfig, truth, colours) -> None:
     x_label, f_label = _units(config)
-    x, p = data["grid"]["x"], data["points"]
-    final = data["summary"] if data["summary"] is not None else (
-        {"f_mean": data["steps"]["f_mean"][-1], "f_var": data["steps"]["f_var"][-1]} if len(data["steps"]["f_mean"]) else None)
+    x, p = data.grid["x"], data.points
+    final = _final_f(data)
     if truth is not None:
         ax.plot(x, truth, color="k", lw=1.2, label="truth")
     if final is not None:
-        mean, sd = final["f_mean"], np.sqrt(np.maximum(final["f_var"], 0.0))
+        mean, sd = final[0], np.sqrt(np.maximum(final[1], 0.0))
         ax.plot(x, mean, color="tab:blue", label="GP mean")
         ax.fill_between(x, mean - 2 * sd, mean + 2 * sd, color="tab:blue", alpha=0.2, label="+-2 sd")
-    err = p["noise"] / np.sqrt(np.maximum(p["n_shots"], 1))
-    ax.errorbar(p["x"], p["value"], yerr=err, fmt="none", ecolor="0.4", elinewidth=0.8, zorder=2)
-    ax.scatter(p["x"], p["value"], c=colours, s=30, edgecolor="k", linewidth=0.5, zorder=3, label="measured (mean +- se)")
+    err = p.noise / np.sqrt(np.maximum(p.n_shots, 1))
+    ax.errorbar(p.x, p.value, yerr=err, fmt="none", ecolor="0.4", elinewidth=0.8, zorder=2)
+    ax.scatter(p.x, p.value, c=colours, s=30, edgecolor="k", linewidth=0.5, zorder=3, label="measured (mean +- se)")
     ax.set(xlabel=x_label, ylabel=f_label, title="f: final prediction against the truth")
     ax.legend(fontsize=8)
 
 
-def _noise(ax, data: dict, config: CampaignConfig, law, colours) -> None:
+def _noise(ax, data: CampaignRecord, config: CampaignConfig, law, colours) -> None:
     _, f_label = _units(config)
-    p, grid, steps = data["points"], data["grid"], data["steps"]
+    p, grid, steps = data.points, data.grid, data.steps
     if law is not None:
         t = grid["t_fine"]
         ax.plot(t, law(t), color="k", lw=1.2, label="true noise law")
-    if len(steps["noise_mean"]):
-        mean, sd = steps["noise_mean"][-1], np.sqrt(np.maximum(steps["noise_var"][-1], 0.0))
-        ax.plot(grid["t"], mean, color="tab:red", label=f"noise model (step {len(steps['noise_mean'])})")
+    if len(steps):
+        mean, sd = steps.arrays["noise_mean"][-1], np.sqrt(np.maximum(steps.arrays["noise_var"][-1], 0.0))
+        ax.plot(grid["t"], mean, color="tab:red", label=f"noise model (step {len(steps)})")
         ax.fill_between(grid["t"], mean - 2 * sd, mean + 2 * sd, color="tab:red", alpha=0.2, label="+-2 sd")
-    measured = np.asarray(p["noise_measured"], dtype=bool) & np.isfinite(p["shot_std"])
-    ax.scatter(p["t"][measured], p["shot_std"][measured], c=colours[measured], s=30, edgecolor="k", linewidth=0.5,
+    measured = p.noise_measured.astype(bool) & np.isfinite(p.shot_std)
+    ax.scatter(p.t[measured], p.shot_std[measured], c=colours[measured], s=30, edgecolor="k", linewidth=0.5,
                zorder=3, label="measured single-shot sd")
-    few = ~np.asarray(p["noise_measured"], dtype=bool) & np.isfinite(p["shot_std"])
+    few = ~p.noise_measured.astype(bool) & np.isfinite(p.shot_std)
     if few.any():
-        ax.scatter(p["t"][few], p["shot_std"][few], facecolor="none", edgecolor="0.5", s=22, zorder=2,
+        ax.scatter(p.t[few], p.shot_std[few], facecolor="none", edgecolor="0.5", s=22, zorder=2,
                    label="sd of few-shot points")
     ax.set(xlabel="exposure / sweep time t (s)", ylabel=f"single-shot noise sd ({f_label})",
            title="noise model with its data", ylim=(0, None))
     ax.legend(fontsize=8)
 
 
-def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
+def _sweep_figure(path: Path, data: CampaignRecord, fits: dict, out_dir: Path) -> Path:
     from noisebo.sho import sho_amplitude
 
-    last = len(data["points"]["x"]) - 1
-    spectrum, fit = last_sweep(lambda point: read_spectra(path, point), data, fits, last)
+    last = len(data.points) - 1
+    spectrum, fit = last_sweep(lambda point: read_spectra(path, point), data.shots.point, fits, last)
     freq, amp = spectrum[0].astype(np.float64), spectrum[1].astype(np.float64)
     fig = Figure(figsize=(7, 4.2), layout="constrained")
     ax = fig.subplots()
@@ -270,9 +270,9 @@ def _sweep_figure(path: Path, data: dict, fits: dict, out_dir: Path) -> Path:
         ax.plot(freq / 1e3, sho_amplitude(freq, fit["amplitude"], fit["resonance_hz"], fit["q"]) / 1e3, color="tab:red",
                 label=f"SHO fit: r = {fit['amplitude']:.3g} +- {fit['amplitude_se']:.2g} pm, "
                       f"f0 = {fit['resonance_hz'] / 1e3:.2f} kHz, Q = {fit['q']:.0f}")
-    t = float(data["points"]["t"][last])
+    t = float(data.points.t[last])
     ax.set(xlabel="drive frequency (kHz)", ylabel="amplitude (nm)",
-           title=f"last sweep of point {last} (x = {format_position(data['points']['x'][last], 3)} um, t = {t:.3g} s)")
+           title=f"last sweep of point {last} (x = {format_position(data.points.x[last], 3)} um, t = {t:.3g} s)")
     ax.legend(fontsize=8)
     out = out_dir / f"{path.stem}_sweep.png"
     fig.savefig(out, dpi=DPI)
@@ -284,26 +284,25 @@ def benchmark_table(rows: dict[str, dict]) -> str:
     return summary_table(rows)
 
 
-def _first_converged(steps: dict) -> int | None:
+def _first_converged(steps) -> int | None:
     """The first BO step (counted from 1) whose ``converged`` flag is set, or None."""
-    hits = np.flatnonzero(np.asarray(steps["converged"], dtype=bool))
-    return int(np.asarray(steps["step"])[hits[0]]) if hits.size else None
+    hits = np.flatnonzero(steps.converged.astype(bool))
+    return int(steps.step[hits[0]]) if hits.size else None
 
 
 def figures_from_file(path: str | Path) -> dict:
     """Benchmark figures of one finished campaign, from its HDF5 file alone."""
     from noisebo.instruments import build
 
-    data = read_campaign(path)
-    config = parse_config(data["attrs"]["config"])
-    if data["summary"] is None:
-        raise CampaignFileError(f"{path}: campaign not finished (status {data['attrs']['status']})")
+    data = read_record(Path(path))
+    config = parse_config(data.config)
+    if data.summary is None:
+        raise CampaignFileError(f"{path}: campaign not finished (status {data.status})")
     record = campaign_figures(
-        config, build(config.instrument), data["steps"]["t_opt"], data["summary"]["t_opt"], data["grid"]["x"],
-        data["summary"]["f_mean"], data["shots"]["t"], data["steps"]["latency_s"],
-        _first_converged(data["steps"]),
+        config, build(config.instrument), data.steps.t_opt, data.summary.t_opt, data.grid["x"],
+        data.summary.f_mean, data.shots.t, data.steps.latency_s, _first_converged(data.steps),
     )
-    record.update(seed=int(data["attrs"]["seed"]), file=str(path))
+    record.update(seed=data.seed, file=str(path))
     return record
 
 
@@ -326,7 +325,7 @@ def sweep_report(files: list[Path], out_dir: Path) -> list[Path]:
     unfinished files are left out and named."""
     finished, skipped = [], []
     for f in files:
-        (finished if read_campaign(f)["summary"] is not None else skipped).append(f)
+        (finished if read_record(f).summary is not None else skipped).append(f)
     if not finished:
         raise CampaignFileError(f"none of the {len(files)} campaign files has finished")
     out_dir.mkdir(parents=True, exist_ok=True)

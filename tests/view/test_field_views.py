@@ -10,7 +10,8 @@ from noisebo.campaign import engine
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
 from noisebo.events import DriverInfo
-from noisebo.storage.hdf5 import read_campaign, write_snapshot
+from noisebo.storage.hdf5 import write_snapshot
+from noisebo.storage.record import read_record
 from noisebo.storage.records import encode, rebuild
 from noisebo.view.recording import true_optimal_map
 from noisebo.view.report import _t_map, campaign_report
@@ -43,7 +44,7 @@ def test_the_simulators_optimal_map_is_shorter_on_the_patch():
 
 
 def test_the_report_draws_the_map_of_a_field_campaign(field_file, tmp_path):
-    data = read_campaign(field_file)
+    data = read_record(field_file)
     assert _t_map(data).shape == (50,)
     written = campaign_report(field_file, tmp_path)
     assert written[0].name == "patch_report.png" and written[0].stat().st_size > 50_000
@@ -61,4 +62,4 @@ def test_an_x_independent_file_has_no_map(tiny_config, tmp_path):
     started = engine.new_campaign(config, 0, DriverInfo("forrester", "0.1.0", {}), {}, "2026-11-24T00:00:00+00:00")
     path = tmp_path / "tiny.h5"
     write_snapshot(path, rebuild([encode(e) for e in [started, *events]]))
-    assert _t_map(read_campaign(path)) is None and inspect_summary(path)["noise_field"] is None
+    assert _t_map(read_record(path)) is None and inspect_summary(path)["noise_field"] is None

@@ -7,6 +7,7 @@ steps, the noise model converged at BO step 3 (the engine's index 2); its journa
 import json
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -39,7 +40,8 @@ def old_and_new(tmp_path_factory):
     ([], None),
 ])
 def test_the_first_converged_step_counts_from_1(converged, first):
-    assert _first_converged({"step": np.arange(1, len(converged) + 1), "converged": np.asarray(converged)}) == first
+    steps = SimpleNamespace(step=np.arange(1, len(converged) + 1), converged=np.asarray(converged))
+    assert _first_converged(steps) == first
 
 
 @pytest.mark.parametrize("which", [0, 1])
