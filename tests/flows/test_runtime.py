@@ -4,6 +4,8 @@ import os
 import subprocess
 import sys
 
+from noisebo.flows import runtime
+
 
 def test_importing_flows_sets_the_temporary_servers_defaults_and_keeps_what_is_set():
     env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_")}
@@ -64,3 +66,15 @@ def test_prefects_exit_notice_is_not_shown_and_its_other_warnings_are(caplog):
     finally:
         worker.filters[:] = filters
     assert [r.getMessage() for r in caplog.records] == ["Service failed to send 3 events"]
+
+
+def test_the_pool_warning_at_exit_is_dropped_and_other_warnings_are_not():
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        runtime.quiet_pool_at_exit()
+        warnings.warn(f"{runtime.POOL_AT_EXIT} <AdaptedConnection>, which will be terminated.", UserWarning,
+                      stacklevel=1)
+        warnings.warn("another warning", UserWarning, stacklevel=1)
+    assert [str(w.message) for w in caught] == ["another warning"]
