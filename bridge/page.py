@@ -107,7 +107,8 @@ def _f_plot(state: EngineState) -> str:
     series = []
     if state.decisions:
         last = state.decisions[-1]
-        x = grids(state.config).x[:, 0] if grids(state.config).x.ndim == 2 else grids(state.config).x
+        x = grids(state.config).x
+        x = x[:, 0] if x.ndim == 2 else x
         sd = np.sqrt(np.maximum(last.f_var, 0.0))
         series += [("band", x, last.f_mean - 2 * sd, last.f_mean + 2 * sd, "#cfe0f3"),
                    ("line", x, last.f_mean, None, "#1f5fa8")]

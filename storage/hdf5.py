@@ -56,7 +56,6 @@ from noisebo.storage.layout import (
     failure_rows,
     fill_grid,
     fill_summary,
-    fsync_file,
     hyperparameter_names,
     point_rows,
     root_attrs,
@@ -69,7 +68,7 @@ from noisebo.storage.layout import (
 from noisebo.storage import steps as numbering
 from noisebo.storage.faults import crash_point
 from noisebo.storage.integrity import NO_JOURNAL, CampaignFileError, Opening, examine
-from noisebo.storage.journal import _fsync_dir
+from noisebo.storage.journal import fsync_path
 
 if TYPE_CHECKING:  # readers of a file (inspect, ask) need no model: the writers import grids when they run
     from noisebo.campaign.engine import EngineState
@@ -162,9 +161,9 @@ def write_snapshot(path: Path, state: EngineState) -> None:
         _fill(f, state)
         f.flush()
         crash_point("hdf5")
-    fsync_file(tmp)
+    fsync_path(tmp)
     os.replace(tmp, path)
-    _fsync_dir(path.parent)
+    fsync_path(path.parent)
 
 
 def stray_temporaries(path: Path) -> list[Path]:

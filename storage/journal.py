@@ -185,7 +185,7 @@ class JournalWriter:
             raise
         finally:
             tmp.unlink(missing_ok=True)
-        _fsync_dir(path.parent)
+        fsync_path(path.parent)
         return writer
 
     @classmethod
@@ -225,7 +225,8 @@ class JournalWriter:
             self._fd = -1
 
 
-def _fsync_dir(path: Path) -> None:
+def fsync_path(path: Path) -> None:
+    """Flush a file's or a folder's contents (a folder: the names in it) to the disk."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)

@@ -68,7 +68,6 @@ from noisebo.storage.layout import (
     failure_rows,
     fill_grid,
     fill_summary,
-    fsync_file,
     hyperparameter_names,
     point_rows,
     root_attrs,
@@ -79,7 +78,7 @@ from noisebo.storage.layout import (
     x_tail,
 )
 from noisebo.storage.integrity import CampaignFileError
-from noisebo.storage.journal import _fsync_dir
+from noisebo.storage.journal import fsync_path
 
 if TYPE_CHECKING:  # reading a running file needs no model
     from noisebo.campaign.engine import EngineState
@@ -233,9 +232,9 @@ class LiveFile:
             live._write(state, crash=lambda: None)
             start_swmr(f)  # flushes: from here on the file opens with swmr=True, whatever happens
             crash_point("hdf5")
-            fsync_file(tmp)
+            fsync_path(tmp)
             os.replace(tmp, path)
-            _fsync_dir(path.parent)
+            fsync_path(path.parent)
         except BaseException:
             f.close()
             tmp.unlink(missing_ok=True)

@@ -249,7 +249,7 @@ def _keep_intact(jpath: Path) -> list[str]:
         finally:
             new.close()
         os.replace(fresh, jpath)
-        journal._fsync_dir(jpath.parent)
+        journal.fsync_path(jpath.parent)
     finally:
         writer.close()
     return [damage.describe(jpath), f"moved it to {aside} and kept records 0-{damage.record - 1} in {jpath}; "
