@@ -42,14 +42,21 @@ class RemoteSettings(FrozenModel):
     timeout after this long without a word from the instrument PC (beyond the shot's own t);
     ``max_body_mib``: the largest reading accepted; ``shape``: what a reading must look like."""
 
-    host: str = Field(default="127.0.0.1", min_length=1)
-    port: Count = Field(default=8765, ge=0, le=65535)
-    token_file: str = Field(default=DEFAULT_TOKEN_FILE, min_length=1)
-    tls_certfile: str | None = Field(default=None, min_length=1)
-    tls_keyfile: str | None = Field(default=None, min_length=1)
-    silence_s: Number = Field(default=120.0, gt=0)
-    max_body_mib: Number = Field(default=64.0, gt=0)
-    shape: ReadingShape = ReadingShape()
+    host: str = Field(default="127.0.0.1", min_length=1, description="the address the bridge listens on: "
+                      "127.0.0.1 this computer only; another (0.0.0.0: every interface) lets other computers in and "
+                      "needs a token of at least 32 characters, and TLS to keep it off the network in the clear")
+    port: Count = Field(default=8765, ge=0, le=65535, description="the TCP port (0: any free one)")
+    token_file: str = Field(default=DEFAULT_TOKEN_FILE, min_length=1, description="the file holding the bearer "
+                            "token, created with a new random token (mode 600) when missing; the environment "
+                            "variable NOISEBO_BRIDGE_TOKEN overrides it")
+    tls_certfile: str | None = Field(default=None, min_length=1, description="the certificate (PEM) to serve HTTPS "
+                                     "with; given with tls_keyfile or not at all")
+    tls_keyfile: str | None = Field(default=None, min_length=1, description="its private key (PEM)")
+    silence_s: Number = Field(default=120.0, gt=0, description="a shot fails as a timeout after this long (s) "
+                              "without a word from the instrument PC, beyond the shot's own t")
+    max_body_mib: Number = Field(default=64.0, gt=0, description="the largest reading accepted (MiB); a larger body "
+                                 "is refused (413)")
+    shape: ReadingShape = Field(ReadingShape(), description="what a reading must look like")
 
     @model_validator(mode="after")
     def _tls_pair(self) -> RemoteSettings:
@@ -206,7 +213,7 @@ class RemoteInstrument:
 class ManualSettings(FrozenModel):
     """A campaign measured by hand: ``shape`` is what each reading must look like."""
 
-    shape: ReadingShape = ReadingShape()
+    shape: ReadingShape = Field(ReadingShape(), description="what a reading must look like")
 
 
 class ManualInstrument:

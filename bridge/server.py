@@ -27,12 +27,26 @@ from fastapi.responses import HTMLResponse, JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from noisebo.bridge import page as page_html
+from noisebo.bridge.answers import ErrorAnswer, NextAnswer, Recorded, StatusAnswer
 from noisebo.bridge.exchange import Exchange
 from noisebo.bridge.wire import ReadingBody, WireError, parse_body
 
 MAX_WAIT_S = 60.0
 DRAIN_MAX_BYTES = 256 * 2**20  # an unwanted body is read and discarded up to this; beyond it the connection is closed
 HEADER_ONLY = ("the token goes in the header `Authorization: Bearer TOKEN`; `?token=` opens only the status page /")
+
+
+def refusals(*statuses: int, **said_instead: str) -> dict:
+    """The API description of refusals with these statuses (each answers ``{"error": ...}``);
+    ``said_instead`` (``s422="..."``) words one of them for its path."""
+    said = {400: "the body is not JSON", 401: "no token, or the token in the URL", 403: "a wrong token",
+            409: "the shot is not wanted (finished, not yet due, recorded with another reading, or the campaign "
+                 "has ended): drop the reading and poll /next",
+            413: "the body is over `max_body_mib`",
+            422: "a field, a non-finite number, the wrong kind of reading or a spectrum of the wrong shape",
+            503: "the campaign is starting, or the reading is not journaled yet: send the same post again"}
+    return {status: {"model": ErrorAnswer, "description": said_instead.get(f"s{status}", said[status])}
+            for status in statuses}
 
 
 def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
@@ -75,8 +89,11 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
         where = "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in error.errors())
         return JSONResponse({"error": where}, 422)
 
-    @app.get("/next", dependencies=[Depends(authorised)], summary="The next wanted shot (long poll)")
-    async def next_shot(wait: float = Query(25.0, ge=0.0, le=MAX_WAIT_S, description="seconds to wait for one")):
+    @app.get("/next", dependencies=[Depends(authorised)], summary="The next wanted shot (long poll)",
+             responses={200: {"model": NextAnswer, "description": "a shot to measure, nothing yet, or the end"},
+                        **refusals(401, 403, 422, s422="`wait` is not a number of seconds from 0 to 60")})
+    async def next_shot(wait: float = Query(25.0, ge=0.0, le=MAX_WAIT_S,
+                                            description="how long to wait for a wanted shot (s), at most 60")):
         """`{"kind": "shot", "campaign", "point", "shot", "step", "x", "t", "wanted", "attempt", "seed",
         "reading"}`: measure at x for t seconds and post to /shots/{point}/{shot} ("step": the BO step,
         counted from 1; 0 for a seed point). `{"kind": "wait"}`:
@@ -84,9 +101,13 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
         return await run_in_threadpool(exchange.next_shot, wait)
 
     @app.post("/shots/{point}/{shot}", dependencies=[Depends(authorised)], summary="Post a shot's reading",
+              responses={200: {"model": Recorded, "description": "journaled (or journaled before)"},
+                         **refusals(400, 401, 403, 409, 413, 422, 503)},
               openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
                   "schema": ReadingBody.model_json_schema()}}}})
-    async def post_shot(request: Request, point: int = Path(ge=0), shot: int = Path(ge=0)):
+    async def post_shot(request: Request,
+                        point: int = Path(ge=0, description="the request's point: its index in the campaign, from 0"),
+                        shot: int = Path(ge=0, description="the request's shot: its index within the point, from 0")):
         """Body: `{"value": number}`, `{"spectrum": [[...], ...], "reduction": "sho"}` (rows × samples)
         or `{"error": "what went wrong", "attempt": n}`. 200 once journaled (`"duplicate": true` when it
         was already); 409 when the shot is not wanted; 413, 400, 422 for a bad body; nothing is
@@ -95,7 +116,8 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
         body = parse_body(raw)
         return await run_in_threadpool(exchange.hand_in, point, shot, body)
 
-    @app.get("/status", dependencies=[Depends(authorised)], summary="Campaign progress")
+    @app.get("/status", dependencies=[Depends(authorised)], summary="Campaign progress",
+             responses={200: {"model": StatusAnswer, "description": "the campaign's progress"}, **refusals(401, 403)})
     async def status():
         return exchange.status()
 

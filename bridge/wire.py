@@ -76,11 +76,14 @@ class ReadingShape(FrozenModel):
     named reduction that turns a spectrum into the shot's value; ``spectrum_rows``: the row
     counts accepted; ``min_samples``/``max_samples``: the samples per row accepted."""
 
-    reading: Literal["scalar", "spectrum"] = "scalar"
-    reduction: str = Field(default="sho", min_length=1)
-    spectrum_rows: tuple[config.Count, ...] = (2, 3)
-    min_samples: config.Count = Field(default=8, ge=1)
-    max_samples: config.Count = Field(default=1_000_000, ge=1)
+    reading: Literal["scalar", "spectrum"] = Field("scalar", description="scalar: one number per shot; spectrum: "
+                                                   "rows x samples per shot")
+    reduction: str = Field(default="sho", min_length=1, description="the named reduction that turns a spectrum into "
+                           "the shot's value (a reading may name its own)")
+    spectrum_rows: tuple[config.Count, ...] = Field((2, 3), description="the row counts a spectrum may have (e.g. "
+                                                    "frequency Hz, amplitude, phase deg)")
+    min_samples: config.Count = Field(default=8, ge=1, description="the fewest samples per row accepted")
+    max_samples: config.Count = Field(default=1_000_000, ge=1, description="the most samples per row accepted")
 
     @model_validator(mode="after")
     def _consistent(self) -> ReadingShape:
@@ -95,9 +98,9 @@ class PackedSpectrum(StrictModel):
     """A spectrum as bytes: ``data`` is base64 of the values, little-endian ``dtype``, row after
     row, ``rows`` rows. Much faster to send than lists of numbers for long sweeps."""
 
-    rows: int = Field(ge=1)
-    dtype: Literal["float32", "float64"] = "float64"
-    data: str
+    rows: int = Field(ge=1, description="the number of rows (e.g. 3: frequency Hz, amplitude, phase deg)")
+    dtype: Literal["float32", "float64"] = Field("float64", description="the values' type, little-endian")
+    data: str = Field(description="base64 of the values, row after row (rows x samples values in all)")
 
     def array(self) -> np.ndarray:
         try:
@@ -114,13 +117,19 @@ class ReadingBody(StrictModel):
     """A posted reading: exactly one of ``value``, ``spectrum`` or ``error``. NaN and infinities
     parse here and are refused by ``outcome_of`` with the field named."""
 
-    value: Number | None = None
+    value: Number | None = Field(None, description="a scalar reading: the shot's value, in the units of f (a "
+                                 "finite number; an integer will do)")
     spectrum: Annotated[Union[Annotated[list[list[Number]], Tag("rows")], Annotated[PackedSpectrum, Tag("packed")]],
-                        Discriminator(lambda v: "packed" if isinstance(v, (dict, PackedSpectrum)) else "rows")] | None = None
-    reduction: str | None = None
-    error: str | None = Field(default=None, min_length=1, max_length=2000)
-    attempt: int = Field(default=0, ge=0)
-    campaign: str | None = None
+                        Discriminator(lambda v: "packed" if isinstance(v, (dict, PackedSpectrum)) else "rows")] | None = Field(
+        None, description="a spectrum reading: rows x samples as lists of numbers (e.g. frequency Hz, amplitude, "
+                          "phase deg), or packed as base64")
+    reduction: str | None = Field(None, description="how the campaign turns the spectrum into the shot's value "
+                                  "(default: the campaign's, e.g. sho)")
+    error: str | None = Field(default=None, min_length=1, max_length=2000, description="the shot failed: what went "
+                              "wrong (counts against the failure budget; the same shot is asked again)")
+    attempt: int = Field(default=0, ge=0, description="with error: the request's attempt number")
+    campaign: str | None = Field(None, description="the request's campaign id; a reading for another campaign is "
+                                 "refused (409)")
 
     @model_validator(mode="after")
     def _one_kind(self) -> ReadingBody:

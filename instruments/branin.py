@@ -38,9 +38,10 @@ class BraninSettings(FrozenModel):
     law, which the default noise-model priors Uniform(0, 15) cover); seed: the random stream of
     shots measured outside a campaign (a campaign draws each shot from its own key)."""
 
-    a0: NonNegativeFloat = 0.1
-    a1: NonNegativeFloat = 2.0
-    seed: Count = Field(0, ge=0)
+    a0: NonNegativeFloat = Field(0.1, description="A0, the time-independent single-shot noise sd (units of f)")
+    a1: NonNegativeFloat = Field(2.0, description="A1, the time-dependent noise amplitude (units of f at t = 1 s)")
+    seed: Count = Field(0, ge=0, description="random stream of shots measured outside a campaign (a campaign draws "
+                        "each shot from its own key)")
 
 
 class BraninInstrument:

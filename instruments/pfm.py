@@ -88,17 +88,24 @@ class PFMSettings(FrozenModel):
     ``seed``: the random stream of sweeps measured outside a campaign (a campaign draws each
     shot from its own key)."""
 
-    profile: Source = ScanProfileConfig()
-    resonance_hz: PositiveFloat = 372_000.0
-    q: Number = Field(250.0, gt=1)
-    sweep_half_span_hz: PositiveFloat = 5_000.0
-    sample_rate_hz: PositiveFloat = 10_000.0
-    sample_noise_pm: NonNegativeFloat = 7_500.0
-    background_pm: NonNegativeFloat = 0.5
-    gain_jitter: NonNegativeFloat = 0.002
-    position_jitter_um: NonNegativeFloat = 0.0001
-    resonance_jitter_hz: NonNegativeFloat = 50.0
-    seed: Count = Field(0, ge=0)
+    profile: Source = Field(ScanProfileConfig(), description="the local response, chosen by `source`: scan (a line "
+                            "across a real scan), synthetic (a synthetic line), scan_area (a real scan's area) or "
+                            "synthetic_area")
+    resonance_hz: PositiveFloat = Field(372_000.0, description="the contact resonance (Hz)")
+    q: Number = Field(250.0, gt=1, description="the oscillator's quality factor")
+    sweep_half_span_hz: PositiveFloat = Field(5_000.0, description="a sweep covers resonance_hz +- this (Hz)")
+    sample_rate_hz: PositiveFloat = Field(10_000.0, description="samples per second of sweep (Hz): a sweep of t s "
+                                          "has round(sample_rate_hz t) samples")
+    sample_noise_pm: NonNegativeFloat = Field(7_500.0, description="Gaussian noise per sample of the amplitude "
+                                              "spectrum (pm, sd)")
+    background_pm: NonNegativeFloat = Field(0.5, description="electrostatic background added to the local response, "
+                                            "per sweep (pm, sd)")
+    gain_jitter: NonNegativeFloat = Field(0.002, description="relative gain jitter (drive and contact) per sweep "
+                                          "(sd, a fraction)")
+    position_jitter_um: NonNegativeFloat = Field(0.0001, description="tip landing error per sweep (um, sd per axis)")
+    resonance_jitter_hz: NonNegativeFloat = Field(50.0, description="resonance drift per sweep (Hz, sd)")
+    seed: Count = Field(0, ge=0, description="random stream of sweeps measured outside a campaign (a campaign draws "
+                        "each shot from its own key)")
 
     @model_validator(mode="after")
     def _consistent(self) -> PFMSettings:

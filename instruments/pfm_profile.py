@@ -30,13 +30,15 @@ class ScanProfileConfig(FrozenModel):
     ``amplitude_channel``/``phase_channel``: the channels' indices k, or None (the default) to
     find them by their ``quantity`` attribute (``instruments.pfm_scan.find_channel``)."""
 
-    source: Literal["scan"] = "scan"
-    file: str = DEFAULT_SCAN
-    amplitude_channel: ChannelIndex | None = None
-    phase_channel: ChannelIndex | None = None
-    start_px: tuple[Number, Number] = (20.0, 120.0)
-    end_px: tuple[Number, Number] = (200.0, 255.0)
-    smooth_px: NonNegativeFloat = 1.0
+    source: Literal["scan"] = Field("scan", description="a line across a real PFM scan")
+    file: str = Field(DEFAULT_SCAN, description="the scan (pyNSID HDF5): a path, or the name of a shipped scan")
+    amplitude_channel: ChannelIndex | None = Field(None, description="the amplitude channel's index; None: the "
+                                                   "channel whose recorded quantity is the amplitude")
+    phase_channel: ChannelIndex | None = Field(None, description="the phase channel's index; None: the channel "
+                                               "whose recorded quantity is the phase")
+    start_px: tuple[Number, Number] = Field((20.0, 120.0), description="the line's first pixel (row, column)")
+    end_px: tuple[Number, Number] = Field((200.0, 255.0), description="the line's last pixel (row, column)")
+    smooth_px: NonNegativeFloat = Field(1.0, description="Gaussian smoothing of the scan (pixels, sd)")
 
     @model_validator(mode="after")
     def _distinct(self) -> ScanProfileConfig:
@@ -50,12 +52,12 @@ class SyntheticProfileConfig(FrozenModel):
     response passes through zero (tanh profile), and domain amplitudes ``amplitude_pm`` times a
     per-domain factor drawn from ``seed``."""
 
-    source: Literal["synthetic"] = "synthetic"
-    length_um: PositiveFloat = 1.0
-    n_domains: Count = Field(4, ge=1, le=1000)
-    amplitude_pm: PositiveFloat = 100.0
-    wall_um: PositiveFloat = 0.02
-    seed: Count = 0
+    source: Literal["synthetic"] = Field("synthetic", description="a synthetic line of alternating domains")
+    length_um: PositiveFloat = Field(1.0, description="the line's length (um)")
+    n_domains: Count = Field(4, ge=1, le=1000, description="domains along the line")
+    amplitude_pm: PositiveFloat = Field(100.0, description="typical domain response (pm)")
+    wall_um: PositiveFloat = Field(0.02, description="domain-wall width (um; tanh profile)")
+    seed: Count = Field(0, description="random stream of the per-domain amplitude factors")
 
 
 ProfileConfig = Annotated[Union[ScanProfileConfig, SyntheticProfileConfig], Field(discriminator="source")]

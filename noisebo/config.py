@@ -147,8 +147,8 @@ def _refuses(model: type[BaseModel], name: str, value: Any, where: set[tuple]) -
 class UniformPrior(FrozenModel):
     """Uniform(low, high) prior on a non-negative parameter, in the parameter's own units."""
 
-    low: NonNegativeFloat = 0.0
-    high: PositiveFloat = 15.0
+    low: NonNegativeFloat = Field(0.0, description="lower bound, in the parameter's units")
+    high: PositiveFloat = Field(15.0, description="upper bound, in the parameter's units; above `low`")
 
     @model_validator(mode="after")
     def _ordered(self) -> UniformPrior:
@@ -168,15 +168,19 @@ class FaultsConfig(FrozenModel):
     a NaN or infinite reading, an outlier (the reading moved by ``outlier_sd`` times the true
     single-shot noise sd) or, for spectra, a corrupted spectrum; otherwise the real reading."""
 
-    seed: Count = Field(0, ge=0)
-    timeout: Rate = 0.0
-    exception: Rate = 0.0
-    nan: Rate = 0.0
-    inf: Rate = 0.0
-    outlier: Rate = 0.0
-    corrupt_spectrum: Rate = 0.0
-    outlier_sd: PositiveFloat = 50.0
-    hang_s: PositiveFloat = 2.0
+    seed: Count = Field(0, ge=0, description="seed of the injector's own random stream (independent of the campaign's)")
+    timeout: Rate = Field(0.0, description="probability that a call hangs for `hang_s` (cut off by "
+                                           "`instrument.timeout_s`); the rates add up to at most 1")
+    exception: Rate = Field(0.0, description="probability that a call raises an instrument error")
+    nan: Rate = Field(0.0, description="probability that a call returns a NaN reading")
+    inf: Rate = Field(0.0, description="probability that a call returns an infinite reading")
+    outlier: Rate = Field(0.0, description="probability that a reading is moved by `outlier_sd` true single-shot "
+                                           "noise sd")
+    corrupt_spectrum: Rate = Field(0.0, description="probability that a spectrum reading comes back corrupted "
+                                                    "(spectra only)")
+    outlier_sd: PositiveFloat = Field(50.0, description="how far an injected outlier lies from the true reading, in "
+                                                        "single-shot noise sd")
+    hang_s: PositiveFloat = Field(2.0, description="length of an injected hang (s); above `instrument.timeout_s`")
 
     @model_validator(mode="after")
     def _at_most_one(self) -> FaultsConfig:
@@ -193,10 +197,14 @@ class InstrumentConfig(FrozenModel):
     ``timeout_s`` (the instrument layer gives up on a shot after this long; None: no limit) and
     ``faults`` (injected faults, for resilience tests) wrap any driver."""
 
-    kind: str = Field(min_length=1)
-    settings: dict[str, Any] = Field(default_factory=dict)
-    timeout_s: PositiveFloat | None = None
-    faults: FaultsConfig | None = None
+    kind: str = Field(min_length=1, description="the name of an installed instrument driver (`noisebo instruments` "
+                                                "lists them), e.g. forrester, pfm, remote, manual")
+    settings: dict[str, Any] = Field(default_factory=dict, description="the driver's own settings, validated by its "
+                                     "`Settings` model when the config is loaded (see the drivers' settings below)")
+    timeout_s: PositiveFloat | None = Field(None, description="the instrument layer gives up on a shot after this "
+                                            "long (s) and records a timeout; None: no limit")
+    faults: FaultsConfig | None = Field(None, description="injected instrument faults, for resilience tests; "
+                                                          "None: none")
 
     def __hash__(self) -> int:  # settings is a mapping: hash its canonical JSON
         return hash((self.kind, json.dumps(self.settings, sort_keys=True, default=str), self.timeout_s, self.faults))
@@ -214,9 +222,12 @@ class SHOReductionConfig(FrozenModel):
     ``q_bounds``. ``nominal_resonance_hz`` and ``nominal_q`` (the instrument's tune), when both
     are given, rescue a sweep whose free fit fails (see ``noisebo.sho.fit_sho``)."""
 
-    q_bounds: tuple[PositiveFloat, PositiveFloat] = (5.0, 5000.0)
-    nominal_resonance_hz: PositiveFloat | None = None
-    nominal_q: PositiveFloat | None = None
+    q_bounds: tuple[PositiveFloat, PositiveFloat] = Field((5.0, 5000.0), description="the range of the quality "
+                                                          "factor Q the fit may take (increasing)")
+    nominal_resonance_hz: PositiveFloat | None = Field(None, description="the instrument's nominal resonance (Hz); "
+                                                       "with `nominal_q` it rescues a sweep whose free fit fails")
+    nominal_q: PositiveFloat | None = Field(None, description="the instrument's nominal quality factor, inside "
+                                            "`q_bounds`; given with `nominal_resonance_hz` or not at all")
 
     @model_validator(mode="after")
     def _consistent(self) -> SHOReductionConfig:
@@ -232,7 +243,8 @@ class SHOReductionConfig(FrozenModel):
 class ReductionConfig(FrozenModel):
     """How a raw spectrum becomes a shot's value, per named reduction (a reading names its own)."""
 
-    sho: SHOReductionConfig = SHOReductionConfig()
+    sho: SHOReductionConfig = Field(SHOReductionConfig(), description="the SHO fit of a resonance sweep (a "
+                                    "reading whose reduction is \"sho\")")
 
 
 AXIS_NAME = r"^[A-Za-z_][A-Za-z0-9_]*$"
@@ -244,11 +256,14 @@ class AxisConfig(FrozenModel):
     ``n``: points along it of the grid decisions are shown on (and, for a single axis, searched
     over); default 200 for one axis, 64 per axis for two, 12 for more."""
 
-    name: str = Field(pattern=AXIS_NAME, max_length=32)
-    low: FiniteFloat
-    high: FiniteFloat
-    units: str = Field("", max_length=32)
-    n: Count | None = Field(None, ge=2, le=20_000)
+    name: str = Field(pattern=AXIS_NAME, max_length=32, description="the axis's name, an identifier (x, y, ...)")
+    low: FiniteFloat = Field(description="lower bound, in the axis's `units`")
+    high: FiniteFloat = Field(description="upper bound, in the axis's `units`; above `low`")
+    units: str = Field("", max_length=32, description="the units of positions along the axis (um, V, ...); x "
+                                                      "travels in these units everywhere: requests, files, figures")
+    n: Count | None = Field(None, ge=2, le=20_000, description="grid points along the axis (None: 200 for one "
+                            "axis, 64 for two, 12 for more): the candidate grid for one axis, the display grid "
+                            "for two")
 
     @model_validator(mode="after")
     def _ordered(self) -> AxisConfig:
@@ -269,11 +284,13 @@ class SpaceConfig(FrozenModel):
     With one axis, proposals lie on its grid; with more, on ``n_candidates`` reference points
     (the display grid for two axes, a Halton set for more) refined locally, off the grid."""
 
-    axes: tuple[AxisConfig, ...] = (AxisConfig(name="x", low=0.0, high=1.0, n=200),)
-    t_min: PositiveFloat = 0.2
-    t_max: PositiveFloat = 10.0
-    n_t: Count = Field(100, ge=2, le=20_000)
-    n_candidates: Count = Field(1024, ge=16, le=20_000)
+    axes: tuple[AxisConfig, ...] = Field((AxisConfig(name="x", low=0.0, high=1.0, n=200),), description="the axes "
+                                         "of x, 1 to 4 (or, for one axis named x, the keys `x_min`, `x_max`, `n_x`)")
+    t_min: PositiveFloat = Field(0.2, description="shortest exposure or sweep time (s)")
+    t_max: PositiveFloat = Field(10.0, description="longest exposure or sweep time (s); above `t_min`")
+    n_t: Count = Field(100, ge=2, le=20_000, description="points of the t grid, evenly spaced over [t_min, t_max]")
+    n_candidates: Count = Field(1024, ge=16, le=20_000, description="reference points (a Halton set) that a "
+                                "decision searches from with three or four axes")
 
     @model_validator(mode="before")
     @classmethod
@@ -352,9 +369,10 @@ class SpaceConfig(FrozenModel):
 class RewardConfig(FrozenModel):
     """R(t, Noise) = -alpha*t^2 - beta*Noise, normalised to [0, 1]; gamma weights it (Eq. 6)."""
 
-    alpha: PositiveFloat = 0.1
-    beta: PositiveFloat = 2.0
-    gamma: NonNegativeFloat = 5.0
+    alpha: PositiveFloat = Field(0.1, description="weight of the time cost t^2 in R (1/s^2)")
+    beta: PositiveFloat = Field(2.0, description="weight of the single-shot noise sd in R (1/units of f)")
+    gamma: NonNegativeFloat = Field(5.0, description="exponent of the normalised reward in the reward-driven "
+                                                     "policy (Eq. 6)")
 
 
 class AcquisitionConfig(FrozenModel):
@@ -369,15 +387,18 @@ class AcquisitionConfig(FrozenModel):
     ``f_acquisition``: UE, EI or UCB on f; ``maximize`` sets EI/UCB's direction.
     """
 
-    policy: PolicyName = "reward"
-    f_acquisition: Literal["ue", "ei", "ucb"] = "ue"
-    t_acquisition: Literal["ei"] = "ei"
-    maximize: Flag = True
-    ucb_kappa: PositiveFloat = 2.0
-    ei_xi: NonNegativeFloat = 0.01
-    fixed_t: PositiveFloat | None = None
-    """A baseline without time optimisation: every proposal uses the t-grid value nearest this
-    (s), chosen by the policy's acquisition over x alone; None (default) optimises t."""
+    policy: PolicyName = Field("reward", description="an installed policy (`noisebo policies`): reward, double, "
+                               "info_rate or a plug-in's")
+    f_acquisition: Literal["ue", "ei", "ucb"] = Field("ue", description="acquisition on f: uncertainty (ue), "
+                                                      "expected improvement (ei) or upper confidence bound (ucb)")
+    t_acquisition: Literal["ei"] = Field("ei", description="acquisition on the normalised reward over t (the double "
+                                         "policy's acq_t)")
+    maximize: Flag = Field(True, description="whether EI and UCB look for the maximum of f (false: the minimum)")
+    ucb_kappa: PositiveFloat = Field(2.0, description="UCB's multiple of the posterior sd of f")
+    ei_xi: NonNegativeFloat = Field(0.01, description="EI's exploration margin, in standardised units of f")
+    fixed_t: PositiveFloat | None = Field(None, description="a baseline without time optimisation: every proposal "
+                                          "uses the t-grid value nearest this (s), chosen by the policy's acquisition "
+                                          "over x alone; None optimises t")
 
 
 class PrimaryModelConfig(FrozenModel):
@@ -385,10 +406,12 @@ class PrimaryModelConfig(FrozenModel):
     [0, 1]. The default length prior puts 95 % of its mass between 0.075 and 0.53 of the x range:
     features much shorter cannot be resolved by a few dozen points, much longer ones are flat."""
 
-    amplitude_loc: FiniteFloat = 0.0
-    amplitude_scale: PositiveFloat = 1.0
-    length_loc: FiniteFloat = math.log(0.2)
-    length_scale: PositiveFloat = 0.5
+    amplitude_loc: FiniteFloat = Field(0.0, description="log-median of the kernel amplitude's LogNormal prior "
+                                       "(standardised f)")
+    amplitude_scale: PositiveFloat = Field(1.0, description="log-sd of the kernel amplitude's LogNormal prior")
+    length_loc: FiniteFloat = Field(math.log(0.2), description="log-median of each length scale's LogNormal prior "
+                                    "(x scaled to [0, 1] per axis)")
+    length_scale: PositiveFloat = Field(0.5, description="log-sd of each length scale's LogNormal prior")
 
 
 class NoiseFieldConfig(FrozenModel):
@@ -412,37 +435,44 @@ class NoiseFieldConfig(FrozenModel):
     out with less variance near the cube's faces; a larger factor needs more functions).
     """
 
-    varies: Literal["a0", "a0_a1"] = "a0"
-    amplitude_loc: FiniteFloat = math.log(0.5)
-    amplitude_scale: PositiveFloat = 1.0
-    length_loc: FiniteFloat = math.log(0.2)
-    length_scale: PositiveFloat = 0.75
-    basis_per_axis: Count | None = Field(None, ge=2, le=256)
-    boundary_factor: Number = Field(2.0, ge=1.1, le=4.0)
+    varies: Literal["a0", "a0_a1"] = Field("a0", description="a0: A0(x) varies, A1 and p shared; a0_a1: A1(x) "
+                                           "varies too, an independent field with the same priors")
+    amplitude_loc: FiniteFloat = Field(math.log(0.5), description="log-median of the LogNormal prior of the field's "
+                                       "sd (itself in log units of A0)")
+    amplitude_scale: PositiveFloat = Field(1.0, description="log-sd of the field sd's LogNormal prior")
+    length_loc: FiniteFloat = Field(math.log(0.2), description="log-median of each axis length's LogNormal prior "
+                                    "(x scaled to [0, 1] per axis)")
+    length_scale: PositiveFloat = Field(0.75, description="log-sd of each axis length's LogNormal prior")
+    basis_per_axis: Count | None = Field(None, ge=2, le=256, description="basis functions per axis of the "
+                                         "approximate GP (None: 96, 24, 10, 7 for 1-4 axes)")
+    boundary_factor: Number = Field(2.0, ge=1.1, le=4.0, description="the basis lives on a box this many times the "
+                                    "unit cube's width, centred on it")
 
 
 class ParameterPosterior(FrozenModel):
     """One noise-law parameter's posterior: mean and sd (A0, A1 in the noise's units; p none)."""
 
-    mean: FiniteFloat
-    sd: NonNegativeFloat
+    mean: FiniteFloat = Field(description="posterior mean (A0, A1 in the noise's units; p without units)")
+    sd: NonNegativeFloat = Field(description="posterior sd, in the same units")
 
 
 class ProfileDriver(FrozenModel):
-    name: str
-    version: str
-    settings: dict
+    """The instrument driver a noise profile was made with."""
+
+    name: str = Field(description="the driver's name")
+    version: str = Field(description="the driver's version")
+    settings: dict = Field(description="the driver's complete settings, its defaults filled in")
 
 
 class ProfileCampaign(FrozenModel):
     """One campaign a profile was made from: its file, config name, seed, start time (UTC) and
     how many of its points measured the noise."""
 
-    file: str
-    config: str
-    seed: Count
-    created_utc: str
-    noise_points: Count
+    file: str = Field(description="the campaign's file")
+    config: str = Field(description="its config's name")
+    seed: Count = Field(description="its seed")
+    created_utc: str = Field(description="when it started (UTC, ISO 8601)")
+    noise_points: Count = Field(description="how many of its points measured the noise")
 
 
 PROFILE_KIND: Final = "noisebo.noise_profile"
@@ -453,15 +483,16 @@ class NoiseProfile(FrozenModel):
     (``noisebo.models.profile``): the posterior of its noise law from finished campaigns, the
     driver (name, version, settings) and the campaigns it came from."""
 
-    kind: Literal["noisebo.noise_profile"] = PROFILE_KIND
-    schema_version: Literal[1] = 1
-    driver: ProfileDriver
-    law: str
-    parameters: dict[str, ParameterPosterior]
-    t_range_s: tuple[FiniteFloat, FiniteFloat]
-    noise_points: Count
-    campaigns: tuple[ProfileCampaign, ...]
-    made_utc: str
+    kind: Literal["noisebo.noise_profile"] = Field(PROFILE_KIND, description="what the file is")
+    schema_version: Literal[1] = Field(1, description="the profile format's version")
+    driver: ProfileDriver = Field(description="the instrument driver the campaigns ran on")
+    law: str = Field(description="the noise law (`noise_model.mean`) the profile describes")
+    parameters: dict[str, ParameterPosterior] = Field(description="each law parameter's posterior (a0, a1, and p "
+                                                      "for a law that infers its exponent)")
+    t_range_s: tuple[FiniteFloat, FiniteFloat] = Field(description="the shortest and longest t measured (s)")
+    noise_points: Count = Field(description="the noise measurements the law was fitted on")
+    campaigns: tuple[ProfileCampaign, ...] = Field(description="the campaigns it came from")
+    made_utc: str = Field(description="when it was made (UTC, ISO 8601)")
 
     def __hash__(self) -> int:  # holds mappings: hash its canonical JSON
         return hash(self.model_dump_json())
@@ -491,17 +522,30 @@ class NoiseModelConfig(FrozenModel):
     settings known not to touch the noise).
     """
 
-    mean: NoiseLawName = "inv_sqrt"
-    a0_prior: UniformPrior = UniformPrior()
-    a1_prior: UniformPrior = UniformPrior()
-    p_prior: UniformPrior = UniformPrior(low=0.1, high=1.5)
-    residual_amplitude_loc: FiniteFloat = math.log(0.05)
-    residual_amplitude_scale: PositiveFloat = 1.0
-    learn_after_convergence: Flag = True
-    field: NoiseFieldConfig | None = None
-    profile: NoiseProfile | None = None
-    profile_check: Flag = True
-    profile_alpha: Annotated[Number, Field(gt=0, lt=0.5)] = 0.01
+    mean: NoiseLawName = Field("inv_sqrt", description="an installed noise law (`noisebo policies`): inv_sqrt "
+                               "(A1/sqrt(t) + A0), power (A1/t^p + A0), quadrature (sqrt(A1^2/t + A0^2)) or a "
+                               "plug-in's")
+    a0_prior: UniformPrior = Field(UniformPrior(), description="Uniform prior of A0, the time-independent noise sd "
+                                   "(units of f)")
+    a1_prior: UniformPrior = Field(UniformPrior(), description="Uniform prior of A1, the time-dependent noise "
+                                   "amplitude (units of f at t = 1 s)")
+    p_prior: UniformPrior = Field(UniformPrior(low=0.1, high=1.5), description="Uniform prior of the exponent p "
+                                  "(the power law only)")
+    residual_amplitude_loc: FiniteFloat = Field(math.log(0.05), description="log-median of the LogNormal prior of "
+                                                "the residual GP's amplitude over t")
+    residual_amplitude_scale: PositiveFloat = Field(1.0, description="log-sd of that prior")
+    learn_after_convergence: Flag = Field(True, description="keep training on the few-shot noise estimates taken "
+                                          "after convergence, weighted by their sampling error")
+    field: NoiseFieldConfig | None = Field(None, description="noise that depends on x: how the law's parameters "
+                                           "vary over x; None: the same noise everywhere, as the paper assumes")
+    profile: NoiseProfile | None = Field(None, description="an instrument's noise profile (`noisebo noise-profile`): "
+                                         "in YAML its path, relative to the config's folder, read when the config is "
+                                         "loaded; its posterior becomes the law's prior")
+    profile_check: Flag = Field(True, description="refuse a profile made with another driver or other driver "
+                                "settings (false: use it anyway)")
+    profile_alpha: Annotated[Number, Field(gt=0, lt=0.5)] = Field(0.01, description="the profile is dropped for good "
+                                                                  "once its posterior predictive p-value on the "
+                                                                  "replicate scatter falls below this")
 
     @model_validator(mode="after")
     def _profile_fits(self) -> NoiseModelConfig:
@@ -542,15 +586,22 @@ class InferenceConfig(FrozenModel):
     range instead, this many bins (an approximation, recorded with each decision).
     """
 
-    mode: Literal["map", "nuts"] = "map"
-    restarts: Count = Field(6, ge=1, le=64)
-    laplace_samples: Count = Field(32, ge=0, le=1024)
-    nuts_warmup: Count = Field(500, ge=10)
-    nuts_samples: Count = Field(500, ge=10)
-    predict_samples: Count = Field(100, ge=1)
-    primary_quadrature: Count = Field(0, ge=0, le=15)
-    max_inputs: Count = Field(256, ge=8, le=8192)
-    restart_every: Count = Field(8, ge=1)
+    mode: Literal["map", "nuts"] = Field("map", description="map: L-BFGS to the posterior mode (with a Laplace "
+                                         "approximation for the noise model); nuts: numpyro NUTS")
+    restarts: Count = Field(6, ge=1, le=64, description="prior draws a multi-start fit starts from, besides a "
+                            "data-driven guess and the previous step's fit")
+    laplace_samples: Count = Field(32, ge=0, le=1024, description="Gaussian draws of the noise model's Laplace "
+                                   "approximation (map mode)")
+    nuts_warmup: Count = Field(500, ge=10, description="NUTS warm-up iterations per fit")
+    nuts_samples: Count = Field(500, ge=10, description="NUTS samples per fit")
+    predict_samples: Count = Field(100, ge=1, description="thinned NUTS draws that predictions average over")
+    primary_quadrature: Count = Field(0, ge=0, le=15, description="nodes per dimension of the Gauss-Hermite "
+                                      "quadrature over the f GP's hyperparameter posterior (map mode); 0: off, the "
+                                      "mode alone")
+    max_inputs: Count = Field(256, ge=8, le=8192, description="distinct inputs a GP takes exactly; beyond, it merges "
+                              "points into this many equal-width bins (an approximation, recorded per step)")
+    restart_every: Count = Field(8, ge=1, description="after convergence every this-many-th step multi-starts, the "
+                                 "others start from the previous fit (1: every step multi-starts)")
 
 
 class ScheduleConfig(FrozenModel):
@@ -605,24 +656,44 @@ class ScheduleConfig(FrozenModel):
     ``noise_model.learn_after_convergence``.
     """
 
-    n_seed: Count = Field(3, ge=1)
-    seed_design: Literal["latin_hypercube", "uniform"] = "latin_hypercube"
-    seed_t_scale: Literal["log", "linear", "log_span"] = "log"
-    n_steps: Count = Field(15, ge=0)
-    adaptive_shots: Flag = False
-    convergence: Literal["variance", "posterior"] = "variance"
-    t_interval_rel: PositiveFloat = 0.1
-    noise_t: Literal["policy", "informative"] = "policy"
-    shots_before: Count = Field(30, ge=2)
-    shots_after: Count = Field(3, ge=1)
-    window: Count = Field(3, ge=2)
-    threshold: PositiveFloat = 5e-4
-    clip_sd: PositiveFloat | None = None
-    min_failed: Count = Field(5, ge=1)
-    tolerated_rate: Rate = 0.5
-    budget_s: PositiveFloat | None = None
-    point_overhead_s: NonNegativeFloat = 0.0
-    mode: Literal["paper", "budget"] = "paper"
+    n_seed: Count = Field(3, ge=1, description="random seed points before the first BO step")
+    seed_design: Literal["latin_hypercube", "uniform"] = Field("latin_hypercube", description="how the seed points "
+                                                               "are drawn over x and t")
+    seed_t_scale: Literal["log", "linear", "log_span"] = Field("log", description="the scale of the seeds' t: log, "
+                                                               "linear, or log_span (t_min, the geometric middle and "
+                                                               "t_max exactly)")
+    n_steps: Count = Field(15, ge=0, description="BO steps after the seed points")
+    adaptive_shots: Flag = Field(False, description="a noise-measuring point takes the shots that make its noise "
+                                 "estimate as precise as the noise model at its t, between max(2, shots_after) and "
+                                 "shots_before")
+    convergence: Literal["variance", "posterior"] = Field("variance", description="variance: the paper's rule (the "
+                                                          "predicted optimal t stopped moving); posterior: its 95 % "
+                                                          "interval is narrow enough")
+    t_interval_rel: PositiveFloat = Field(0.1, description="posterior rule: converged once the 95 % interval of t* "
+                                          "lies within this fraction of its median either side")
+    noise_t: Literal["policy", "informative"] = Field("policy", description="where a noise-measuring point measures: "
+                                                      "at the policy's t, or (posterior rule) at the t that narrows "
+                                                      "t*'s interval most per second")
+    shots_before: Count = Field(30, ge=2, description="shots per point until the noise model converges (and per seed "
+                                "point, paper mode)")
+    shots_after: Count = Field(3, ge=1, description="shots per point after convergence (every point in budget mode)")
+    window: Count = Field(3, ge=2, description="variance rule: BO steps over which the predicted optimal t's "
+                          "variance is taken")
+    threshold: PositiveFloat = Field(5e-4, description="variance rule: converged when that variance is below this "
+                                     "(s^2)")
+    clip_sd: PositiveFloat | None = Field(None, description="reject shots farther than this many robust sd (1.4826 "
+                                          "x MAD) from the median of the point's shots; None: no clipping")
+    min_failed: Count = Field(5, ge=1, description="failure budget: failed attempts before the failed fraction is "
+                              "judged")
+    tolerated_rate: Rate = Field(0.5, description="failure budget: the campaign stops as failed once the failed "
+                                 "fraction of attempts exceeds this")
+    budget_s: PositiveFloat | None = Field(None, description="the instrument time the campaign may spend (s): every "
+                                           "shot's t plus point_overhead_s per point; None: no budget")
+    point_overhead_s: NonNegativeFloat = Field(0.0, description="instrument time per point besides its shots (s): "
+                                               "moving the tip or stage, settling")
+    mode: Literal["paper", "budget"] = Field("paper", description="paper: noise points of shots_before shots until "
+                                             "convergence; budget: every point takes shots_after shots and the noise "
+                                             "model learns from every point's replicate scatter")
 
     @property
     def seed_shots(self) -> int:
@@ -643,17 +714,22 @@ class ScheduleConfig(FrozenModel):
 class CampaignConfig(FrozenModel):
     """One campaign: instrument, space, reward, policy, models, inference and schedule."""
 
-    schema_version: Count = SCHEMA_VERSION
-    name: str = "campaign"
-    instrument: InstrumentConfig = InstrumentConfig(kind="forrester")
-    reduction: ReductionConfig = ReductionConfig()
-    space: SpaceConfig = SpaceConfig()
-    reward: RewardConfig = RewardConfig()
-    acquisition: AcquisitionConfig = AcquisitionConfig()
-    primary_model: PrimaryModelConfig = PrimaryModelConfig()
-    noise_model: NoiseModelConfig = NoiseModelConfig()
-    inference: InferenceConfig = InferenceConfig()
-    schedule: ScheduleConfig = ScheduleConfig()
+    schema_version: Count = Field(SCHEMA_VERSION, description="the configuration format's version; a version-1 "
+                                  "config (instrument settings beside kind) is migrated when loaded")
+    name: str = Field("campaign", description="the campaign's name, used in its file names and flow-run names")
+    instrument: InstrumentConfig = Field(InstrumentConfig(kind="forrester"), description="the instrument driver and "
+                                         "its settings")
+    reduction: ReductionConfig = Field(ReductionConfig(), description="how a raw spectrum becomes a shot's value")
+    space: SpaceConfig = Field(SpaceConfig(), description="where (x) and how long (t) the campaign may measure")
+    reward: RewardConfig = Field(RewardConfig(), description="the cost/noise reward R(t) = -alpha t^2 - beta Noise")
+    acquisition: AcquisitionConfig = Field(AcquisitionConfig(), description="the policy and its acquisition "
+                                           "functions")
+    primary_model: PrimaryModelConfig = Field(PrimaryModelConfig(), description="priors of the GP for f")
+    noise_model: NoiseModelConfig = Field(NoiseModelConfig(), description="the noise law, its priors, a noise field "
+                                          "and a noise profile")
+    inference: InferenceConfig = Field(InferenceConfig(), description="how the models' hyperparameters are inferred")
+    schedule: ScheduleConfig = Field(ScheduleConfig(), description="seeds, steps, shots, convergence, failure and "
+                                     "instrument-time budgets")
 
     @model_validator(mode="after")
     def _fixed_t_in_range(self) -> CampaignConfig:
