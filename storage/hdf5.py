@@ -49,19 +49,14 @@ from noisebo.storage.layout import (
     SPECTRA_DESCRIPTION,
     SPECTRA_ROWS,
     STEP_COLUMNS,
-    SUMMARY_MAPS,
     put_dataset,
     put_text,
-    array_shapes,
     failure_rows,
     fill_grid,
     fill_summary,
-    hyperparameter_names,
-    point_rows,
     root_attrs,
-    shot_columns,
     spectra_of,
-    step_rows,
+    state_tables,
     temporary_path,
     text_crc32,
 )
@@ -74,29 +69,9 @@ if TYPE_CHECKING:  # readers of a file (inspect, ask) need no model: the writers
     from noisebo.campaign.engine import EngineState
 
 
-def campaign_tables(state: EngineState) -> dict:
-    """The campaign as plain columns, in the shape ``read_campaign`` returns (without "attrs"):
-    "grid", "points", "steps" (with "hyperparameters" and the per-step arrays), "shots" and
-    "summary" (None until done)."""
-    from noisebo.models.grids import grids
-
-    g = grids(state.config)
-    decisions = state.decisions
-    d = state.config.space.dimensions
-    steps = step_rows(decisions, hyperparameter_names(decisions), array_shapes(state), d)
-    summary = None
-    if state.summary is not None:
-        s = state.summary
-        summary = {"f_mean": s.f_mean, "f_var": s.f_var, "noise_fine": s.noise_fine, "t_opt": float(s.t_opt),
-                   "hyperparameters": dict(s.hyperparameters)}
-        summary |= {name: getattr(s, name) for name in SUMMARY_MAPS if getattr(s, name).size}
-    return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points, d), "steps": steps,
-            "shots": shot_columns(state), "summary": summary}
-
-
 def _fill(f: h5py.File, state: EngineState) -> None:
     f.attrs.update(root_attrs(state))
-    tables = campaign_tables(state)
+    tables = state_tables(state)
     fill_grid(f, state)
 
     _fill_shots(f, state, tables["shots"])

@@ -192,6 +192,26 @@ def root_attrs(state: EngineState) -> dict:
     )
 
 
+def state_tables(state: EngineState) -> dict:
+    """The campaign as plain columns, in the shape ``storage.hdf5.read_campaign`` returns (without
+    "attrs"): "grid", "points", "steps" (with "hyperparameters" and the per-step arrays), "shots"
+    (with "fit") and "summary" (None until done)."""
+    from noisebo.models.grids import grids
+
+    g = grids(state.config)
+    decisions = state.decisions
+    d = state.config.space.dimensions
+    steps = step_rows(decisions, hyperparameter_names(decisions), array_shapes(state), d)
+    summary = None
+    if state.summary is not None:
+        s = state.summary
+        summary = {"f_mean": s.f_mean, "f_var": s.f_var, "noise_fine": s.noise_fine, "t_opt": float(s.t_opt),
+                   "hyperparameters": dict(s.hyperparameters)}
+        summary |= {name: getattr(s, name) for name in SUMMARY_MAPS if getattr(s, name).size}
+    return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points, d), "steps": steps,
+            "shots": shot_columns(state), "summary": summary}
+
+
 def fill_grid(f: h5py.File, state: EngineState) -> None:
     from noisebo.models.grids import grids
 

@@ -9,13 +9,25 @@ sees them: seed points at step 0, BO steps from 1 (``storage.steps``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+import json
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from noisebo.storage.layout import ARRAY_COLUMNS, POINT_COLUMNS, STEP_COLUMNS, column_dtype
+from noisebo.storage.layout import (
+    ARRAY_COLUMNS,
+    POINT_COLUMNS,
+    STEP_COLUMNS,
+    column_dtype,
+    failure_rows,
+    root_attrs,
+    state_tables,
+)
+
+if TYPE_CHECKING:
+    from noisebo.campaign.engine import EngineState
 
 
 @dataclass(frozen=True)
@@ -70,7 +82,8 @@ class Steps:
 @dataclass(frozen=True)
 class Shots:
     """Every shot (s,): its point and index in it, t (s), value (f units; NaN when rejected) and
-    whether it was usable; ``fits``: a sweep's SHO fit columns (empty for scalar readings)."""
+    whether it was usable; ``fits``: a sweep's SHO fit columns (``storage.layout.FIT_UNITS``,
+    (s,) each; empty for scalar readings)."""
 
     point: np.ndarray
     shot: np.ndarray
@@ -150,13 +163,26 @@ class CampaignRecord:
 def read_record(path: Path) -> CampaignRecord:
     """The campaign file at ``path`` as a ``CampaignRecord``; ``CampaignFileError`` (one line)
     for a missing, damaged or foreign file, as every reader."""
-    from noisebo.storage.hdf5 import read_campaign, read_failures
+    from noisebo.storage.hdf5 import read_campaign, read_failures, read_shot_fits
 
-    return from_tables(Path(path), read_campaign(path), read_failures(path))
+    return from_tables(Path(path), read_campaign(path), read_failures(path), read_shot_fits(path))
 
 
-def from_tables(path: Path, data: dict, failures: dict) -> CampaignRecord:
-    """The record of what ``read_campaign`` and ``read_failures`` read from ``path``."""
+def from_state(state: EngineState, path: Path | str | None = None) -> CampaignRecord:
+    """The record of a campaign's state, as a file written from it reads back: what a store
+    that keeps no file (``storage.memory``) gives its readers. ``path`` names where it is kept."""
+    tables = state_tables(state)
+    attrs = root_attrs(state)
+    attrs |= {"config": json.loads(attrs["config_json"]), "driver": json.loads(attrs["driver_json"])}
+    fits = tables["shots"]["fit"]
+    failures = failure_rows(state.failures, state.config.space.dimensions)
+    return from_tables(Path(path or f"<{state.config.name}: in memory>"), tables | {"attrs": attrs}, failures,
+                       fits if np.any(np.isfinite(fits["amplitude"])) else None)
+
+
+def from_tables(path: Path, data: dict, failures: dict, fits: dict | None = None) -> CampaignRecord:
+    """The record of what ``read_campaign``, ``read_failures`` and ``read_shot_fits`` read from
+    ``path`` (``fits`` None: the shots are not sweeps)."""
     attrs = data["attrs"]
     converged = int(attrs["converged_step"])
     budget = float(attrs.get("budget_s", -1.0))
@@ -166,7 +192,7 @@ def from_tables(path: Path, data: dict, failures: dict) -> CampaignRecord:
         policy=str(attrs["policy"]), converged_step=None if converged < 1 else converged,
         n_shots=int(attrs["n_shots"]), budget_s=None if budget < 0 else budget,
         grid={name: np.asarray(v) for name, v in data["grid"].items()},
-        points=_points(data["points"]), steps=_steps(data["steps"]), shots=_shots(data["shots"]),
+        points=_points(data["points"]), steps=_steps(data["steps"]), shots=_shots(data["shots"], fits),
         failures=_failures(failures), summary=_summary(data["summary"]), attrs=attrs)
 
 
@@ -193,12 +219,11 @@ def _steps(table: dict) -> Steps:
     return Steps(**columns, hyperparameters=hyper, arrays=arrays)
 
 
-def _shots(table: dict) -> Shots:
+def _shots(table: dict, fits: dict | None) -> Shots:
     n = len(table["t"])
-    typed = {f.name for f in fields(Shots)} - {"fits"}
-    fits = {name: np.asarray(v) for name, v in table.items() if name not in typed | {"x", "committed", "reason"}}
     return Shots(point=np.asarray(table["point"]), shot=np.asarray(table["shot"]), t=np.asarray(table["t"]),
-                 value=np.asarray(table["value"]), ok=_column(table, "ok", "bool", n), fits=fits)
+                 value=np.asarray(table["value"]), ok=_column(table, "ok", "bool", n),
+                 fits={name: np.asarray(v) for name, v in (fits or {}).items()})
 
 
 def _text(values) -> tuple[str, ...]:

@@ -1,4 +1,5 @@
-"""The campaign recorder: journal first (durable, the source of truth), HDF5 file after.
+"""The campaign recorder: journal first (durable, the source of truth), the results' store after
+(``storage.store``: the HDF5 file, unless another store is given).
 
 A campaign's files are FILE.h5 (the results) and FILE.journal beside it. Creating refuses to
 overwrite either; resuming locks the journal, cuts off a torn tail, replays it and rewrites the
@@ -25,14 +26,13 @@ from noisebo.events import (
     Event,
     PointCommitted,
     Started,
-    Status,
     StatusChanged,
     Summarised,
 )
 from noisebo.storage import journal, records
-from noisebo.storage.hdf5 import CampaignFileError, stray_temporaries, write_snapshot
+from noisebo.storage.hdf5 import CampaignFileError, stray_temporaries
 from noisebo.storage.journal import JournalError, JournalWriter
-from noisebo.storage.live import LiveFile
+from noisebo.storage.store import CampaignStore, Hdf5Store
 
 PACKAGES = ("noisebo", "numpy", "scipy", "jax", "jaxlib", "numpyro", "h5py", "prefect", "pydantic", "rerun-sdk")
 
@@ -83,17 +83,19 @@ DAMAGED_JOURNAL_ADVICE = ("nothing was changed; `noisebo rebuild {path} --keep-i
 
 class Recorder:
     """Commits campaign events: each is journaled (written and fsynced) before it is applied,
-    and the HDF5 file is brought up to date after every committed point and status change."""
+    and the store (the HDF5 file) is brought up to date after every committed point and status change."""
 
-    def __init__(self, h5_path: Path, writer: JournalWriter, state: EngineState):
+    def __init__(self, h5_path: Path, writer: JournalWriter, state: EngineState, store: CampaignStore | None = None):
         self.h5_path = Path(h5_path)
         self._writer = writer
         self.state = state
-        self._live: LiveFile | None = None
+        self.store: CampaignStore = Hdf5Store(self.h5_path) if store is None else store
         self.dropped: str | None = None  # what reopening the journal cut off (a torn tail), said to the user
 
     @classmethod
-    def create(cls, h5_path: Path, started: Started) -> Recorder:
+    def create(cls, h5_path: Path, started: Started, store: CampaignStore | None = None) -> Recorder:
+        """A new campaign: its journal FILE.journal beside ``h5_path``, its results in ``store``
+        (by default the HDF5 file ``h5_path``)."""
         h5_path = Path(h5_path)
         if h5_path.exists():
             raise CampaignFileError(f"{h5_path} already exists; continue it with `noisebo resume {h5_path}`")
@@ -102,7 +104,7 @@ class Recorder:
             writer = JournalWriter.create(journal_path(h5_path), records.encode(started))
         except JournalError as error:
             raise CampaignFileError(str(error)) from None
-        recorder = cls(h5_path, writer, engine.start(started))
+        recorder = cls(h5_path, writer, engine.start(started), store)
         recorder.snapshot()
         return recorder
 
@@ -163,33 +165,12 @@ class Recorder:
         return state
 
     def snapshot(self) -> None:
-        """Bring the HDF5 file up to ``self.state``: a running campaign's rows appended in place
-        (written whole when the open file cannot take them: the first time in this process, a new
-        status reason, a summary, a new hyperparameter); any other status, the whole campaign
-        once in the finished layout."""
-        state = self.state
-        if state.status is not Status.RUNNING:
-            self._close_live()
-            write_snapshot(self.h5_path, state)
-            return
-        try:
-            if self._live is not None and self._live.holds(state):
-                self._live.append(state)
-                return
-            self._close_live()
-            self._live = LiveFile.create(self.h5_path, state)
-        except BaseException:
-            self._close_live()  # the next snapshot writes the file whole again
-            raise
-
-    def _close_live(self) -> None:
-        if self._live is not None:
-            live, self._live = self._live, None
-            live.close()
+        """Bring the store (the HDF5 file, unless another was given) up to ``self.state``."""
+        self.store.save(self.state)
 
     def close(self) -> None:
         try:
-            self._close_live()
+            self.store.close()
         finally:
             self._writer.close()
 
