@@ -1,10 +1,11 @@
 """What a campaign looks like at each step: pure frames built from its tables.
 
 A frame is everything the live view and the report draw at one moment of a campaign, in raw
-units. The input is the table dict of ``storage.hdf5.campaign_tables`` (a running
-campaign) or ``read_campaign`` (a file): the same frames come out of both, so a replayed
-recording equals the live one. Their "step" columns number steps as a user sees them
-(``storage.steps``): 0 for the seed points, k (1..n_steps) for BO step k.
+units. The input is the campaign's typed tables (``CampaignTables``): a file's record
+(``storage.record.read_record``) or a running campaign's (``storage.record.from_state``, or the
+live recording's lighter view): the same frames come out of both, so a replayed recording
+equals the live one. Their step columns number steps as a user sees them (``storage.steps``): 0
+for the seed points, k (1..n_steps) for BO step k.
 
 Frame numbering (the ``step`` timeline): 0 holds the seed points; k (1..n_steps) the decision of
 BO step k and the point it measured (1-based, as the progress lines print it); n_steps + 1 the
@@ -13,15 +14,39 @@ final models after the last point.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from noisebo.config import CampaignConfig
+from noisebo.storage.record import Points, Shots, Steps, Summary
 from noisebo.models.reward import normalise, reward
 from noisebo.state import format_position
 
 POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured")
+
+
+class CampaignTables(Protocol):
+    """What frames are drawn from: the grids ("x", "t", "t_fine"), the committed points, the BO
+    steps, the shots (frames read their point and t) and the summary (None until done). A
+    ``storage.record.CampaignRecord`` is one."""
+
+    @property
+    def grid(self) -> Mapping[str, np.ndarray]: ...
+
+    @property
+    def points(self) -> Points: ...
+
+    @property
+    def steps(self) -> Steps: ...
+
+    @property
+    def shots(self) -> Shots: ...
+
+    @property
+    def summary(self) -> Summary | None: ...
 
 
 @dataclass(frozen=True)
@@ -60,62 +85,57 @@ def normalised_reward(t: np.ndarray, noise: np.ndarray, alpha: float, beta: floa
     return np.asarray(normalise(reward(np.asarray(t), np.asarray(noise), alpha, beta)), dtype=np.float64)
 
 
-def n_frames(tables: dict, config: CampaignConfig) -> int:
+def n_frames(tables: CampaignTables, config: CampaignConfig) -> int:
     """Frames a campaign holds so far: seeds, one per committed BO point, the final one if done."""
-    steps = np.asarray(tables["points"]["step"])
-    return 1 + int(np.sum(steps >= 1)) + (tables["summary"] is not None)
+    return 1 + int(np.sum(tables.points.step >= 1)) + (tables.summary is not None)
 
 
-def frame_at(tables: dict, config: CampaignConfig, k: int) -> Frame:
+def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
     """Frame ``k`` (see the module docstring) of a campaign's tables."""
-    n_steps = len(tables["steps"]["step"])
-    final = tables["summary"] is not None and k == int(np.sum(np.asarray(tables["points"]["step"]) >= 1)) + 1
-    bo = min(k, n_steps) - 1  # index of the latest decision shown, -1 for none
-    points = _points_until(tables["points"], k)
-    shots_t = _measurement_time(tables, points)
-    scalars = {"measurement_time_s": shots_t}
+    steps = tables.steps
+    final = tables.summary is not None and k == int(np.sum(tables.points.step >= 1)) + 1
+    bo = min(k, len(steps.step)) - 1  # index of the latest decision shown, -1 for none
+    points = _points_until(tables.points, k)
+    scalars = {"measurement_time_s": _measurement_time(tables.shots, points)}
     if final:
         return _final_frame(tables, config, k, points, scalars)
     if bo < 0:
         n = len(points["x"])
         return Frame(0, points, None, None, None, None, None, None, scalars,
                      f"{n} seed points measured", n - 1 if n else None)
-    steps, grid = tables["steps"], tables["grid"]
-    f = Curve(grid["x"], steps["f_mean"][bo], np.sqrt(np.maximum(steps["f_var"][bo], 0.0)))
-    noise = Curve(grid["t"], steps["noise_mean"][bo], np.sqrt(np.maximum(steps["noise_var"][bo], 0.0)))
-    t_opt = float(steps["t_opt"][bo])
-    hyper = {name: float(v[bo]) for name, v in steps["hyperparameters"].items()}
-    scalars |= {"t_opt_s": t_opt, "latency_s": float(steps["latency_s"][bo])}
+    arrays, grid = steps.arrays, tables.grid
+    f = Curve(grid["x"], arrays["f_mean"][bo], np.sqrt(np.maximum(arrays["f_var"][bo], 0.0)))
+    noise = Curve(grid["t"], arrays["noise_mean"][bo], np.sqrt(np.maximum(arrays["noise_var"][bo], 0.0)))
+    t_opt, latency = float(steps.t_opt[bo]), float(steps.latency_s[bo])
+    hyper = {name: float(v[bo]) for name, v in steps.hyperparameters.items()}
+    scalars |= {"t_opt_s": t_opt, "latency_s": latency}
     scalars |= {name: hyper[f"noise.{name}"] for name in ("a0", "a1") if f"noise.{name}" in hyper}
-    x, t = steps["x"][bo], float(steps["t"][bo])
+    x, t = steps.x[bo], float(steps.t[bo])
     x = float(x) if np.ndim(x) == 0 else tuple(float(v) for v in x)
-    text = (f"step {bo + 1}: measure x={format_position(x)} at t={t:.4g} s with {int(steps['shots'][bo])} shots; "
-            f"predicted optimal t {t_opt:.4g} s{' (noise model converged)' if steps['converged'][bo] else ''}; "
-            f"decision {float(steps['latency_s'][bo]):.3f} s")
+    text = (f"step {bo + 1}: measure x={format_position(x)} at t={t:.4g} s with {int(steps.shots[bo])} shots; "
+            f"predicted optimal t {t_opt:.4g} s{' (noise model converged)' if steps.converged[bo] else ''}; "
+            f"decision {latency:.3f} s")
     return Frame(
-        bo + 1, points, f, noise, _reward(noise, config), np.asarray(steps["acq_map"][bo]), t_opt, (x, t),
+        bo + 1, points, f, noise, _reward(noise, config), np.asarray(arrays["acq_map"][bo]), t_opt, (x, t),
         scalars, text, len(points["x"]) - 1,
     )
 
 
-def frames(tables: dict, config: CampaignConfig) -> list[Frame]:
+def frames(tables: CampaignTables, config: CampaignConfig) -> list[Frame]:
     """Every frame of a campaign's tables, in order."""
     return [frame_at(tables, config, k) for k in range(n_frames(tables, config))]
 
 
-def _points_until(points: dict, k: int) -> dict:
-    step = np.asarray(points["step"])
-    keep = step <= k  # a point of step s belongs to frame s (seed points: 0)
-    out = {name: np.asarray(points[name])[keep] for name in POINT_FIELDS}
-    out["frame"] = step[keep]
+def _points_until(points: Points, k: int) -> dict:
+    keep = points.step <= k  # a point of step s belongs to frame s (seed points: 0)
+    out = {name: np.asarray(getattr(points, name))[keep] for name in POINT_FIELDS}
+    out["frame"] = points.step[keep]
     return out
 
 
-def _measurement_time(tables: dict, points: dict) -> float:
+def _measurement_time(shots: Shots, points: dict) -> float:
     """Total sweep/exposure time (s) of the shots of the points shown."""
-    shots = tables["shots"]
-    mine = np.asarray(shots["point"]) < len(points["x"])
-    return float(np.sum(np.asarray(shots["t"])[mine]))
+    return float(np.sum(shots.t[shots.point < len(points["x"])]))
 
 
 def _reward(noise: Curve, config: CampaignConfig) -> Curve:
@@ -123,13 +143,14 @@ def _reward(noise: Curve, config: CampaignConfig) -> Curve:
     return Curve(noise.grid, normalised_reward(noise.grid, noise.mean, r.alpha, r.beta), np.zeros_like(noise.grid))
 
 
-def _final_frame(tables: dict, config: CampaignConfig, k: int, points: dict, scalars: dict) -> Frame:
-    s, grid = tables["summary"], tables["grid"]
-    f = Curve(grid["x"], s["f_mean"], np.sqrt(np.maximum(s["f_var"], 0.0)))
-    noise = Curve(grid["t_fine"], s["noise_fine"], np.zeros_like(s["noise_fine"]))
-    hyper = s["hyperparameters"]
-    scalars = scalars | {"t_opt_s": float(s["t_opt"])}
-    scalars |= {name: float(hyper[f"noise.{name}"]) for name in ("a0", "a1") if f"noise.{name}" in hyper}
-    text = (f"final models on all {len(points['x'])} points: predicted optimal t {float(s['t_opt']):.4g} s, "
+def _final_frame(tables: CampaignTables, config: CampaignConfig, k: int, points: dict, scalars: dict) -> Frame:
+    s, grid = tables.summary, tables.grid
+    assert s is not None
+    f = Curve(grid["x"], s.f_mean, np.sqrt(np.maximum(s.f_var, 0.0)))
+    noise = Curve(grid["t_fine"], s.noise_fine, np.zeros_like(s.noise_fine))
+    scalars = scalars | {"t_opt_s": s.t_opt}
+    scalars |= {name: float(s.hyperparameters[f"noise.{name}"]) for name in ("a0", "a1")
+                if f"noise.{name}" in s.hyperparameters}
+    text = (f"final models on all {len(points['x'])} points: predicted optimal t {s.t_opt:.4g} s, "
             f"{scalars['measurement_time_s']:.1f} s of measurement")
-    return Frame(k, points, f, noise, _reward(noise, config), None, float(s["t_opt"]), None, scalars, text, None)
+    return Frame(k, points, f, noise, _reward(noise, config), None, s.t_opt, None, scalars, text, None)

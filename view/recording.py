@@ -7,6 +7,7 @@ fresh recording. ``replay(h5_path, rrd_path)`` rebuilds the same frames from the
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -14,7 +15,9 @@ import numpy as np
 
 from noisebo.config import CampaignConfig, parse_config
 from noisebo.models.grids import grids
-from noisebo.view.frames import Frame, frame_at, frames, n_frames
+from noisebo.storage.layout import STEP_COLUMNS
+from noisebo.storage.record import Points, Shots, Steps, from_state, read_record
+from noisebo.view.frames import CampaignTables, Frame, frame_at, frames, n_frames
 from noisebo.view.rerun_view import RerunView
 
 FIT_KEYS = ("amplitude", "resonance_hz", "q", "sign")
@@ -92,6 +95,17 @@ class _PerStep:
         return len(self._decisions)
 
 
+@dataclass(frozen=True)
+class _Running:
+    """A running campaign's tables for its frames (``view.frames.CampaignTables``)."""
+
+    grid: dict
+    points: Points
+    steps: Steps
+    shots: Shots
+    summary: None = None
+
+
 class CampaignRecording:
     """Observer of a running campaign: logs each new frame to a RerunView."""
 
@@ -102,27 +116,30 @@ class CampaignRecording:
         self._shot_t: list[float] = []
         self._shots_of = 0  # committed points whose shots are in those lists
 
-    def _tables(self, state) -> dict:
-        """The columns ``frame_at`` reads, in ``campaign_tables``' shape but built for a frame's
-        needs: the per-step arrays by reference and the shots added point by point, so a frame of
-        a long campaign costs what is new, not a copy of everything (the finished campaign's
-        summary frame, once, takes the whole tables)."""
-        from noisebo.storage.hdf5 import campaign_tables
+    def _tables(self, state) -> CampaignTables:
+        """The tables ``frame_at`` reads, built for a frame's needs: the per-step arrays by
+        reference and the shots added point by point, so a frame of a long campaign costs what
+        is new, not a copy of everything (the finished campaign's summary frame, once, takes the
+        whole record)."""
         from noisebo.storage.layout import array_shapes, hyperparameter_names, point_rows, step_rows
 
         if state.summary is not None:
-            return campaign_tables(state)
+            return from_state(state)
         for entry in state.points[self._shots_of:]:
             self._shot_point += [s.point for s in entry.shots]
             self._shot_t += [s.t for s in entry.shots]
         self._shots_of = len(state.points)
         decisions = state.decisions
         d = self.config.space.dimensions
-        steps = step_rows(decisions, hyperparameter_names(decisions), {}, d)
-        steps |= {name: _PerStep(decisions, name) for name in array_shapes(state)}
+        rows = step_rows(decisions, hyperparameter_names(decisions), {}, d)
+        hyper = rows.pop("hyperparameters")
+        steps = Steps(**{name: rows[name] for name in STEP_COLUMNS}, hyperparameters=hyper,
+                      arrays={name: _PerStep(decisions, name) for name in array_shapes(state)})
         g = grids(self.config)
-        return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points, d), "steps": steps,
-                "shots": {"point": np.asarray(self._shot_point), "t": np.asarray(self._shot_t)}, "summary": None}
+        point, t = np.asarray(self._shot_point, dtype=np.int32), np.asarray(self._shot_t)
+        shots = Shots(point=point, shot=np.zeros_like(point), t=t, value=np.full(len(t), np.nan),
+                      ok=np.ones(len(t), dtype=bool))  # frames read a shot's point and t only
+        return _Running({"x": g.x, "t": g.t, "t_fine": g.t_fine}, Points(**point_rows(state.points, d)), steps, shots)
 
     def update(self, state) -> None:
         """Log the frames ``state`` (an ``EngineState``) has reached and not logged yet."""
@@ -163,23 +180,22 @@ def last_sweep(spectra: Callable[[int], np.ndarray], shot_points: np.ndarray, fi
 
 def replay(h5_path: Path, rrd_path: Path | None = None, warn: Callable[[str], None] = print) -> Path:
     """Rebuild a campaign's recording from its HDF5 file alone; returns the .rrd path."""
-    from noisebo.storage.hdf5 import read_campaign, read_shot_fits, spectra_reader
+    from noisebo.storage.hdf5 import spectra_reader
 
     h5_path = Path(h5_path)
-    data = read_campaign(h5_path)
-    config = parse_config(data["attrs"]["config"])
+    record = read_record(h5_path)
+    config = parse_config(record.config)
     rrd_path = Path(rrd_path) if rrd_path is not None else rrd_path_for(h5_path)
-    truth, law = instrument_curves(config, warn=warn, source=(h5_path, data["attrs"]["driver"]))
-    name = f"{h5_path.stem}"
-    view = RerunView(config, name, rrd=rrd_path, truth=truth, noise_law=law, warn=warn, wall_clock=False)
-    all_frames = frames(data, config)
+    truth, law = instrument_curves(config, warn=warn, source=(h5_path, record.driver))
+    view = RerunView(config, h5_path.stem, rrd=rrd_path, truth=truth, noise_law=law, warn=warn, wall_clock=False)
+    all_frames = frames(record, config)
     view.fit_ranges(all_frames)
-    fits = read_shot_fits(h5_path)
+    fits = record.shots.fits
     with spectra_reader(h5_path) as spectra:
         for frame in all_frames:
             spectrum, fit = None, None
-            if fits is not None and frame.latest_point is not None:
-                spectrum, fit = last_sweep(spectra, data["shots"]["point"], fits, frame.latest_point)
+            if fits and frame.latest_point is not None:
+                spectrum, fit = last_sweep(spectra, record.shots.point, fits, frame.latest_point)
             view.log(frame, spectrum, fit)
     view.close()
     if not view.enabled:

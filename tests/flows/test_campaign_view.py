@@ -10,7 +10,7 @@ import pytest
 import rerun.chunk
 
 from noisebo.flows.campaign import campaign
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.record import read_record
 from noisebo.view.frames import frame_at
 from noisebo.view.recording import replay
 from noisebo.view.rerun_view import RerunView
@@ -55,13 +55,13 @@ def recorded(tiny_config, prefect_harness, tmp_path_factory):
 def test_recording_holds_every_view_and_the_campaigns_numbers(recorded, tiny_config):
     rrd = recorded.replace(".h5", ".rrd")
     assert entities(rrd) >= ENTITIES
-    data, logged = read_campaign(recorded), columns(rrd)
+    record, logged = read_record(recorded), columns(rrd)
     n = tiny_config.schedule.n_steps
     t_opt = logged[("/traces/t_opt_s", "Scalars:scalars")]
-    assert [t_opt[k][0] for k in range(1, n + 1)] == pytest.approx(list(data["steps"]["t_opt"]))
-    assert t_opt[n + 1][0] == pytest.approx(data["summary"]["t_opt"])  # the final frame
+    assert [t_opt[k][0] for k in range(1, n + 1)] == pytest.approx(list(record.steps.t_opt))
+    assert t_opt[n + 1][0] == pytest.approx(record.summary.t_opt)  # the final frame
     for name in ("x", "t", "value"):
-        assert logged[("/campaign/points", name)][n + 1] == pytest.approx(list(data["points"][name]))
+        assert logged[("/campaign/points", name)][n + 1] == pytest.approx(list(getattr(record.points, name)))
     assert logged[("/campaign/points", "from_step")][n + 1] == [0, 0, 0, 1, 2, 3, 4]
     text = logged[("/log", "TextLog:text")]
     assert text[0] == ["3 seed points measured"] and text[1][0].startswith("step 1: measure x=")
@@ -96,7 +96,7 @@ def test_an_absent_live_viewer_changes_nothing(tiny_config, prefect_harness, tmp
 def test_a_failing_view_is_reported_once_and_switches_itself_off(recorded, tiny_config, tmp_path):
     said = []
     view = RerunView(tiny_config, "broken", rrd=tmp_path / "b.rrd", warn=said.append)
-    frame = frame_at(read_campaign(recorded), tiny_config, 1)
+    frame = frame_at(read_record(recorded), tiny_config, 1)
     broken = frame.__class__(**{**frame.__dict__, "points": {}})  # no point columns: logging raises
     view.log(broken)
     view.log(broken)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from noisebo.config import parse_config
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.record import read_record
 from noisebo.storage.recorder import rebuild_file
 from noisebo.view.frames import frames
 from noisebo.view.report import _first_converged, figures_from_file, write_summary
@@ -46,8 +46,8 @@ def test_the_first_converged_step_counts_from_1(converged, first):
 
 @pytest.mark.parametrize("which", [0, 1])
 def test_frames_of_an_old_and_a_new_file_are_numbered_alike(old_and_new, which):
-    data = read_campaign(old_and_new[which])
-    shown = frames(data, parse_config(data["attrs"]["config"]))
+    record = read_record(old_and_new[which])
+    shown = frames(record, parse_config(record.config))
     # frame 0 the seed points, 1-4 BO steps 1-4, 5 the final models
     assert [f.step for f in shown] == [0, 1, 2, 3, 4, 5]
     assert shown[-1].points["frame"].tolist() == [0, 0, 0, 1, 2, 3, 4]
