@@ -14,9 +14,11 @@ import email.parser
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import zipfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,9 +69,10 @@ def isolated_environment(venv: Path, home: Path) -> dict[str, str]:
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory) -> Installed:
+def installed(tmp_path_factory) -> Iterator[Installed]:
     """The wheel built from the checkout and installed with its dependencies into a new virtual
-    environment under a temporary folder; built once for this module."""
+    environment under a temporary folder; built once for this module, and the environment (1.6 GB)
+    deleted at its end."""
     base = tmp_path_factory.mktemp("wheel-install")
     assert outside_the_checkout(base), f"the temporary folder {base} is inside the checkout"
     wheels, venv, home, work = base / "wheel", base / "venv", base / "home", base / "work"
@@ -89,7 +92,8 @@ def installed(tmp_path_factory) -> Installed:
                            str(wheel)], cwd=work, env=pip_env, capture_output=True, text=True,
                           timeout=INSTALL_TIMEOUT_S, check=False)
     assert done.returncode == 0, f"pip install of {wheel.name} failed\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
-    return Installed(wheel, venv, work, env)
+    yield Installed(wheel, venv, work, env)
+    shutil.rmtree(venv, ignore_errors=True)
 
 
 def wheel_version(wheel: Path) -> str:
