@@ -595,6 +595,9 @@ def _view_options(parser: argparse.ArgumentParser) -> None:
 
 
 CONFIG_HELP = "a campaign YAML, or a shipped config by name, e.g. forrester (`noisebo config` lists them)"
+SEED_HELP = "the campaign's seed: every random draw is keyed by it, so one seed gives one campaign"
+POLICY_HELP = "an installed policy (`noisebo policies`), instead of the config's acquisition.policy"
+OUT_HELP = "the folder the campaign's files go into (created if missing)"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -606,9 +609,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = commands.add_parser("run", help="run one campaign through the Prefect flow")
     run.add_argument("config", help=CONFIG_HELP)
-    run.add_argument("--seed", type=int, default=0)
-    run.add_argument("--policy", choices=_policy_choices(), default=None)
-    run.add_argument("--out", type=Path, default=Path("data/runs"))
+    run.add_argument("--seed", type=int, default=0, help=SEED_HELP)
+    run.add_argument("--policy", choices=_policy_choices(), default=None, help=POLICY_HELP)
+    run.add_argument("--out", type=Path, default=Path("data/runs"), help=OUT_HELP)
     _view_options(run)
     run.set_defaults(handler=_run)
 
@@ -621,7 +624,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     serve = commands.add_parser("serve", help="serve campaign and sweep deployments to a Prefect server")
     serve.add_argument("config", nargs="+", help="campaign YAML(s); deployments are named after each config's name")
-    serve.add_argument("--out", type=Path, default=Path("data/runs"))
+    serve.add_argument("--out", type=Path, default=Path("data/runs"),
+                       help="the folder under which each flow run writes a folder of its own")
     serve.add_argument("--sweep-seeds", default="0-7", help="seeds of the sweep deployment: N, A-B or A,B,C")
     serve.add_argument("--sweep-policy", choices=_policy_choices("both", "all"), default="both",
                        help="an installed policy, both (the paper's two) or all (every installed one)")
@@ -634,7 +638,8 @@ def build_parser() -> argparse.ArgumentParser:
     deploy = commands.add_parser("deploy", help="register campaign deployments in a Prefect process work pool")
     deploy.add_argument("config", nargs="+", help="campaign YAML(s)")
     deploy.add_argument("--pool", default="noisebo", help="process work pool (created if missing)")
-    deploy.add_argument("--out", type=Path, default=Path("data/runs"))
+    deploy.add_argument("--out", type=Path, default=Path("data/runs"),
+                        help="the folder under which each flow run writes a folder of its own")
     deploy.set_defaults(handler=_deploy)
 
     replay = commands.add_parser("replay", help="rebuild a campaign's Rerun recording from its .h5 file")
@@ -652,7 +657,8 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--seeds", required=True, help="N, A-B or A,B,C")
     sweep.add_argument("--policy", choices=_policy_choices("both", "all"), default="both",
                        help="an installed policy, both (the paper's two) or all (every installed one)")
-    sweep.add_argument("--out", type=Path, default=Path("data/runs/sweep"))
+    sweep.add_argument("--out", type=Path, default=Path("data/runs/sweep"),
+                       help="the sweep's folder: its campaigns' files and summary")
     sweep.add_argument("--workers", type=int, default=2, help="threads, or local Dask worker processes")
     sweep.add_argument("--runner", choices=["threads", "dask", "workers"], default="threads",
                        help="workers: each campaign a run of --deployment on its work pool's workers")
@@ -662,9 +668,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     start = commands.add_parser("start", help="create a campaign's file without running it (to measure by hand)")
     start.add_argument("config", help=CONFIG_HELP)
-    start.add_argument("--seed", type=int, default=0)
-    start.add_argument("--policy", choices=_policy_choices(), default=None)
-    start.add_argument("--out", type=Path, default=Path("data/runs"))
+    start.add_argument("--seed", type=int, default=0, help=SEED_HELP)
+    start.add_argument("--policy", choices=_policy_choices(), default=None, help=POLICY_HELP)
+    start.add_argument("--out", type=Path, default=Path("data/runs"), help=OUT_HELP)
     start.set_defaults(handler=_start)
 
     ask = commands.add_parser("ask", help="print what a campaign wants measured next (deciding it if due)")
@@ -704,7 +710,7 @@ def build_parser() -> argparse.ArgumentParser:
     policies.set_defaults(handler=_policies_listed)
 
     inspect = commands.add_parser("inspect", help="summarise a campaign file")
-    inspect.add_argument("file")
+    inspect.add_argument("file", help="the campaign's .h5 file (finished or running)")
     inspect.add_argument("--json", action="store_true", help="machine-readable output")
     inspect.set_defaults(handler=_inspect)
     return parser
