@@ -42,7 +42,7 @@ def ensure_environment() -> None:
     _say("installing noisebo and its dependencies (first run: a few minutes)")
     pip = [str(BIN / "python"), "-m", "pip", "install", "--disable-pip-version-check", "-q"]
     subprocess.run(pip + ["--upgrade", "pip"], check=True)
-    subprocess.run(pip + ["-e", f"{ROOT}[test]"], check=True, cwd=ROOT)
+    subprocess.run(pip + ["-e", f"{ROOT}[test,docs]"], check=True, cwd=ROOT)
     STAMP.write_text(wanted)
 
 

@@ -1,4 +1,4 @@
-"""Screenshots of a campaign's flow run page in the Prefect UI, for the README.
+"""Screenshots of a campaign's flow run page in the Prefect UI, for the documentation (docs/prefect.md).
 
     python benchmarks/screenshot_flow_run.py [--config PATH] [--seed N] [--out DIR] [--only-logs]
 

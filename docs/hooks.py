@@ -1,0 +1,59 @@
+"""mkdocs hooks (mkdocs.yml, ``hooks:``): the reference pages' generated parts, filled in where a
+page says ``<!-- generated: NAME -->``, and the repository files that pages link to outside docs/
+(the benchmarks' figures), copied into the site."""
+
+from __future__ import annotations
+
+import atexit
+import re
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from mkdocs.plugins import event_priority
+
+DOCS = Path(__file__).resolve().parent
+sys.path.insert(0, str(DOCS))
+
+from generate import bridge_reference, cli_reference, config_reference, hdf5_reference, package_layout  # noqa: E402
+from generate.outside_files import outside_links, pointed_into_site, repository_file  # noqa: E402
+
+GENERATORS = {"configuration": config_reference.page, "cli": cli_reference.page, "hdf5": hdf5_reference.page,
+              "bridge-api": bridge_reference.page}
+MARKER = re.compile(r"<!-- generated: ([a-z0-9-]+) -->")
+
+
+def generated(match: re.Match) -> str:
+    name = match.group(1)
+    if name not in GENERATORS:
+        raise KeyError(f"no generator for <!-- generated: {name} -->; known: {', '.join(GENERATORS)}")
+    return GENERATORS[name]()
+
+
+@event_priority(100)  # before mkdocstrings builds its handlers from their config
+def on_config(config):
+    """The API pages read the package as a wheel lays it out (generate/package_layout.py)."""
+    folder = Path(tempfile.mkdtemp(prefix="noisebo-docs-"))
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    python = config["plugins"]["mkdocstrings"].config["handlers"].setdefault("python", {})
+    python["paths"] = [str(package_layout.assemble(folder))]
+    return config
+
+
+def on_files(files, config):
+    """Every repository file a page links to outside docs/, added to the site under repo/."""
+    from mkdocs.structure.files import File
+
+    docs_dir = Path(config["docs_dir"])
+    wanted = {where for page in files.documentation_pages()
+              for where in outside_links(docs_dir, page.src_uri, page.content_string).values()}
+    for where in sorted(wanted):
+        files.append(File.generated(config, where, abs_src_path=str(repository_file(docs_dir, where))))
+    return files
+
+
+def on_page_markdown(markdown, page, config, files):
+    """The page with its links outside docs/ pointed into the site and its generated parts filled in."""
+    links = outside_links(Path(config["docs_dir"]), page.file.src_uri, markdown)
+    return MARKER.sub(generated, pointed_into_site(markdown, page.file.src_uri, links))
