@@ -38,14 +38,14 @@ class ScanAreaConfig(FrozenModel):
     source: Literal["scan_area"] = Field("scan_area", description="the area of a real PFM scan; x = (x, y) in um "
                                          "from its first pixel")
     file: str = Field(DEFAULT_SCAN, description="the scan (pyNSID HDF5): a path, or the name of a shipped scan")
-    amplitude_channel: ChannelIndex | None = Field(None, description="the amplitude channel's index; None: the "
+    amplitude_channel: ChannelIndex | None = Field(None, description="the amplitude channel's index; null: the "
                                                    "channel whose recorded quantity is the amplitude")
-    phase_channel: ChannelIndex | None = Field(None, description="the phase channel's index; None: the channel "
+    phase_channel: ChannelIndex | None = Field(None, description="the phase channel's index; null: the channel "
                                                "whose recorded quantity is the phase")
     rows_px: tuple[PixelIndex, PixelIndex] | None = Field(None, description="first and last row (pixels, "
-                                                          "inclusive); None: all")
+                                                          "inclusive); null: all")
     columns_px: tuple[PixelIndex, PixelIndex] | None = Field(None, description="first and last column (pixels, "
-                                                             "inclusive); None: all")
+                                                             "inclusive); null: all")
     smooth_px: NonNegativeFloat = Field(1.0, description="Gaussian smoothing of the scan (pixels, sd)")
 
     @model_validator(mode="after")

@@ -32,9 +32,9 @@ class ScanProfileConfig(FrozenModel):
 
     source: Literal["scan"] = Field("scan", description="a line across a real PFM scan")
     file: str = Field(DEFAULT_SCAN, description="the scan (pyNSID HDF5): a path, or the name of a shipped scan")
-    amplitude_channel: ChannelIndex | None = Field(None, description="the amplitude channel's index; None: the "
+    amplitude_channel: ChannelIndex | None = Field(None, description="the amplitude channel's index; null: the "
                                                    "channel whose recorded quantity is the amplitude")
-    phase_channel: ChannelIndex | None = Field(None, description="the phase channel's index; None: the channel "
+    phase_channel: ChannelIndex | None = Field(None, description="the phase channel's index; null: the channel "
                                                "whose recorded quantity is the phase")
     start_px: tuple[Number, Number] = Field((20.0, 120.0), description="the line's first pixel (row, column)")
     end_px: tuple[Number, Number] = Field((200.0, 255.0), description="the line's last pixel (row, column)")

@@ -202,9 +202,9 @@ class InstrumentConfig(FrozenModel):
     settings: dict[str, Any] = Field(default_factory=dict, description="the driver's own settings, validated by its "
                                      "`Settings` model when the config is loaded (see the drivers' settings below)")
     timeout_s: PositiveFloat | None = Field(None, description="the instrument layer gives up on a shot after this "
-                                            "long (s) and records a timeout; None: no limit")
+                                            "long (s) and records a timeout; null: no limit")
     faults: FaultsConfig | None = Field(None, description="injected instrument faults, for resilience tests; "
-                                                          "None: none")
+                                                          "null: none")
 
     def __hash__(self) -> int:  # settings is a mapping: hash its canonical JSON
         return hash((self.kind, json.dumps(self.settings, sort_keys=True, default=str), self.timeout_s, self.faults))
@@ -261,7 +261,7 @@ class AxisConfig(FrozenModel):
     high: FiniteFloat = Field(description="upper bound, in the axis's `units`; above `low`")
     units: str = Field("", max_length=32, description="the units of positions along the axis (um, V, ...); x "
                                                       "travels in these units everywhere: requests, files, figures")
-    n: Count | None = Field(None, ge=2, le=20_000, description="grid points along the axis (None: 200 for one "
+    n: Count | None = Field(None, ge=2, le=20_000, description="grid points along the axis (null: 200 for one "
                             "axis, 64 for two, 12 for more): the candidate grid for one axis, the display grid "
                             "for two")
 
@@ -398,7 +398,7 @@ class AcquisitionConfig(FrozenModel):
     ei_xi: NonNegativeFloat = Field(0.01, description="EI's exploration margin, in standardised units of f")
     fixed_t: PositiveFloat | None = Field(None, description="a baseline without time optimisation: every proposal "
                                           "uses the t-grid value nearest this (s), chosen by the policy's acquisition "
-                                          "over x alone; None optimises t")
+                                          "over x alone; null optimises t")
 
 
 class PrimaryModelConfig(FrozenModel):
@@ -444,7 +444,7 @@ class NoiseFieldConfig(FrozenModel):
                                     "(x scaled to [0, 1] per axis)")
     length_scale: PositiveFloat = Field(0.75, description="log-sd of each axis length's LogNormal prior")
     basis_per_axis: Count | None = Field(None, ge=2, le=256, description="basis functions per axis of the "
-                                         "approximate GP (None: 96, 24, 10, 7 for 1-4 axes)")
+                                         "approximate GP (null: 96, 24, 10, 7 for 1-4 axes)")
     boundary_factor: Number = Field(2.0, ge=1.1, le=4.0, description="the basis lives on a box this many times the "
                                     "unit cube's width, centred on it")
 
@@ -537,7 +537,7 @@ class NoiseModelConfig(FrozenModel):
     learn_after_convergence: Flag = Field(True, description="keep training on the few-shot noise estimates taken "
                                           "after convergence, weighted by their sampling error")
     field: NoiseFieldConfig | None = Field(None, description="noise that depends on x: how the law's parameters "
-                                           "vary over x; None: the same noise everywhere, as the paper assumes")
+                                           "vary over x; null: the same noise everywhere, as the paper assumes")
     profile: NoiseProfile | None = Field(None, description="an instrument's noise profile (`noisebo noise-profile`): "
                                          "in YAML its path, relative to the config's folder, read when the config is "
                                          "loaded; its posterior becomes the law's prior")
@@ -682,13 +682,13 @@ class ScheduleConfig(FrozenModel):
     threshold: PositiveFloat = Field(5e-4, description="variance rule: converged when that variance is below this "
                                      "(s^2)")
     clip_sd: PositiveFloat | None = Field(None, description="reject shots farther than this many robust sd (1.4826 "
-                                          "x MAD) from the median of the point's shots; None: no clipping")
+                                          "x MAD) from the median of the point's shots; null: no clipping")
     min_failed: Count = Field(5, ge=1, description="failure budget: failed attempts before the failed fraction is "
                               "judged")
     tolerated_rate: Rate = Field(0.5, description="failure budget: the campaign stops as failed once the failed "
                                  "fraction of attempts exceeds this")
     budget_s: PositiveFloat | None = Field(None, description="the instrument time the campaign may spend (s): every "
-                                           "shot's t plus point_overhead_s per point; None: no budget")
+                                           "shot's t plus point_overhead_s per point; null: no budget")
     point_overhead_s: NonNegativeFloat = Field(0.0, description="instrument time per point besides its shots (s): "
                                                "moving the tip or stage, settling")
     mode: Literal["paper", "budget"] = Field("paper", description="paper: noise points of shots_before shots until "
