@@ -46,18 +46,18 @@ def timed_lines(command: list[str], env: dict) -> tuple[list[tuple[float, str]],
     return lines, process.wait()
 
 
-def shot_seconds(config, file: dict) -> np.ndarray:
+def shot_seconds(config, file) -> np.ndarray:
     """What the simulated instrument itself took for each BO point's shots (s), re-run here."""
     from noisebo.instruments import build
     from noisebo.keys import MEASURE, numpy_rng
 
     instrument = build(config.instrument)
-    shots, points = file["shots"], file["points"]
+    shots, points = file.shots, file.points
     out = []
-    for i in np.flatnonzero(points["step"] >= 1):  # BO points (seed points: step 0)
+    for i in np.flatnonzero(points.step >= 1):  # BO points (seed points: step 0)
         started = time.perf_counter()
-        for k in range(int(np.sum(shots["point"] == i))):
-            instrument.simulate(np.array([points["x"][i]]), float(points["t"][i]), numpy_rng(0, MEASURE, int(i), k))
+        for k in range(int(np.sum(shots.point == i))):
+            instrument.simulate(np.array([points.x[i]]), float(points.t[i]), numpy_rng(0, MEASURE, int(i), k))
         out.append(time.perf_counter() - started)
     return np.asarray(out)
 
@@ -87,7 +87,7 @@ def main(argv=None) -> int:
 def one_run(args, reports: str) -> dict | None:
 
     from noisebo.config import load_config
-    from noisebo.storage.hdf5 import read_campaign
+    from noisebo.storage.record import read_record
 
     base = load_config(args.config)
     config = base.with_overrides(name="long", schedule={"n_steps": args.points - base.schedule.n_seed})
@@ -102,9 +102,9 @@ def one_run(args, reports: str) -> dict | None:
         print(f"noisebo run failed (exit {code}); last lines:\n" + "\n".join(line for _, line in lines[-5:]))
         return None
     path = next(work.glob("*.h5"))
-    file = read_campaign(path)
+    file = read_record(path)
     at = {int(m.group(1)): t for t, line in lines if (m := STEP_LINE.match(line))}
-    latency = file["steps"]["latency_s"]
+    latency = file.steps.latency_s
     instrument = shot_seconds(config, file)
     rows = []
     for step in sorted(at):

@@ -30,7 +30,7 @@ from noisebo.flows.processes import BIN, local_server, start, stop, wait_for  # 
 from noisebo.instruments import build  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.registry import chosen_policies, policy_names  # noqa: E402
-from noisebo.storage.hdf5 import read_campaign  # noqa: E402
+from noisebo.storage.record import read_record  # noqa: E402
 
 ENGINES = {
     "sequential (1 thread)": ["--runner", "threads", "--workers", "1"],
@@ -47,14 +47,14 @@ def equal_to_alone(config, seeds, policies, folder: Path) -> tuple[int, int]:
         cfg = config.with_overrides(acquisition={"policy": policy})
         for seed in seeds:
             alone = run_campaign(cfg, build(cfg.instrument), seed)
-            data = read_campaign(folder / f"{cfg.name}_{policy}_s{seed:04d}.h5")
-            p = data["points"]
+            data = read_record(folder / f"{cfg.name}_{policy}_s{seed:04d}.h5")
+            p = data.points
             same += bool(
-                np.array_equal(p["x"], [q.x for q in alone.state.points])
-                and np.array_equal(p["t"], [q.t for q in alone.state.points])
-                and np.array_equal(p["value"], [q.value for q in alone.state.points])
-                and np.array_equal(data["steps"]["t_opt"], [d.t_opt for d in alone.decisions])
-                and data["summary"]["t_opt"] == alone.summary.t_opt
+                np.array_equal(p.x, [q.x for q in alone.state.points])
+                and np.array_equal(p.t, [q.t for q in alone.state.points])
+                and np.array_equal(p.value, [q.value for q in alone.state.points])
+                and np.array_equal(data.steps.t_opt, [d.t_opt for d in alone.decisions])
+                and data.summary.t_opt == alone.summary.t_opt
             )
             total += 1
     return same, total

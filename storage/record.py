@@ -125,7 +125,8 @@ class CampaignRecord:
     (plain mappings: the config validates with ``noisebo.config.parse_config``);
     ``converged_step``: the first BO step at which the noise model had converged, None if never;
     ``budget_s``: the instrument-time budget, None for none; ``grid``: the config's grids (x, t,
-    t_fine); ``attrs``: every root attribute as stored."""
+    t_fine); ``versions``: the packages that wrote it ({"noisebo": "0.1.0", "python": ..., ...};
+    empty for a file that did not record them); ``attrs``: every root attribute as stored."""
 
     path: Path
     schema_version: int
@@ -144,6 +145,7 @@ class CampaignRecord:
     shots: Shots
     failures: Failures
     summary: Summary | None
+    versions: dict[str, str]
     attrs: dict[str, Any]
 
     @property
@@ -193,7 +195,8 @@ def from_tables(path: Path, data: dict, failures: dict, fits: dict | None = None
         n_shots=int(attrs["n_shots"]), budget_s=None if budget < 0 else budget,
         grid={name: np.asarray(v) for name, v in data["grid"].items()},
         points=_points(data["points"]), steps=_steps(data["steps"]), shots=_shots(data["shots"], fits),
-        failures=_failures(failures), summary=_summary(data["summary"]), attrs=attrs)
+        failures=_failures(failures), summary=_summary(data["summary"]),
+        versions=json.loads(attrs.get("versions_json", "{}")), attrs=attrs)
 
 
 def _column(table: dict, name: str, units: str, n: int) -> np.ndarray:

@@ -252,14 +252,14 @@ def test_a_temporary_server_that_does_not_start_in_time_is_one_line_and_no_file(
 def test_a_spent_budget_is_resumed_only_with_a_larger_one(tiny_config, tmp_path, prefect_harness, capsys):
     from noisebo.instruments.forrester import ForresterInstrument
     from noisebo.campaign.driver import drive
-    from noisebo.storage.hdf5 import read_campaign
+    from noisebo.storage.record import read_record
 
     config = tiny_config.with_overrides(schedule={"budget_s": 60.0, "n_steps": 100})
     path = tmp_path / "budget.h5"
     with start_campaign(path, config, 1) as recorder:
         spent = drive(recorder.state, ForresterInstrument(), recorder.commit).spent_s
-    attrs = read_campaign(path)["attrs"]
-    assert attrs["status"] == "budget_spent" and attrs["budget_s"] == 60.0 and spent <= 60.0
+    record = read_record(path)
+    assert record.status == "budget_spent" and record.budget_s == 60.0 and spent <= 60.0
     before = snapshot(tmp_path)
     for argv, message in ((["resume", str(path)], "continue it with a larger budget"),
                           (["resume", str(path), "--budget-s", "30"], f"it has spent {spent:.4g} s already")):
@@ -271,6 +271,6 @@ def test_a_spent_budget_is_resumed_only_with_a_larger_one(tiny_config, tmp_path,
         main(["resume", str(path), "--budget-s", "-5"])
     assert "a budget is a positive number of seconds" in capsys.readouterr().err
     assert main(["resume", str(path), "--budget-s", "90", "--no-rrd"]) == 0
-    data = read_campaign(path)
-    assert data["attrs"]["status"] == "budget_spent" and data["attrs"]["budget_s"] == 90.0
-    assert 60.0 < sum(data["shots"]["t"]) <= 90.0 and data["summary"] is not None
+    data = read_record(path)
+    assert data.status == "budget_spent" and data.budget_s == 90.0
+    assert 60.0 < sum(data.shots.t) <= 90.0 and data.summary is not None

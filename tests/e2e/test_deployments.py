@@ -13,7 +13,7 @@ import yaml
 from noisebo.flows.processes import BIN, start, stop, wait_for
 from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.record import read_record
 
 pytestmark = pytest.mark.e2e
 
@@ -48,11 +48,11 @@ def test_deployment_run_with_a_parameter_runs_the_campaign(served, tiny_config):
         assert "COMPLETED" in (run.stdout + run.stderr).upper()
     files = sorted(out.glob("tiny-reward-s3-*/tiny_reward_s0003.h5"))
     assert len(files) == 2
-    data = read_campaign(files[0])
-    assert data["attrs"]["status"] == "completed"
+    data = read_record(files[0])
+    assert data.status == "completed"
     alone = run_campaign(tiny_config, build(tiny_config.instrument), 3)
-    np.testing.assert_array_equal(data["points"]["value"], [p.value for p in alone.state.points])
-    np.testing.assert_array_equal(data["points"]["t"], [p.t for p in alone.state.points])
+    np.testing.assert_array_equal(data.points.value, [p.value for p in alone.state.points])
+    np.testing.assert_array_equal(data.points.t, [p.t for p in alone.state.points])
 
 
 def test_the_scheduled_sweep_runs_by_itself_and_summarises(served, tiny_config):
@@ -65,5 +65,5 @@ def test_the_scheduled_sweep_runs_by_itself_and_summarises(served, tiny_config):
     assert "interval" in inspect.stdout and "60" in inspect.stdout
     assert (sweep_dir / "convergence_steps.png").exists()
     alone = run_campaign(tiny_config, build(tiny_config.instrument), 1)
-    swept = read_campaign(sweep_dir / "tiny_reward_s0001.h5")
-    np.testing.assert_array_equal(swept["points"]["value"], [p.value for p in alone.state.points])
+    swept = read_record(sweep_dir / "tiny_reward_s0001.h5")
+    np.testing.assert_array_equal(swept.points.value, [p.value for p in alone.state.points])

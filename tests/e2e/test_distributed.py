@@ -11,7 +11,7 @@ import yaml
 from noisebo.flows.processes import BIN, start, stop, wait_for
 from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.record import read_record
 
 pytestmark = pytest.mark.e2e
 
@@ -29,9 +29,9 @@ def test_a_dask_sweep_equals_each_seed_alone(prefect_server, tiny_config, tmp_pa
         policy_config = tiny_config.with_overrides(acquisition={"policy": policy})
         for seed in (0, 1):
             alone = run_campaign(policy_config, build(policy_config.instrument), seed)
-            swept = read_campaign(out / f"tiny_{policy}_s{seed:04d}.h5")
-            np.testing.assert_array_equal(swept["points"]["value"], [p.value for p in alone.state.points])
-            assert swept["summary"]["t_opt"] == alone.summary.t_opt
+            swept = read_record(out / f"tiny_{policy}_s{seed:04d}.h5")
+            np.testing.assert_array_equal(swept.points.value, [p.value for p in alone.state.points])
+            assert swept.summary.t_opt == alone.summary.t_opt
     assert (out / "sweep_summary.md").exists() and (out / "convergence_steps.png").exists()
 
 
@@ -60,5 +60,5 @@ def test_a_sweep_on_two_prefect_workers_equals_each_seed_alone(prefect_server, t
     assert all(n > 0 for n in ran), f"each worker runs some campaigns, got {ran}"
     for seed in (0, 1, 2):
         alone = run_campaign(tiny_config, build(tiny_config.instrument), seed)
-        swept = read_campaign(out / f"tiny_reward_s{seed:04d}.h5")
-        np.testing.assert_array_equal(swept["points"]["value"], [p.value for p in alone.state.points])
+        swept = read_record(out / f"tiny_reward_s{seed:04d}.h5")
+        np.testing.assert_array_equal(swept.points.value, [p.value for p in alone.state.points])

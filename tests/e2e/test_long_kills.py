@@ -15,7 +15,8 @@ from noisebo.instruments import build
 from noisebo.instruments.registry import validated
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
-from noisebo.storage.hdf5 import read_campaign, read_spectra
+from noisebo.storage.hdf5 import read_spectra
+from noisebo.storage.record import read_record
 
 pytestmark = pytest.mark.e2e
 
@@ -43,15 +44,15 @@ def noisebo(args, env):
 
 
 def assert_equals_reference(path, final):
-    data = read_campaign(path)
-    assert data["attrs"]["status"] == "completed" and data["attrs"]["n_points"] == POINTS
+    data = read_record(path)
+    assert data.status == "completed" and len(data.points) == POINTS
     points = [e.committed.point for e in final.points]
-    np.testing.assert_array_equal(data["points"]["x"], [p.x[0] for p in points], err_msg="x")  # one axis: (n,)
+    np.testing.assert_array_equal(data.points.x, [p.x[0] for p in points], err_msg="x")  # one axis: (n,)
     for name in ("t", "value", "noise", "shot_std"):
-        np.testing.assert_array_equal(data["points"][name], [getattr(p, name) for p in points], err_msg=name)
-    got = list(zip(data["shots"]["point"].tolist(), data["shots"]["shot"].tolist()))
+        np.testing.assert_array_equal(getattr(data.points, name), [getattr(p, name) for p in points], err_msg=name)
+    got = list(zip(data.shots.point.tolist(), data.shots.shot.tolist()))
     assert got == [(s.point, s.shot) for e in final.points for s in e.shots]  # every shot once, in order
-    np.testing.assert_array_equal(data["steps"]["t_opt"], [d.t_opt for d in final.decisions])
+    np.testing.assert_array_equal(data.steps.t_opt, [d.t_opt for d in final.decisions])
     for i in (0, 57, 150, POINTS - 1):
         expected = np.stack([s.reading.spectrum for s in final.points[i].shots])
         np.testing.assert_array_equal(read_spectra(path, i), expected)
@@ -66,8 +67,8 @@ def test_kill_deep_into_a_long_campaign_then_resume(crash, long_yaml, tmp_path, 
     env = {**prefect_server, "NOISEBO_CRASH_AT": crash}
     killed = noisebo(["run", str(long_yaml), "--seed", str(SEED), "--out", str(out), "--no-rrd"], env)
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
-    running = read_campaign(path)  # the killed file opens, with the rows committed before the kill
-    assert running["attrs"]["status"] == "running" and running["attrs"]["n_points"] >= 100
+    running = read_record(path)  # the killed file opens, with the rows committed before the kill
+    assert running.status == "running" and len(running.points) >= 100
     env = {k: v for k, v in env.items() if k != "NOISEBO_CRASH_AT"}
     done = noisebo(["resume", str(path), "--no-rrd"], env)
     assert done.returncode == 0, done.stderr[-2000:]

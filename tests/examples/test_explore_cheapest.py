@@ -15,7 +15,7 @@ from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import ConfigError, load_config
 from noisebo.models.grids import grids
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.record import read_record
 from tests.examples import packages
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -82,6 +82,6 @@ def test_noisebo_run_under_the_example_policy_writes_its_campaign(target, config
     done = noisebo(["run", str(config_path), "--seed", str(SEED), "--out", str(out)],
                    environment(target, prefect_harness))
     assert done.returncode == 0, done.stderr[-2000:]
-    data = read_campaign(Path(done.stdout.strip().splitlines()[-1]))
-    assert data["attrs"]["status"] == "completed"
-    assert np.all(np.asarray(data["steps"]["t"]) == 0.2)
+    data = read_record(Path(done.stdout.strip().splitlines()[-1]))
+    assert data.status == "completed"
+    assert np.all(np.asarray(data.steps.t) == 0.2)

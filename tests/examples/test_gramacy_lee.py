@@ -18,7 +18,7 @@ from noisebo.instruments.registry import settings_of
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import ConfigError, InstrumentConfig, lax_fields
 from noisebo.storage import journal
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.record import read_record
 from tests.examples import packages
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -83,9 +83,9 @@ def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(target,
     done = noisebo(["resume", str(path)], env)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip().splitlines()[-1] == str(path)
-    data = read_campaign(path)
-    assert data["attrs"]["status"] == "completed" and data["attrs"]["driver"]["name"] == "gramacy-lee"
-    assert data["attrs"]["driver"]["version"] == "0.2.0" and data["attrs"]["driver"]["settings"]["a1"] == 0.5
+    data = read_record(path)
+    assert data.status == "completed" and data.driver["name"] == "gramacy-lee"
+    assert data.driver["version"] == "0.2.0" and data.driver["settings"]["a1"] == 0.5
 
     monkeypatch.syspath_prepend(str(target))  # the same campaign uninterrupted, in this process
     from noisebo.cli.main import _validated
@@ -93,8 +93,8 @@ def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(target,
 
     config = _validated(config_path)
     alone = run_campaign(config, build(config.instrument), SEED)
-    np.testing.assert_array_equal(data["points"]["value"], [p.value for p in alone.state.points])
-    assert list(data["shots"]["point"]) == [i for i, p in enumerate(alone.final.points) for _ in p.shots]
+    np.testing.assert_array_equal(data.points.value, [p.value for p in alone.state.points])
+    assert list(data.shots.point) == [i for i, p in enumerate(alone.final.points) for _ in p.shots]
 
     inspected = json.loads(noisebo(["inspect", str(path), "--json"], env).stdout)
     assert inspected["driver"]["name"] == "gramacy-lee" and inspected["status"] == "completed"

@@ -15,7 +15,7 @@ import pytest
 from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.storage import journal
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.record import read_record
 
 SEED = 9
 
@@ -86,7 +86,7 @@ def test_injected_kill_then_resume(crash, tiny_yaml, tmp_path, prefect_harness, 
         # reader opens it, and any finished file too.
         with h5py.File(path, "r", swmr=True) as f:
             assert f.attrs["status"] == "running"
-        assert read_campaign(path)["attrs"]["status"] == "running"
+        assert read_record(path).status == "running"
     if not path.with_suffix(".journal").exists():
         # Killed while creating: nothing was committed, and a fresh run starts cleanly.
         done = noisebo(["run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)], cli_env(prefect_harness))
@@ -129,8 +129,8 @@ def test_another_process_reads_the_file_while_the_campaign_runs(tiny_yaml, tmp_p
             # noisebo's reader, while the campaign writes: the running file is open for appending
             # (plain h5py refuses it; the reader opens it with swmr=True) and its per-point counts
             # are in /committed, not in root attributes (no attribute is rewritten under SWMR).
-            data = read_campaign(path)
-            seen.append((str(data["attrs"]["status"]), int(data["attrs"]["n_points"]), len(data["shots"]["value"])))
+            data = read_record(path)
+            seen.append((str(data.status), len(data.points), len(data.shots.value)))
         time.sleep(0.01)
     assert proc.wait(timeout=60) == 0
     running = [s for s in seen if s[0] == "running"]

@@ -12,7 +12,8 @@ from noisebo.flows.campaign import campaign, resume
 from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
-from noisebo.storage.hdf5 import read_campaign, read_spectra
+from noisebo.storage.record import read_record
+from noisebo.storage.hdf5 import read_spectra
 
 PFM_TINY = CampaignConfig().with_overrides(
     name="pfm-tiny",
@@ -32,20 +33,20 @@ def pfm_file(prefect_harness, tmp_path_factory):
 
 def test_pfm_flow_equals_the_pure_loop_and_keeps_raw_spectra(pfm_file):
     pure = run_campaign(PFM_TINY, build(PFM_TINY.instrument), 2)
-    data = read_campaign(pfm_file)
-    np.testing.assert_array_equal(data["points"]["value"], [p.value for p in pure.state.points])
-    shots = data["shots"]
-    assert shots["committed"].all() and shots["ok"].all()
+    data = read_record(pfm_file)
+    np.testing.assert_array_equal(data.points.value, [p.value for p in pure.state.points])
+    shots = data.shots
+    assert shots.ok.all() and len(shots.t) == data.n_shots
     with h5py.File(pfm_file, "r") as f:
         assert set(f["shots/fit"]) >= {"amplitude", "amplitude_se", "resonance_hz", "q", "sign"}
         amplitude, sign = f["shots/fit/amplitude"][()], f["shots/fit/sign"][()]
         assert len(f["spectra"]) == len(pure.state.points)
-    np.testing.assert_allclose(shots["value"], sign * amplitude)
+    np.testing.assert_allclose(shots.value, sign * amplitude)
     first = read_spectra(pfm_file, 0)
     samples = int(round(10_000 * pure.state.points[0].t))
     assert first.shape == (PFM_TINY.schedule.shots_before, 3, samples) and first.dtype == np.float32
     # the point's value is the mean of its shots' fitted values
-    assert data["points"]["value"][0] == pytest.approx(shots["value"][shots["point"] == 0].mean())
+    assert data.points.value[0] == pytest.approx(shots.value[shots.point == 0].mean())
 
 
 def test_resumed_pfm_campaign_refits_journaled_sweeps_identically(pfm_file, tmp_path, prefect_harness):
@@ -59,9 +60,9 @@ def test_resumed_pfm_campaign_refits_journaled_sweeps_identically(pfm_file, tmp_
         writer.append(record)
     writer.close()
     resumed = resume(str(path), show_progress=False)
-    a, b = read_campaign(pfm_file), read_campaign(resumed)
-    np.testing.assert_array_equal(a["points"]["value"], b["points"]["value"])
-    np.testing.assert_array_equal(a["shots"]["value"], b["shots"]["value"])
+    a, b = read_record(pfm_file), read_record(resumed)
+    np.testing.assert_array_equal(a.points.value, b.points.value)
+    np.testing.assert_array_equal(a.shots.value, b.shots.value)
 
 
 def test_pfm_report_draws_the_campaign_and_its_last_sweep(pfm_file, tmp_path):

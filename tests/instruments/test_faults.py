@@ -17,7 +17,7 @@ from noisebo.failures import (
     InstrumentTimeout,
     check_budget,
 )
-from noisebo.storage.hdf5 import read_campaign
+from noisebo.storage.record import read_record
 
 
 def faulty(**rates):
@@ -90,18 +90,18 @@ def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tin
         "seed": 5, "timeout": 0.05, "exception": 0.15, "nan": 0.05, "inf": 0.05}})
     inst = build(config.instrument)
     path = run_flow(config, 2, tmp_path / "faulty.h5", inst)
-    data, counts = read_campaign(path), inst.counts()
+    data, counts = read_record(path), inst.counts()
     with h5py.File(path, "r") as f:
         kinds = [k.decode() for k in f["failures/kind"][()]]
         reasons = [r.decode() for r in f["shots/reason"][()]]
     assert kinds.count("timeout") == counts["timeout"] and kinds.count("instrument error") == counts["exception"]
     assert reasons.count("non-finite reading") == counts["nan"] + counts["inf"]
-    assert data["attrs"]["status"] == "completed" and sum(counts.values()) > 10
+    assert data.status == "completed" and sum(counts.values()) > 10
     # the same campaign in this process, with the same faults injected, is the same shot for shot,
     # failed attempt for failed attempt
     alone = run_campaign(config, build(config.instrument), 2).final
-    np.testing.assert_array_equal(data["points"]["value"], [p.value for p in alone.data.points])
-    np.testing.assert_array_equal(data["shots"]["value"], [v.value for p in alone.points for v in p.committed.values])
+    np.testing.assert_array_equal(data.points.value, [p.value for p in alone.data.points])
+    np.testing.assert_array_equal(data.shots.value, [v.value for p in alone.points for v in p.committed.values])
     assert kinds == [f.kind for f in alone.failures] and len(alone.failures) > 3
 
 
@@ -112,16 +112,16 @@ def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config
                                         schedule={"min_failed": 5, "tolerated_rate": 0.5})
     with pytest.raises(FailureBudgetExceeded):
         campaign(config, seed=0, out_dir=str(tmp_path), show_progress=False, record_rrd=False)
-    data = read_campaign(tmp_path / "tiny_reward_s0000.h5")
-    assert data["attrs"]["status"] == "failed" and "failure budget exceeded" in data["attrs"]["status_reason"]
-    attempts = int(data["attrs"]["n_failed_attempts"]) + int(data["attrs"]["n_shots"])
+    data = read_record(tmp_path / "tiny_reward_s0000.h5")
+    assert data.status == "failed" and "failure budget exceeded" in data.status_reason
+    attempts = len(data.failures.t) + data.n_shots
     assert 5 <= attempts <= 5 / 0.5  # stopped within min_failed / tolerated_rate attempts
     # Resumed (say, after fixing the instrument), it gets a fresh budget, not an instant stop.
     with pytest.raises(FailureBudgetExceeded):
         resume(str(tmp_path / "tiny_reward_s0000.h5"), show_progress=False, record_rrd=False)
-    again = read_campaign(tmp_path / "tiny_reward_s0000.h5")["attrs"]
-    more = int(again["n_failed_attempts"]) + int(again["n_shots"]) - attempts
-    assert 5 <= more <= 5 / 0.5 and again["status"] == "failed"
+    again = read_record(tmp_path / "tiny_reward_s0000.h5")
+    more = len(again.failures.t) + again.n_shots - attempts
+    assert 5 <= more <= 5 / 0.5 and again.status == "failed"
 
 
 @pytest.mark.parametrize("kind, reason", [("corrupt_spectrum", ""), ("nan", ""), ("outlier", None)])
@@ -150,15 +150,15 @@ def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny
     config = tiny_config.with_overrides(instrument={"faults": {"seed": 4, "nan": 0.7}},
                                         schedule={"n_steps": 6, "min_failed": 1000})
     path = campaign(config, seed=1, out_dir=str(tmp_path), show_progress=False, record_rrd=False)
-    data = read_campaign(path)
-    n_shots = np.asarray(data["points"]["n_shots"])
-    per_point = np.bincount(np.asarray(data["shots"]["point"]))
-    assert data["attrs"]["status"] == "completed"
-    assert np.all(n_shots >= np.where(np.asarray(data["points"]["noise_measured"]), 2, 1))
-    scheduled = np.concatenate([[10] * 3, np.asarray(data["steps"]["shots"])])
+    data = read_record(path)
+    n_shots = np.asarray(data.points.n_shots)
+    per_point = np.bincount(np.asarray(data.shots.point))
+    assert data.status == "completed"
+    assert np.all(n_shots >= np.where(np.asarray(data.points.noise_measured), 2, 1))
+    scheduled = np.concatenate([[10] * 3, np.asarray(data.steps.shots)])
     assert np.any(per_point > scheduled)  # extra shots were taken
     pure = run_campaign(config, build(config.instrument), 1)
-    np.testing.assert_array_equal(data["points"]["value"], [p.value for p in pure.state.points])
+    np.testing.assert_array_equal(data.points.value, [p.value for p in pure.state.points])
 
 
 @pytest.mark.slow
@@ -179,16 +179,16 @@ def test_a_200_step_campaign_with_a_quarter_of_faults(prefect_harness, tmp_path)
         with start_campaign(tmp_path / "faulty200.h5", config, 3) as recorder:
             return run(recorder, instrument=inst)
 
-    data = read_campaign(faulty_campaign())
+    data = read_record(faulty_campaign())
     counts = inst.counts()
     with h5py.File(tmp_path / "faulty200.h5", "r") as f:
         kinds = [k.decode() for k in f["failures/kind"][()]]
         reasons = [r.decode() for r in f["shots/reason"][()]]
-    assert data["attrs"]["status"] == "completed" and len(data["points"]["x"]) == 203
+    assert data.status == "completed" and len(data.points.x) == 203
     assert kinds.count("timeout") == counts["timeout"] and kinds.count("instrument error") == counts["exception"]
     assert reasons.count("non-finite reading") == counts["nan"] + counts["inf"]
     assert sum(counts.values()) / inst.calls == pytest.approx(0.25, abs=0.03)
-    assert np.all(np.isfinite(data["points"]["value"])) and np.all(np.isfinite(data["points"]["noise"]))
+    assert np.all(np.isfinite(data.points.value)) and np.all(np.isfinite(data.points.noise))
     t_star = true_optimal_t(inst.noise_law, config.space.t_min, config.space.t_max, config.reward.alpha,
                             config.reward.beta)
-    assert abs(data["summary"]["t_opt"] - t_star) / t_star < 0.10
+    assert abs(data.summary.t_opt - t_star) / t_star < 0.10

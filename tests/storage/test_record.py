@@ -74,3 +74,18 @@ def test_the_typed_tables_are_the_layouts_columns():
 def test_a_missing_file_is_the_readers_one_line_error(tmp_path):
     with pytest.raises(CampaignFileError, match="no such file"):
         read_record(tmp_path / "absent.h5")
+
+
+def test_the_file_names_the_noisebo_that_wrote_it(tiny_config, tmp_path):
+    import importlib.metadata
+
+    import noisebo
+    from noisebo.campaign import engine
+    from noisebo.events import DriverInfo
+    from noisebo.storage.recorder import package_versions
+
+    started = engine.new_campaign(tiny_config, 0, DriverInfo("forrester", "1.0", {}), package_versions(), "2026")
+    write_snapshot(tmp_path / "v.h5", engine.start(started))
+    versions = read_record(tmp_path / "v.h5").versions
+    assert versions["noisebo"] == noisebo.__version__ == importlib.metadata.version("noisebo")
+    assert set(versions) >= {"python", "jax", "h5py", "prefect"}

@@ -14,7 +14,8 @@ from noisebo.events import DriverInfo
 from noisebo.models.convergence import converged, converged_map
 from noisebo.models.grids import grids
 from noisebo.models.reward import true_optimal_t
-from noisebo.storage.hdf5 import read_campaign, write_snapshot
+from noisebo.storage.record import read_record
+from noisebo.storage.hdf5 import write_snapshot
 from noisebo.storage.records import decode, encode, rebuild
 
 # Quadrature law sqrt(A1^2/t + A0^2), A1 = 1, A0 = 0.1 off the patch and 4.1 on it (x = 0.5,
@@ -87,10 +88,10 @@ def test_the_maps_replay_from_the_journal_and_reach_the_file(run, tmp_path):
     np.testing.assert_array_equal(again.summary.t_opt_map, result.summary.t_opt_map)
     path = tmp_path / "patch.h5"
     write_snapshot(path, again)
-    data = read_campaign(path)
-    assert data["steps"]["t_opt_map"].shape == (len(result.decisions), grids(CONFIG).x.size)
-    np.testing.assert_array_equal(data["summary"]["t_opt_map"], result.summary.t_opt_map)
-    np.testing.assert_array_equal(data["summary"]["noise_map"], result.summary.noise_map)
+    data = read_record(path)
+    assert data.steps.arrays["t_opt_map"].shape == (len(result.decisions), grids(CONFIG).x.size)
+    np.testing.assert_array_equal(data.summary.t_opt_map, result.summary.t_opt_map)
+    np.testing.assert_array_equal(data.summary.noise_map, result.summary.noise_map)
 
 
 def test_a_journal_without_maps_decodes_with_empty_ones(run):
