@@ -107,6 +107,8 @@ def default_text(field: FieldInfo) -> str:
     value = field.get_default(call_default_factory=True)
     if isinstance(value, float) and not isinstance(value, bool):
         return code(number(value))
+    if isinstance(value, BaseModel) and not plain(value):
+        return "its keys' defaults"
     return code(json.dumps(plain(value)))
 
 
