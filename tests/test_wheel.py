@@ -1,23 +1,19 @@
 """The wheel a lab installs: one top-level package, noisebo, with the adapters as its
 subpackages, the shipped configs and scan as package data, and the noisebo command."""
 
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
 
 import pytest
+
+from installed_layout import build_wheel
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> zipfile.ZipFile:
-    out = tmp_path_factory.mktemp("wheel")
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
-                    "--disable-pip-version-check", str(ROOT), "-w", str(out)], check=True, capture_output=True,
-                   timeout=600, cwd=out)
-    return zipfile.ZipFile(next(out.glob("noisebo-*.whl")))
+    return zipfile.ZipFile(build_wheel(tmp_path_factory.mktemp("wheel")))
 
 
 def test_one_top_level_package(wheel):

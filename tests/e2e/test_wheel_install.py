@@ -25,6 +25,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from installed_layout import build_wheel
+
 pytestmark = pytest.mark.e2e
 ROOT = Path(__file__).resolve().parents[2]
 INSTALL_TIMEOUT_S = 1800  # a fresh machine downloads JAX, Prefect, rerun-sdk, ...
@@ -76,12 +78,9 @@ def installed(tmp_path_factory) -> Iterator[Installed]:
     base = tmp_path_factory.mktemp("wheel-install")
     assert outside_the_checkout(base), f"the temporary folder {base} is inside the checkout"
     wheels, venv, home, work = base / "wheel", base / "venv", base / "home", base / "work"
-    for folder in (home, work):
+    for folder in (wheels, home, work):
         folder.mkdir()
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
-                    "--disable-pip-version-check", str(ROOT), "-w", str(wheels)], check=True, capture_output=True,
-                   timeout=600, cwd=wheels.parent)
-    (wheel,) = wheels.glob("noisebo-*.whl")
+    wheel = build_wheel(wheels)
     # The venv from the base interpreter, not from the checkout's .venv, so that its pyvenv.cfg
     # does not name the checkout.
     base_python = getattr(sys, "_base_executable", sys.executable)
