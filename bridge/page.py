@@ -127,7 +127,8 @@ def _noise_plot(state: EngineState) -> str:
         last, t = state.decisions[-1], grids(state.config).t
         if last.noise_mean.ndim == 1 and len(last.noise_mean) == len(t):
             sd = np.sqrt(np.maximum(last.noise_var, 0.0))
-            series += [("band", t, last.noise_mean - 2 * sd, last.noise_mean + 2 * sd, "#d9ecd0"),
+            low = np.maximum(last.noise_mean - 2 * sd, 0.0)  # an sd is never negative
+            series += [("band", t, low, last.noise_mean + 2 * sd, "#d9ecd0"),
                        ("line", t, last.noise_mean, None, "#2d7a1f")]
     if measured:
         series.append(("points", [p.t for p in measured], [p.shot_std for p in measured], None, "#d2540a"))

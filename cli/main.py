@@ -426,6 +426,7 @@ def inspect_summary(path: Path) -> dict:
         "policy": record.policy,
         "driver": record.driver,
         "schema_version": record.schema_version,
+        "versions": record.versions,
         "config": record.config,
         "first_converged_step": record.converged_step,
         "final_t_opt": None if summary is None else summary.t_opt,
@@ -451,7 +452,9 @@ def _inspect(args) -> int:
     x_width = max([9] + [len(format_position(row["x"])) for row in summary["points"]])
     print(f"{summary['file']}: {summary['config']['name']} seed {summary['seed']}, policy {summary['policy']}, "
           f"status {summary['status']}{' (' + summary['status_reason'] + ')' if summary['status_reason'] else ''}")
-    print(f"  instrument {driver['name']} {driver['version']}")
+    written_by = summary["versions"].get("noisebo")
+    print(f"  instrument {driver['name']} {driver['version']}"
+          + (f"; written by noisebo {written_by}" if written_by else ""))
     print(f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
           f"noise model {'not converged' if conv is None else f'converged at step {conv}'}; "
           f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s")

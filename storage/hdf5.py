@@ -6,7 +6,7 @@ committed point appends only its new rows). When the run ends (any status but ru
 ``write_snapshot`` writes the whole campaign once more in the finished layout: a new file beside
 the old one, fsynced and atomically renamed over it, so a finished campaign is a plain, compact
 HDF5 file (spectra compressed) that ``h5py.File(path, "r")`` opens. Layout (schema
-"noisebo.campaign", version 4) is documented in the README; every dataset carries "units" and
+"noisebo.campaign", version 4) is documented in docs/reference/hdf5.md; every dataset carries "units" and
 "description" attributes. Steps are stored as a user sees them (``storage.steps``: seed points
 step 0, BO steps 1..n_steps); the readers convert a file of schema 1-3 (0-based BO steps, seed
 points -1) to the same numbers.

@@ -2,8 +2,8 @@
 the columns of /points, /steps, /shots and /failures with their units and descriptions, the
 per-step arrays, the root attributes, and the rows each table gets from the campaign's state.
 ``storage.hdf5`` writes the finished file and reads both kinds; ``storage.live`` grows the running
-file in place. Both import this module and not each other (the HDF5 layout is documented in the
-README, "HDF5 layout")."""
+file in place; ``storage.live`` imports this module, not ``storage.hdf5``. The reference page
+docs/reference/hdf5.md is generated from this module."""
 
 from __future__ import annotations
 
@@ -167,7 +167,7 @@ def step_rows(decisions: Sequence[Decision], names: Sequence[str], shapes: dict,
 
 
 def root_attrs(state: EngineState) -> dict:
-    """The file's root attributes (README: "HDF5 layout")."""
+    """The file's root attributes (docs/reference/hdf5.md)."""
     config = state.config
     return dict(
         schema=SCHEMA,

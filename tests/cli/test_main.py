@@ -6,6 +6,7 @@ import shutil
 import h5py
 import pytest
 
+import noisebo
 from noisebo.cli.main import main, parse_seeds
 from noisebo.flows.campaign import start_campaign
 from noisebo.campaign.engine import new_campaign
@@ -136,6 +137,7 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
     assert main(["inspect", path, "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["seed"] == 2 and data["status"] == "completed" and data["config"]["name"] == "tiny"
+    assert data["versions"]["noisebo"] == noisebo.__version__  # the wheel, --version and the file agree
     # seed points are step 0, BO steps count from 1
     assert [p["step"] for p in data["points"]] == [0, 0, 0, 1, 2, 3, 4]
     assert {"x", "t", "n_shots", "value", "noise", "t_opt"} <= set(data["points"][3])
@@ -144,6 +146,7 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
     assert main(["inspect", path]) == 0
     text = capsys.readouterr().out
     assert "status completed" in text and "t_opt (s)" in text
+    assert f"written by noisebo {noisebo.__version__}" in text
     # the recording is rebuilt beside a copy of the file, and the report lands where asked
     copy = tmp_path / "copy" / "tiny_reward_s0002.h5"
     copy.parent.mkdir()
