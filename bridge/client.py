@@ -122,7 +122,7 @@ def packed_spectrum(rows: Any) -> dict | None:
         if getattr(rows, "ndim", 2) != 2:
             raise ValueError(f"measure returned an array of shape {rows.shape}; a spectrum is rows × samples")
         code = "f" if str(rows.dtype) == "float32" else "d"
-        flat = array.array(code)
+        flat: array.array[float] = array.array(code)
         flat.frombytes(rows.astype("=f4" if code == "f" else "=f8").tobytes())
         n_rows, lengths = len(rows), {rows.shape[1]}
     else:

@@ -90,7 +90,7 @@ class Exchange:
             key, started = (request.point, request.taken), self._clock()
             while True:
                 handed = self._handed.get(key)
-                if handed is not None and _current(handed, self._state, key):
+                if handed is not None and self._state is not None and _current(handed, self._state, key):
                     if isinstance(handed.outcome, ShotError):
                         raise InstrumentError(handed.outcome.reason)
                     return handed.outcome

@@ -84,10 +84,10 @@ def tell(path: Path, point: int | None, outcomes_for: Callable[[ReadingShape], S
             raise ManualError(f"point {request.point} wants {left} more shot{'s' * (left != 1)} "
                               f"(shots {request.taken}-{request.wanted - 1}); got {len(outcomes)}")
         for outcome in outcomes:
-            request = engine.ask(recorder.state)
-            if not isinstance(request, Request):
+            step = engine.ask(recorder.state)
+            if not isinstance(step, Request):
                 break
-            commit(recorder.state, engine.tell(recorder.state, request, {request.taken: outcome}, decide_next=False).events)
+            commit(recorder.state, engine.tell(recorder.state, step, {step.taken: outcome}, decide_next=False).events)
         return recorder.state, next_step(recorder, say, commit), len(outcomes)
 
 

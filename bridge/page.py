@@ -104,7 +104,7 @@ def _f_plot(state: EngineState) -> str:
         return _message_plot("f", "a map of several axes: see the Rerun view")
     from noisebo.models.grids import grids
 
-    series = []
+    series: list[tuple] = []
     if state.decisions:
         last = state.decisions[-1]
         x = grids(state.config).x
@@ -120,7 +120,7 @@ def _f_plot(state: EngineState) -> str:
 def _noise_plot(state: EngineState) -> str:
     measured = [e.committed.point for e in state.points if e.committed.point.noise_measured
                 and math.isfinite(e.committed.point.shot_std)]
-    series = []
+    series: list[tuple] = []
     if state.decisions:
         from noisebo.models.grids import grids
 

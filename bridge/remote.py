@@ -130,6 +130,8 @@ def check_tls(settings: RemoteSettings) -> None:
     """``InstrumentUnavailable`` naming the setting when the certificate or key cannot be loaded."""
     import ssl
 
+    if settings.tls is None:  # plain HTTP: nothing to load
+        return
     certfile, keyfile = settings.tls
     for which, path in (("tls_certfile", certfile), ("tls_keyfile", keyfile)):
         if not Path(path).is_file():

@@ -45,6 +45,8 @@ from noisebo.reduction import Reading
 from noisebo.storage.steps import shown as shown_step
 
 if TYPE_CHECKING:
+    from pydantic_core import ErrorDetails
+
     from noisebo.campaign.engine import EngineState
 
 
@@ -176,7 +178,7 @@ def parse_body(raw: bytes) -> ReadingBody:
         raise WireError(422, "; ".join(problems) + (f"; and {more} more" if more > 0 else "")) from None
 
 
-def problem(item: dict, prefix: str) -> str:
+def problem(item: ErrorDetails, prefix: str) -> str:
     """One of pydantic's errors as "body.field: what is wrong", saying what was given when it
     was of the wrong type (``body.value: Input should be a valid number, got the string '0.5'``)."""
     loc = ".".join(str(p) for p in (prefix, *item["loc"]))
@@ -214,6 +216,7 @@ def outcome_of(body: ReadingBody, shape: ReadingShape) -> Reading | ShotError:
         return Reading(float(body.value))
     if shape.reading != "spectrum":
         raise WireError(422, "spectrum: this campaign's instrument returns one number per shot; post \"value\"")
+    assert body.spectrum is not None  # ReadingBody holds exactly one of value, spectrum and error
     return Reading(None, spectrum_of(body.spectrum, shape), body.reduction or shape.reduction)
 
 
