@@ -13,11 +13,14 @@ group ``noisebo.instruments`` (``instruments.registry``) and built from its own 
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
 from noisebo.reduction import Reading
+
+if TYPE_CHECKING:
+    from typing_extensions import TypeIs
 
 
 @runtime_checkable
@@ -50,7 +53,7 @@ class Follower(Protocol):
         state wants next and acknowledges a reading once the state holds it."""
 
 
-def is_simulator(instrument) -> bool:
+def is_simulator(instrument: object) -> TypeIs[Simulator]:
     """Whether the instrument (the fault injector and the timeout guard pass it through) is a
     ``Simulator``: the same check the campaign loop makes before drawing a shot."""
     from noisebo.campaign.driver import simulates  # the campaign loop, with the models: not for listing drivers

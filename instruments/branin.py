@@ -59,9 +59,9 @@ class BraninInstrument:
     @property
     def bounds(self) -> list[tuple[float, float]]:
         """The domain of each coordinate: [(-5, 10), (0, 15)]."""
-        return [tuple(b) for b in BOUNDS]
+        return [(lo, hi) for lo, hi in BOUNDS]
 
-    def noise_law(self, t: np.ndarray) -> np.ndarray:
+    def noise_law(self, t: np.ndarray | float) -> np.ndarray:
         """Single-shot noise sd at exposure t (s), any shape: A1/sqrt(t) + A0."""
         t = np.asarray(t, dtype=np.float64)
         return self.settings.a1 / np.sqrt(t) + self.settings.a0

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import cast
 
 import numpy as np
 
-from noisebo.instruments.base import Instrument, Reading, is_simulator
+from noisebo.instruments.base import Instrument, Reading, Simulator, is_simulator
 from noisebo.config import FAULT_KINDS, FaultsConfig
 from noisebo.failures import InstrumentError
 
@@ -53,7 +54,8 @@ class FaultyInstrument:
         return self._faulty(self.inner.measure(x, t), x, t)
 
     def _simulate(self, x: np.ndarray, t: float, rng: np.random.Generator) -> Reading:
-        return self._faulty(self.inner.simulate(x, t, rng), x, t)
+        simulator = cast(Simulator, self.inner)  # bound as simulate only when the inner instrument is one
+        return self._faulty(simulator.simulate(x, t, rng), x, t)
 
     def _faulty(self, reading: Reading, x: np.ndarray, t: float) -> Reading:
         x = np.asarray(x, dtype=np.float64).ravel()
@@ -80,12 +82,14 @@ class FaultyInstrument:
     def _outlier(self, reading: Reading, x: np.ndarray, t: float, sign: float) -> Reading:
         """The reading moved by outlier_sd true noise sd: a scalar directly; a spectrum scaled
         so that its fitted amplitude moves by that much (the fit is linear in the scale)."""
-        simulated = is_simulator(self.inner)
-        noise = self.inner.noise_law(np.asarray([t])) if simulated else None
+        inner = self.inner
+        simulator = inner if is_simulator(inner) else None
+        noise = simulator.noise_law(np.asarray([t])) if simulator is not None else None
         step = self.faults.outlier_sd * (float(noise[0]) if noise is not None else 1.0)
         if reading.spectrum is None:
+            assert reading.value is not None  # a reading without a spectrum is a scalar
             return Reading(float(reading.value) + sign * step)
-        truth = self.inner.truth(x[None, :]) if simulated else None
+        truth = simulator.truth(x[None, :]) if simulator is not None else None
         amplitude = max(abs(float(truth[0])), 1.0) if truth is not None else 1.0
         spectrum = np.array(reading.spectrum, copy=True)
         spectrum[1] *= max(1.0 + sign * step / amplitude, 0.0)

@@ -56,7 +56,7 @@ class ForresterInstrument:
         self.settings = settings or ForresterSettings()
         self._rng = np.random.default_rng(self.settings.seed)
 
-    def _law(self, t: np.ndarray, a0) -> np.ndarray:
+    def _law(self, t: np.ndarray | float, a0) -> np.ndarray:
         s = self.settings
         if s.law == "quadrature":
             return np.sqrt(s.a1**2 / t + a0**2)
@@ -67,7 +67,7 @@ class ForresterInstrument:
         s = self.settings
         return s.a0 + s.patch_a0 * np.exp(-0.5 * ((np.asarray(x, dtype=np.float64) - s.patch_x) / s.patch_width) ** 2)
 
-    def noise_law(self, t: np.ndarray) -> np.ndarray:
+    def noise_law(self, t: np.ndarray | float) -> np.ndarray:
         """Single-shot noise sd at exposure t (s): A1/sqrt(t) + A0 (or the quadrature law); with
         a patch, its mean over 1001 evenly spaced x."""
         t = np.asarray(t, dtype=np.float64)

@@ -8,10 +8,11 @@ waiting after ``timeout_s``.
 from __future__ import annotations
 
 import threading
+from typing import cast
 
 import numpy as np
 
-from noisebo.instruments.base import Instrument, Reading, is_simulator
+from noisebo.instruments.base import Instrument, Reading, Simulator, is_simulator
 from noisebo.failures import InstrumentError, InstrumentTimeout  # noqa: F401 - re-exported
 
 
@@ -34,7 +35,8 @@ class TimeoutGuard:
         return self._within_timeout(lambda: self.inner.measure(x, t), x, t)
 
     def _simulate(self, x: np.ndarray, t: float, rng: np.random.Generator) -> Reading:
-        return self._within_timeout(lambda: self.inner.simulate(x, t, rng), x, t)
+        simulator = cast(Simulator, self.inner)  # bound as simulate only when the inner instrument is one
+        return self._within_timeout(lambda: simulator.simulate(x, t, rng), x, t)
 
     def _within_timeout(self, shot, x, t) -> Reading:
         outcome: dict = {}

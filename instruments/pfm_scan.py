@@ -133,6 +133,7 @@ def find_channel(found: list[Channel], sought: str, path: Path) -> Channel:
 
 def _chosen(found: list[Channel], index: int | None, sought: str, path: Path) -> Channel:
     """The channel a config names by index, or the one found by quantity; its units checked."""
+    channel: Channel | None
     if index is None:
         channel = find_channel(found, sought, path)
     else:

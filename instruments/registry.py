@@ -19,9 +19,11 @@ pyproject.toml.
 from __future__ import annotations
 
 from importlib.metadata import EntryPoint, entry_points
+from typing import Any, Protocol
 
 from pydantic import BaseModel, ValidationError
 
+from noisebo.instruments.base import Instrument
 from noisebo.instruments.faults import FaultyInstrument
 from noisebo.instruments.guard import TimeoutGuard
 from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
@@ -31,6 +33,17 @@ from noisebo.registry import Installed
 from noisebo.registry import installed as installed_in
 
 GROUP = "noisebo.instruments"
+
+
+class Driver(Protocol):
+    """A driver class as ``driver_class`` hands it out, checked when it is loaded: its pydantic
+    ``Settings`` model, ``name`` and ``version``, and a constructor taking its settings."""
+
+    Settings: type[BaseModel]
+    name: str
+    version: str
+
+    def __call__(self, settings: Any) -> Instrument: ...
 
 
 class DriverNotInstalled(ConfigError):
@@ -56,7 +69,7 @@ def _entry_point(kind: str) -> EntryPoint:
     return found[0]
 
 
-def driver_class(kind: str) -> type:
+def driver_class(kind: str) -> Driver:
     """The driver class registered as ``kind``."""
     ep = _entry_point(kind)
     try:
@@ -75,7 +88,7 @@ def driver_class(kind: str) -> type:
     return cls
 
 
-def settings_of(config: InstrumentConfig, cls: type | None = None) -> BaseModel:
+def settings_of(config: InstrumentConfig, cls: Driver | None = None) -> BaseModel:
     """The instrument's settings validated by its driver's own model (``cls``, or the driver
     registered as ``config.kind``)."""
     cls = cls or driver_class(config.kind)
@@ -125,14 +138,15 @@ def profile_problem(config: CampaignConfig, settings: dict) -> str | None:
     return None
 
 
-def space_problem(config: CampaignConfig, cls: type, settings: BaseModel) -> str | None:
+def space_problem(config: CampaignConfig, cls: Driver, settings: BaseModel) -> str | None:
     """What is wrong with ``space.axes`` for a simulator that declares its extent (``bounds``:
     one (low, high) per axis, in x's units), or None: the number of axes must match and every
     axis lie inside its extent. Other drivers (a device knows its own limits) are not asked."""
     if not (hasattr(cls, "bounds") and hasattr(cls, "simulate")):
         return None
     try:
-        bounds = [tuple(map(float, b)) for b in cls(settings).bounds]
+        simulator: Any = cls(settings)  # one with ``bounds`` (checked above), which Instrument does not name
+        bounds = [tuple(map(float, b)) for b in simulator.bounds]
     except Exception:  # noqa: BLE001 - a driver that cannot start says why when the campaign builds it
         return None
     axes = config.space.axes
