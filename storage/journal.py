@@ -134,7 +134,8 @@ def scan(path: Path) -> tuple[list[Record], int, Damage | None]:
     """Every record that reads from the start of the file, the bytes they occupy, and where and
     how reading stopped before the end (None: it reached the end)."""
     data = Path(path).read_bytes()
-    records, offset = [], 0
+    records: list[Record] = []
+    offset = 0
     while offset < len(data):
         found = _frame_at(data, offset)
         if found is None:

@@ -115,8 +115,9 @@ def array_shapes(state: EngineState) -> dict[str, tuple[int, ...]]:
 
     s = state.config.space
     m, n_t = grids(state.config).x.shape[0], s.n_t
-    acq = (m, n_t) if s.dimensions == 1 else (m,)
-    shapes = {"acq_map": acq, "f_mean": (m,), "f_var": (m,), "noise_mean": (n_t,), "noise_var": (n_t,)}
+    acq: tuple[int, ...] = (m, n_t) if s.dimensions == 1 else (m,)
+    shapes: dict[str, tuple[int, ...]] = {"acq_map": acq, "f_mean": (m,), "f_var": (m,), "noise_mean": (n_t,),
+                                          "noise_var": (n_t,)}
     return shapes | ({} if state.config.noise_model.field is None else {"t_opt_map": (m,)})
 
 
@@ -154,8 +155,9 @@ def step_rows(decisions: Sequence[Decision], names: Sequence[str], shapes: dict,
     """/steps columns of these decisions: STEP_COLUMNS (len,) (x (len, d) for d > 1 axes), the
     ARRAY_COLUMNS (len, *shape) and "hyperparameters" {name: (len,)} (NaN where a decision
     lacks one of ``names``)."""
-    rows = {name: np.asarray([getattr(d, name) for d in decisions], dtype=column_dtype(name, units))
-            for name, (units, _) in STEP_COLUMNS.items() if name not in ("x", "step")}
+    rows: dict[str, np.ndarray | dict[str, np.ndarray]] = {
+        name: np.asarray([getattr(d, name) for d in decisions], dtype=column_dtype(name, units))
+        for name, (units, _) in STEP_COLUMNS.items() if name not in ("x", "step")}
     rows["step"] = np.asarray([numbering.shown(d.step) for d in decisions], dtype=column_dtype("step", "1"))
     rows["x"] = positions([d.x for d in decisions], dimensions)
     rows["hyperparameters"] = {
@@ -286,7 +288,8 @@ def shot_rows(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = (), di
             _add_shot(cols, shot, value)
     for shot in taken:
         _add_shot(cols, shot, None)
-    out = {name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS if name != "x"}
+    out: dict[str, np.ndarray | list[str] | dict[str, np.ndarray]] = {
+        name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS if name != "x"}
     out["x"] = positions(cols["x"], dimensions)
     out["reason"], out["note"] = cols["reason"], cols["note"]
     out["fit"] = {name: np.asarray(cols[name], dtype=np.float64) for name in FIT_UNITS}

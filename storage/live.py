@@ -400,6 +400,7 @@ class LiveFile:
         for row, (_, a) in enumerate(arrays):
             shapes[row, : a.ndim] = a.shape
         columns["spectra/shape"].write(start, shapes)
+        assert self._spectra is not None  # laid out by create() before the first write
         self._spectra.write(start, [a.tobytes() for _, a in arrays])
         return spectra
 
