@@ -12,7 +12,7 @@ def blueprint(config: CampaignConfig):
     latest sweep for PFM); below them the scalar traces and the decision log."""
     import rerun.blueprint as rrb
 
-    top = [
+    top: list[rrb.View] = [
         rrb.Spatial2DView(origin="acquisition", name="acquisition over (x, t); points by step"),
         rrb.Spatial2DView(origin="f", name="f(x): mean, +-2 sd band, truth, points"),
     ]

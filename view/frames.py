@@ -18,6 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
+import jax.numpy as jnp
 import numpy as np
 
 from noisebo.config import CampaignConfig
@@ -82,7 +83,7 @@ class Frame:
 
 def normalised_reward(t: np.ndarray, noise: np.ndarray, alpha: float, beta: float) -> np.ndarray:
     """R = -alpha t^2 - beta Noise on the grid t, min-max normalised to [0, 1] (numpy)."""
-    return np.asarray(normalise(reward(np.asarray(t), np.asarray(noise), alpha, beta)), dtype=np.float64)
+    return np.asarray(normalise(reward(jnp.asarray(t), jnp.asarray(noise), alpha, beta)), dtype=np.float64)
 
 
 def n_frames(tables: CampaignTables, config: CampaignConfig) -> int:

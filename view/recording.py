@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, cast
 
 import numpy as np
 
@@ -42,7 +42,7 @@ def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[s
                 instrument = build(config.instrument)
             except DriverNotInstalled as error:
                 if warn is not None:
-                    what = error
+                    what = str(error)
                     if source is not None:
                         path, driver = source
                         what = (f"{path} was made with the instrument driver {driver['name']!r} {driver['version']}, "
@@ -133,8 +133,9 @@ class CampaignRecording:
         d = self.config.space.dimensions
         rows = step_rows(decisions, hyperparameter_names(decisions), {}, d)
         hyper = rows.pop("hyperparameters")
-        steps = Steps(**{name: rows[name] for name in STEP_COLUMNS}, hyperparameters=hyper,
-                      arrays={name: _PerStep(decisions, name) for name in array_shapes(state)})
+        # each _PerStep stands in for a (k, ...) array: frame_at only takes one step's array from it
+        arrays = cast("dict[str, np.ndarray]", {name: _PerStep(decisions, name) for name in array_shapes(state)})
+        steps = Steps(**{name: rows[name] for name in STEP_COLUMNS}, hyperparameters=hyper, arrays=arrays)
         g = grids(self.config)
         point, t = np.asarray(self._shot_point, dtype=np.int32), np.asarray(self._shot_t)
         shots = Shots(point=point, shot=np.zeros_like(point), t=t, value=np.full(len(t), np.nan),

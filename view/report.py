@@ -323,7 +323,8 @@ def write_summary(paths: list, out_dir: str | Path) -> tuple[Path, Path]:
 def sweep_report(files: list[Path], out_dir: Path) -> list[Path]:
     """Figure S1 (first converged step per policy) and the summary table of finished campaigns;
     unfinished files are left out and named."""
-    finished, skipped = [], []
+    finished: list[Path] = []
+    skipped: list[Path] = []
     for f in files:
         (finished if read_record(f).summary is not None else skipped).append(f)
     if not finished:
@@ -336,6 +337,8 @@ def sweep_report(files: list[Path], out_dir: Path) -> list[Path]:
 
 
 def convergence_figure(records: list[dict], out: Path) -> None:
+    from matplotlib.ticker import MaxNLocator
+
     policies = sorted({r["policy"] for r in records})
     n_steps = max(len(r["t_opt_pred"]) for r in records)
     bins = np.arange(1, n_steps + 2)  # first converged step, 1-based; n_steps + 1 = never
@@ -351,6 +354,8 @@ def convergence_figure(records: list[dict], out: Path) -> None:
     ax.set_xticks(bins, [str(b) for b in bins[:-1]] + ["never"])
     ax.set(xlabel="first BO step at which the noise model counts as converged", ylabel="campaigns",
            title="convergence of the noise model across seeds")
-    ax.yaxis.get_major_locator().set_params(integer=True)
+    locator = ax.yaxis.get_major_locator()
+    if isinstance(locator, MaxNLocator):  # the default AutoLocator is one
+        locator.set_params(integer=True)
     ax.legend(fontsize=9)
     fig.savefig(out, dpi=DPI)

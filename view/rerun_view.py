@@ -24,7 +24,7 @@ import socket
 import sys
 import time
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 from urllib.parse import urlparse
 
 import numpy as np
@@ -34,6 +34,10 @@ from noisebo.state import format_position
 from noisebo.view.area import as_image
 from noisebo.view.frames import Curve, Frame
 from noisebo.view.style import step_colours
+
+if TYPE_CHECKING:
+    from rerun import RecordingStream
+    from rerun.sinks import LogSinkLike
 
 BOX_W, BOX_H = 300.0, 150.0
 TRACES = ("t_opt_s", "a0", "a1", "latency_s", "measurement_time_s")
@@ -109,7 +113,7 @@ class RerunView:
         self.enabled = True
         self._f_range: tuple[float, float] | None = None
         self._noise_range: tuple[float, float] | None = None
-        self.stream = None
+        self.stream: RecordingStream | None = None
         self._guard(lambda: self._open(name, rrd, live), "could not start the Rerun recording")
 
     def _open(self, name: str, rrd: Path | None, live: str | None) -> None:
@@ -119,7 +123,7 @@ class RerunView:
 
         self.rr = rr
         self.stream = rr.RecordingStream("noisebo", recording_id=name, send_properties=False)
-        sinks = []
+        sinks: list[LogSinkLike] = []
         if rrd is not None:
             Path(rrd).parent.mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(str(rrd)))
@@ -141,7 +145,7 @@ class RerunView:
         if bin_dir not in os.environ.get("PATH", "").split(os.pathsep):
             os.environ["PATH"] = bin_dir + os.pathsep + os.environ.get("PATH", "")
         try:
-            self.stream.spawn(connect=False, hide_welcome_screen=True)
+            self._recording.spawn(connect=False, hide_welcome_screen=True)
         except Exception as error:  # noqa: BLE001 - no viewer: record to the file only
             self.warn(f"noisebo: could not start a Rerun viewer ({str(error).splitlines()[0]}); recording to file only")
             return False
@@ -150,6 +154,12 @@ class RerunView:
                 return True
             time.sleep(0.25)
         return True
+
+    @property
+    def _recording(self) -> RecordingStream:
+        """The stream ``_open`` made: what logs to it runs only once it has."""
+        assert self.stream is not None
+        return self.stream
 
     def _guard(self, action: Callable[[], None], what: str) -> None:
         if not self.enabled:
@@ -172,12 +182,15 @@ class RerunView:
         self._guard(lambda: self._log(frame, spectrum, fit), "Rerun logging failed")
 
     def close(self) -> None:
-        def finish():
-            self.stream.flush(timeout_sec=2.0)
-            self.stream.disconnect()
+        stream = self.stream
+        if stream is None:
+            return
 
-        if self.stream is not None:
-            self._guard(finish, "could not finish the Rerun recording")
+        def finish() -> None:
+            stream.flush(timeout_sec=2.0)
+            stream.disconnect()
+
+        self._guard(finish, "could not finish the Rerun recording")
 
     # -- drawing -------------------------------------------------------------------------------
 
@@ -196,7 +209,7 @@ class RerunView:
         return Box((s.lows[0], s.highs[0]), self._f_range), Box((s.t_min, s.t_max), self._noise_range)
 
     def _log(self, frame: Frame, spectrum, fit) -> None:
-        rr, st = self.rr, self.stream
+        rr, st = self.rr, self._recording
         st.set_time("step", sequence=frame.step)
         if self.wall_clock:
             st.set_time("wall", timestamp=time.time())
@@ -224,7 +237,7 @@ class RerunView:
     def _log_area(self, frame: Frame) -> None:
         """Two axes: GP mean and sd over the area (and the truth, and the acquisition's best
         over t) as images, the measured points on each coloured by their t (log scale)."""
-        rr, st, s, p = self.rr, self.stream, self.config.space, frame.points
+        rr, st, s, p = self.rr, self._recording, self.config.space, frame.points
         n0, n1 = s.points_per_axis
         xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), 2)
         px = (xy[:, 0] - s.lows[0]) / (s.highs[0] - s.lows[0]) * (n0 - 1) + 0.5
@@ -255,19 +268,19 @@ class RerunView:
         py = (s.t_max - p["t"]) / (s.t_max - s.t_min) * (s.n_t - 1) + 0.5
         labels = [f"{'seed' if k == 0 else f'step {k}'}: x={x:.4g}, t={t:.3g} s" for k, x, t in zip(p["frame"], p["x"], p["t"])]
         colours = colour_by_step(p["frame"], self.config.schedule.n_steps)
-        self.stream.log("acquisition/points", self.rr.Points2D(np.stack([px, py], axis=-1), colors=colours,
+        self._recording.log("acquisition/points", self.rr.Points2D(np.stack([px, py], axis=-1), colors=colours,
                                                                radii=np.where(p["frame"] == frame.step, 2.5, 1.5),
                                                                labels=labels, show_labels=False))
 
     def _log_curve(self, path: str, box: Box, curve: Curve, colour, band: bool = True) -> None:
-        rr, st = self.rr, self.stream
+        rr, st = self.rr, self._recording
         st.log(f"{path}/mean", rr.LineStrips2D([box(curve.grid, curve.mean)], colors=[colour], radii=0.6))
         if band:
             upper, lower = box(curve.grid, curve.mean + 2 * curve.sd), box(curve.grid, curve.mean - 2 * curve.sd)
             st.log(f"{path}/band", rr.LineStrips2D([upper, lower], colors=[colour], radii=0.25))
 
     def _log_f(self, frame: Frame, box: Box) -> None:
-        rr, st, s, p = self.rr, self.stream, self.config.space, frame.points
+        rr, st, s, p = self.rr, self._recording, self.config.space, frame.points
         if self.truth is not None:
             grid = np.linspace(s.x_min, s.x_max, self.truth.size)
             st.log("f/truth", rr.LineStrips2D([box(grid, self.truth)], colors=[(40, 40, 40)], radii=0.4))
@@ -280,7 +293,7 @@ class RerunView:
                                         labels=[f"x={s.x_min:g}, f={box.v0:.3g}", f"x={s.x_max:g}, f={box.v1:.3g}"]))
 
     def _log_noise(self, frame: Frame, box: Box) -> None:
-        rr, st, s, p = self.rr, self.stream, self.config.space, frame.points
+        rr, st, s, p = self.rr, self._recording, self.config.space, frame.points
         if self.noise_law is not None:
             grid = np.linspace(s.t_min, s.t_max, 200)
             st.log("noise/law", rr.LineStrips2D([box(grid, self.noise_law(grid))], colors=[(40, 40, 40)], radii=0.4))
@@ -292,6 +305,7 @@ class RerunView:
         if frame.noise is None:
             return
         self._log_curve("noise", box, frame.noise, (214, 39, 40), band=bool(np.any(frame.noise.sd > 0)))
+        assert frame.reward is not None  # drawn from the noise model, so there with it
         reward_box = Box((s.t_min, s.t_max), (0.0, 1.0))
         st.log("reward/curve", rr.LineStrips2D([reward_box(frame.reward.grid, frame.reward.mean)],
                                                colors=[(44, 160, 44)], radii=0.6))
@@ -301,7 +315,7 @@ class RerunView:
     def _log_spectrum(self, spectrum: np.ndarray, fit: dict | None) -> None:
         from noisebo.sho import sho_amplitude
 
-        rr, st = self.rr, self.stream
+        rr, st = self.rr, self._recording
         freq, amp = np.asarray(spectrum[0], dtype=np.float64), np.asarray(spectrum[1], dtype=np.float64)
         box = Box((freq[0], freq[-1]), (min(0.0, amp.min()), amp.max()))
         st.log("spectrum/data", rr.Points2D(box(freq, amp), radii=0.4, colors=[(120, 120, 120)]))
