@@ -6,8 +6,12 @@ from __future__ import annotations
 import datetime as dt
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from noisebo.storage.integrity import CampaignFileError
+
+if TYPE_CHECKING:
+    from noisebo.models.profile import NoiseProfile
 
 
 def noise_measurements(path: Path) -> dict:
@@ -37,7 +41,7 @@ def _same(campaigns: list[dict], what: str, describe) -> None:
                                     f"{describe(first)}: a profile describes one instrument with one setting")
 
 
-def make_profile(files: list[Path]) -> "NoiseProfile":  # noqa: F821 - imported below, late for a quick --help
+def make_profile(files: list[Path]) -> NoiseProfile:
     import numpy as np
 
     from noisebo.config import parse_config
