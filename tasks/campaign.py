@@ -16,10 +16,13 @@ asks for again with the same key, within the campaign's failure budget.
 
 from __future__ import annotations
 
+from typing import Any, Callable, TypedDict, cast
+
 import numpy as np
 from prefect import get_run_logger, task
-from prefect.cache_policies import NO_CACHE
+from prefect.cache_policies import NO_CACHE, CachePolicy
 from prefect.context import TaskRunContext
+from prefect.tasks import TaskRunNameCallbackWithParameters
 from prefect.utilities.annotations import quote
 
 from noisebo.acquisition.records import Decision
@@ -32,7 +35,21 @@ from noisebo.events import Request, Summary
 from noisebo.models.fitting import NoiseFit, PrimaryFit
 from noisebo.state import format_position
 
-STAGE = {"cache_policy": NO_CACHE, "persist_result": False}
+
+class StageOptions(TypedDict):
+    """The options every stage's task shares."""
+
+    cache_policy: CachePolicy
+    persist_result: bool
+
+
+STAGE: StageOptions = {"cache_policy": NO_CACHE, "persist_result": False}
+
+
+def _run_name(name: Callable[[dict[str, Any]], str]) -> TaskRunNameCallbackWithParameters:
+    """A task run's name from the task's parameters, as ``task_run_name`` takes it (the same
+    function: Prefect's protocol for it also asks for a classmethod that no function has)."""
+    return cast(TaskRunNameCallbackWithParameters, name)
 
 
 def _renamed(name: str) -> None:
@@ -56,7 +73,7 @@ def _seed_design_name(parameters: dict) -> str:
     return f"seed design: {config.schedule.n_seed} points ({config.schedule.seed_design})"
 
 
-@task(name="seed design", task_run_name=_seed_design_name, **STAGE)
+@task(name="seed design", task_run_name=_run_name(_seed_design_name), **STAGE)
 def seed_design(config: CampaignConfig, seed: int) -> np.ndarray:
     """The campaign's seed points (n_seed, d + 1): x, then t (s). Pure: the engine draws the same
     ones from (seed, SEED_POINTS) whenever it needs them."""
@@ -82,7 +99,7 @@ def measure_name(state: EngineState) -> str:
     return f"measure {where} ({why}{resumed})"
 
 
-@task(name="measure", task_run_name=lambda parameters: measure_name(parameters["state"]), **STAGE)
+@task(name="measure", task_run_name=_run_name(lambda parameters: measure_name(parameters["state"])), **STAGE)
 def measure(instrument, state: EngineState, committed: driver.Commit, reduce: bool = True) -> EngineState:
     """The shots of the point under way, each committed (journaled) as it is taken
     (``noisebo.campaign.driver.take_point``); with ``reduce`` False the point's reduction is
@@ -94,7 +111,7 @@ def _fit_sho_name(parameters: dict) -> str:
     return f"fit SHO: {len(parameters['readings'])} sweeps at x={format_position(parameters['x'])}"
 
 
-@task(name="fit SHO", task_run_name=_fit_sho_name, **STAGE)
+@task(name="fit SHO", task_run_name=_run_name(_fit_sho_name), **STAGE)
 def fit_sho(x, t, readings, model_noise, reduction, clip_sd):
     """A point from its sweeps: each fitted with the SHO model (``noisebo.reduction``), the
     point's value the mean of the ok shots' signed amplitudes, its noise their sd (or the noise
@@ -116,7 +133,8 @@ def reduce_point(x, t, readings, model_noise, reduction, clip_sd):
     return steps.make_point(x, t, readings, model_noise, reduction, clip_sd)
 
 
-@task(name="fit noise model", task_run_name=lambda parameters: f"fit noise model n={len(parameters['step'].points.points)}", **STAGE)
+@task(name="fit noise model",
+      task_run_name=_run_name(lambda parameters: f"fit noise model n={len(parameters['step'].points.points)}"), **STAGE)
 def fit_noise_model(step: StepInputs) -> NoiseFit:
     """The noise law (or field) on its training points (``noisebo.models.fitting.fit_noise_model``)."""
     noise = decision.noise_stage(step)
@@ -125,13 +143,14 @@ def fit_noise_model(step: StepInputs) -> NoiseFit:
     return noise
 
 
-@task(name="fit GP", task_run_name=lambda parameters: f"fit GP n={len(parameters['step'].points.points)}", **STAGE)
+@task(name="fit GP", task_run_name=_run_name(lambda parameters: f"fit GP n={len(parameters['step'].points.points)}"),
+      **STAGE)
 def fit_gp(step: StepInputs, noise: NoiseFit) -> PrimaryFit:
     """The primary GP of f on every point (``noisebo.models.fitting.fit_gp``)."""
     return decision.gp_stage(step, noise)
 
 
-@task(name="acquire", task_run_name=lambda parameters: f"acquire {_step_label(parameters['step'])}", **STAGE)
+@task(name="acquire", task_run_name=_run_name(lambda parameters: f"acquire {_step_label(parameters['step'])}"), **STAGE)
 def acquire(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision:
     """Predict over the grids, assess convergence, and the policy's proposal within the budget
     (``noisebo.campaign.decision.acquire_stage``)."""
@@ -143,7 +162,8 @@ def acquire(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision:
     return made
 
 
-@task(name="summarise", task_run_name=lambda parameters: f"summarise n={len(parameters['state'].points)}", **STAGE)
+@task(name="summarise", task_run_name=_run_name(lambda parameters: f"summarise n={len(parameters['state'].points)}"),
+      **STAGE)
 def summarise(config: CampaignConfig, state, seed: int) -> Summary:
     """Both models on every point, summarised (``noisebo.campaign.steps.summarize``)."""
     summary = steps.summarize(config, state, seed)
@@ -160,6 +180,7 @@ TASKS = Stages(
     fit_noise_model=_quoted(fit_noise_model),
     fit_gp=_quoted(fit_gp),
     acquire=_quoted(acquire),
-    summarise=lambda config, state, seed: summarise(quote(config), quote(state), seed),
+    # Prefect types a task's arguments as its function's, not as the quote() it documents for them
+    summarise=lambda config, state, seed: summarise(quote(config), quote(state), seed),  # type: ignore[call-overload]
 )
 """The stages as Prefect tasks, for ``engine.advance(state, TASKS)``."""
