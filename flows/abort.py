@@ -34,7 +34,7 @@ class AbortFlag:
     """Set by the first SIGINT/SIGTERM while ``installed``; campaigns read it between points
     through ``requested()``."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.signal_name: str | None = None
 
     def requested(self) -> str | None:

@@ -94,15 +94,17 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
     if report is not None:
         report.start(state)
     if len(state.points) < state.config.schedule.n_seed:
-        ops.seed_design(quote(state.config), state.seed)
+        # Prefect types a task's arguments as its function's, not as the quote() it documents for them
+        ops.seed_design(quote(state.config), state.seed)  # type: ignore[call-overload]
     final = drive(state, instrument, commit, measure, decide, stop_requested)
     observe(final)
     if report is not None:
         report.finish(final)
     if final.status is Status.FAILED:
         raise FailureBudgetExceeded(final.reason)
-    if final.status is Status.ABORTED and abort.requested() is not None:
-        raise abort.CampaignAborted(abort.requested(), recorder.h5_path)
+    signal_name = abort.requested()
+    if final.status is Status.ABORTED and signal_name is not None:
+        raise abort.CampaignAborted(signal_name, recorder.h5_path)
     return recorder.h5_path
 
 

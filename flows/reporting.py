@@ -21,12 +21,15 @@ import re
 import sys
 import time
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence, cast
 
 from noisebo.campaign.engine import EngineState
 from noisebo.events import Event, ShotFailed, Status, StatusChanged
 from noisebo.state import format_position
 from noisebo.storage.steps import shown as shown_step
+
+if TYPE_CHECKING:
+    from uuid import UUID
 
 PROGRESS_INTERVAL_S = 1.0
 EVENT_PREFIX = "noisebo.campaign"
@@ -126,7 +129,7 @@ def status_event(state: EngineState, path: str | Path, flow_run: dict | None = N
     name = run_name_of(state)
     n_shots, seconds = shots_and_time(state)
     t_opt = predicted_t_opt(state)
-    event = {
+    event: dict[str, Any] = {
         "event": f"{EVENT_PREFIX}.{state.status.value}",
         "resource": {"prefect.resource.id": f"{EVENT_PREFIX}.{name}", "prefect.resource.name": name,
                      "noisebo.config": state.config.name, "noisebo.policy": state.config.acquisition.policy,
@@ -196,9 +199,9 @@ class RunReport:
         self.name = run_name_of(state, resumed)
         self.on = enabled()
         self.failed: set[str] = set()
-        self.progress_id = None
+        self.progress_id: UUID | None = None
         self.last_progress = -float("inf")
-        self.logger = None
+        self.logger: logging.LoggerAdapter | None = None
         self.flow_run: dict | None = None
 
     def _safely(self, what: str, send: Callable[[], object]) -> object:
@@ -225,7 +228,10 @@ class RunReport:
         from prefect.client.orchestration import get_client
         from prefect.context import FlowRunContext
 
-        flow_run = FlowRunContext.get().flow_run
+        context = FlowRunContext.get()
+        flow_run = context.flow_run if context is not None else None
+        if flow_run is None:  # enabled() found one: reports are off outside a flow run
+            raise RuntimeError("not inside a Prefect flow run")
         tags = list(dict.fromkeys([*(flow_run.tags or []), *run_tags(state, self.resumed)]))
         with get_client(sync_client=True) as client:
             client.update_flow_run(flow_run.id, name=self.name, tags=tags)
@@ -235,20 +241,32 @@ class RunReport:
     def _logger(self) -> None:
         from prefect.logging.loggers import PrefectLogAdapter, get_run_logger
 
-        extra = dict(get_run_logger().extra)
+        run_logger = get_run_logger()
+        if not isinstance(run_logger, logging.LoggerAdapter) or run_logger.extra is None:
+            raise RuntimeError("Prefect's run logger names no flow run")
+        extra = dict(run_logger.extra)
         extra["flow_run_name"] = self.name
         self.logger = PrefectLogAdapter(_run_logger(), extra=extra)
 
     def _create_progress(self, state: EngineState) -> None:
         from prefect.artifacts import create_progress_artifact
 
-        self.progress_id = create_progress_artifact(progress_percent(state), key=artifact_key(self.name, "progress"),
-                                                    description=f"points of {self.name} measured")
+        # called from sync code, Prefect's dispatcher returns the id itself rather than a coroutine
+        self.progress_id = cast("UUID", create_progress_artifact(progress_percent(state),
+                                                                 key=artifact_key(self.name, "progress"),
+                                                                 description=f"points of {self.name} measured"))
         self.last_progress = self.clock()
 
     def log(self, records: Sequence[tuple[int, str]]) -> None:
-        if self.logger is not None and records:
-            self._safely("log", lambda: [self.logger.log(level, line) for level, line in records])
+        logger = self.logger
+        if logger is None or not records:
+            return
+
+        def send() -> None:
+            for level, line in records:
+                logger.log(level, line)
+
+        self._safely("log", send)
 
     def committed(self, old: EngineState, new: EngineState, events: Sequence[Event], lines: Sequence[str]) -> None:
         """After ``events`` took the campaign from ``old`` to ``new``: their log lines, the progress
@@ -262,12 +280,13 @@ class RunReport:
             self.emit(new)
 
     def update_progress(self, state: EngineState) -> None:
-        if self.progress_id is None:
+        progress_id = self.progress_id
+        if progress_id is None:
             return
         from prefect.artifacts import update_progress_artifact
 
         self.last_progress = self.clock()
-        self._safely("progress artifact", lambda: update_progress_artifact(self.progress_id, progress_percent(state)))
+        self._safely("progress artifact", lambda: update_progress_artifact(progress_id, progress_percent(state)))
 
     def emit(self, state: EngineState) -> None:
         from prefect.events import emit_event

@@ -8,7 +8,7 @@ an interrupted one is resumed, a missing one is started.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal, cast
 
 import httpx
 from prefect import flow, task
@@ -20,6 +20,9 @@ from noisebo.flows.campaign import campaign, campaign_path, resolve_config, resu
 from noisebo.flows.reporting import report_sweep
 from noisebo.config import CampaignConfig
 from noisebo.view.report import write_summary
+
+if TYPE_CHECKING:
+    from prefect.client.schemas.objects import FlowRun
 
 
 def _orchestration_failed(task, task_run, state) -> bool:
@@ -61,14 +64,19 @@ def campaign_on_workers(deployment: str, config: CampaignConfig, seed: int, out_
     policy = config.acquisition.policy
     # One flow run per campaign even when a loaded server makes the client repeat its request.
     key = f"{flow_run.id}:{deployment}:{policy}:{seed}"
-    run = run_deployment(deployment, parameters={"seed": seed, "policy": policy, "out_dir": out_dir,
-                                                 "per_run_dir": False}, timeout=None, idempotency_key=key)
-    if not run.state.is_completed():
-        raise RuntimeError(f"{deployment} seed {seed} ({policy}) ended {run.state.name}: {run.state.message}")
+    # called from sync code, Prefect's dispatcher returns the flow run itself rather than a coroutine
+    parameters = {"seed": seed, "policy": policy, "out_dir": out_dir, "per_run_dir": False}
+    run = cast("FlowRun", run_deployment(deployment, parameters=parameters, timeout=None, idempotency_key=key))
+    state = run.state
+    if state is None or not state.is_completed():
+        ended = f"{state.name}: {state.message}" if state is not None else "with no state"
+        raise RuntimeError(f"{deployment} seed {seed} ({policy}) ended {ended}")
     return str(campaign_path(config, seed, out_dir))
 
 
-@flow(name="sweep", task_runner=ThreadPoolTaskRunner(max_workers=2))
+# Prefect types task_runner as TaskRunner[PrefectFuture[Any]], invariant in the future type, which no
+# ThreadPoolTaskRunner (TaskRunner[PrefectConcurrentFuture]) matches; Prefect's own examples pass one.
+@flow(name="sweep", task_runner=ThreadPoolTaskRunner(max_workers=2))  # type: ignore[arg-type]
 def sweep(
     config: str | CampaignConfig = "data/configs/forrester.yaml",
     seeds: list[int] = [0, 1, 2, 3],  # noqa: B006 - Prefect parameters are validated copies
@@ -102,7 +110,8 @@ def sweep(
         futures = [campaign_on_workers.submit(deployment, cfg, seed, out_dir) for cfg, seed in configs]
     else:
         futures = [sweep_campaign.submit(cfg, seed, out_dir) for cfg, seed in configs]
-    paths, failures = [], []
+    paths: list[str] = []
+    failures: list[str] = []
     for future in futures:
         outcome = future.result(raise_on_failure=False)
         if isinstance(outcome, BaseException):

@@ -51,7 +51,7 @@ class GuardedServer(SubprocessASGIServer):
         mode = "pdeathsig" if threading.current_thread() is threading.main_thread() else "watch"
         process = subprocess.Popen([sys.executable, "-P", str(GUARD), str(os.getpid()), mode, str(self.port)],
                                    env=server_environment())
-        self._record = record_server(prefect_home(), process.pid)
+        self._record: Path | None = record_server(prefect_home(), process.pid)
         return process
 
     def stop(self) -> None:

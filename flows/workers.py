@@ -3,11 +3,15 @@
 them (``noisebo deploy`` and ``noisebo sweep --runner workers``)."""
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 from prefect import flow
 
 from noisebo.config import load_config
 from noisebo.flows.runtime import PROJECT_ROOT
+
+if TYPE_CHECKING:
+    from prefect import Flow
 
 
 def ensure_process_pool(pool: str) -> None:
@@ -30,7 +34,8 @@ def deploy_campaign(config_path: str | Path, pool: str, out_dir: str | Path) -> 
     config_path = str(Path(config_path).resolve())
     name = load_config(config_path).name
     ensure_process_pool(pool)
-    source = flow.from_source(source=str(PROJECT_ROOT), entrypoint="flows/campaign.py:campaign")
+    # called from sync code, Prefect's dispatcher returns the flow itself rather than a coroutine
+    source = cast("Flow[..., Any]", flow.from_source(source=str(PROJECT_ROOT), entrypoint="flows/campaign.py:campaign"))
     source.deploy(
         name=name, work_pool_name=pool, build=False, push=False, print_next_steps=False,
         parameters={"config": config_path, "out_dir": str(Path(out_dir).resolve()), "show_progress": False,
