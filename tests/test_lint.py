@@ -1,9 +1,14 @@
-"""The lint rules of pyproject.toml ([tool.ruff.lint]) hold for the whole repository and the core
-package type-checks ([tool.mypy]), and a breach of each is caught: CI runs them through this test."""
+"""The lint rules of pyproject.toml ([tool.ruff.lint]) hold for the whole repository, the core
+package type-checks ([tool.mypy]) and so does the whole installed package (the adapters mapped into
+the namespace with it), and a breach of each is caught: CI runs them through this test."""
 
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
+
+from installed_layout import assemble
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,3 +49,33 @@ def test_a_type_error_in_the_core_is_caught(tmp_path):
     (tmp_path / "noisebo" / "wrong.py").write_text("def half(x: float) -> float:\n    return x / 2\n\n\nhalf('one')\n")
     out = mypy(cwd=tmp_path, cache=tmp_path / "cache")
     assert out.returncode == 1 and 'Argument 1 to "half" has incompatible type "str"' in out.stdout
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory) -> tuple[Path, Path]:
+    """The package as a wheel lays it out, beside a copy of pyproject.toml (its [tool.mypy]
+    ``files`` names the core; ``-p noisebo`` on the command line takes its place), and a mypy
+    cache the tests share."""
+    where = tmp_path_factory.mktemp("installed")
+    site = assemble(where / "site")
+    (site / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text())
+    return site, where / "cache"
+
+
+def test_the_installed_package_type_checks(installed):
+    site, cache = installed
+    out = mypy("-p", "noisebo", cwd=site, cache=cache)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.startswith("Success: no issues found")
+
+
+def test_a_type_error_in_an_adapter_is_caught(installed):
+    site, cache = installed
+    wrong = site / "noisebo" / "view" / "wrong.py"
+    wrong.write_text("def half(x: float) -> float:\n    return x / 2\n\n\nhalf('one')\n")
+    try:
+        out = mypy("-p", "noisebo", cwd=site, cache=cache)
+    finally:
+        wrong.unlink()
+    assert out.returncode == 1
+    assert 'noisebo/view/wrong.py:5: error: Argument 1 to "half" has incompatible type "str"' in out.stdout
