@@ -44,7 +44,9 @@ def refuse(parser: argparse.ArgumentParser, message) -> NoReturn:
     parser.exit(EXIT_USAGE, f"{parser.prog}: error: {message}\n")
 
 
-def validated_config(path: str | Path, edit: Callable[[CampaignConfig], CampaignConfig] | None = None) -> CampaignConfig:
+def validated_config(
+    path: str | Path, edit: Callable[[CampaignConfig], CampaignConfig] | None = None
+) -> CampaignConfig:
     """The config at ``path`` with ``edit`` applied, validated as ``noisebo run`` validates a file
     (``cli/main.py: _validated``, ``flows/campaign.py: resolve_config``); ``ConfigError`` (its
     message the CLI's, the file named first) otherwise."""
@@ -54,9 +56,12 @@ def validated_config(path: str | Path, edit: Callable[[CampaignConfig], Campaign
     return validated(config, str(path))
 
 
-def benchmark_config(parser: argparse.ArgumentParser, path: str | Path,
-                     edit: Callable[[CampaignConfig], CampaignConfig] | None = None,
-                     simulator: bool = True):
+def benchmark_config(
+    parser: argparse.ArgumentParser,
+    path: str | Path,
+    edit: Callable[[CampaignConfig], CampaignConfig] | None = None,
+    simulator: bool = True,
+):
     """(config, instrument) for a benchmark: ``validated_config`` and the instrument built from
     it, before anything runs; any problem (a bad file or override, settings the driver refuses, a
     space outside the scan, a scan that cannot be read, no simulator where one is needed) is one
@@ -72,6 +77,9 @@ def benchmark_config(parser: argparse.ArgumentParser, path: str | Path,
     except (ConfigError, ValueError, OSError) as error:  # e.g. the driver cannot read its scan
         refuse(parser, f"{path}: {type(error).__name__}: {error}; nothing was measured")
     if simulator and not simulates(instrument):
-        refuse(parser, f"{path}: instrument.kind {config.instrument.kind} is not a simulator: a benchmark needs "
-                       "one (it scores against its truth)")
+        refuse(
+            parser,
+            f"{path}: instrument.kind {config.instrument.kind} is not a simulator: a benchmark needs "
+            "one (it scores against its truth)",
+        )
     return config, instrument

@@ -172,8 +172,9 @@ class _Campaign:
             while len(readings) < wanted:
                 for _ in range(MAX_ATTEMPTS):
                     self.spent += t
-                    outcome = take_shot(self.instrument, self.seed,
-                                        Request(point, -1, x, float(t), wanted, len(readings), None))
+                    outcome = take_shot(
+                        self.instrument, self.seed, Request(point, -1, x, float(t), wanted, len(readings), None)
+                    )
                     if not isinstance(outcome, ShotError):
                         readings.append(outcome)
                         break
@@ -243,8 +244,15 @@ def run_gpcam(config, instrument, seed: int, score, t_star: float) -> dict:
             t_cap = s.t_max if full else min(s.t_max, (campaign.left() - overhead) / shots)
             bounds = np.column_stack([np.r_[lows, u_min], np.r_[highs, np.log(max(t_cap, cheapest))]])
             tick = time.perf_counter()
-            asked = np.asarray(gpo.ask(bounds, acquisition_function=ACQUISITION, position=position,
-                                       pop_size=ASK_POP_SIZE, max_iter=ASK_MAX_ITER)["x"]).reshape(-1)
+            asked = np.asarray(
+                gpo.ask(
+                    bounds,
+                    acquisition_function=ACQUISITION,
+                    position=position,
+                    pop_size=ASK_POP_SIZE,
+                    max_iter=ASK_MAX_ITER,
+                )["x"]
+            ).reshape(-1)
             x_new, t_new = snapped(asked[:d], float(np.exp(asked[d])), t_cap)
             if full:  # the budget is spent: this ask only says which t gpCAM would measure at next
                 t_opt = t_new
@@ -262,9 +270,17 @@ def run_gpcam(config, instrument, seed: int, score, t_star: float) -> dict:
             point_t.append(float(t_new))
             times.append(campaign.spent)
             errors.append(float(score(np.asarray(gpo.posterior_mean(eval_at)["m(x)"]).reshape(-1))))
-    return {"seed": seed, "times_s": [float(v) for v in times], "rmse": [float(v) for v in errors],
-            "points": campaign.n_points, "status": "budget_spent", "spent_s": float(campaign.spent),
-            "t_opt": t_opt, "t_rel_error": relative_error(t_opt, t_star) if np.isfinite(t_opt) else float("nan"),
-            "shots": point_shots, "t": point_t,
-            "latency_s": float(np.median(latencies)) if latencies else float("nan"),
-            "wall_s": time.perf_counter() - started}
+    return {
+        "seed": seed,
+        "times_s": [float(v) for v in times],
+        "rmse": [float(v) for v in errors],
+        "points": campaign.n_points,
+        "status": "budget_spent",
+        "spent_s": float(campaign.spent),
+        "t_opt": t_opt,
+        "t_rel_error": relative_error(t_opt, t_star) if np.isfinite(t_opt) else float("nan"),
+        "shots": point_shots,
+        "t": point_t,
+        "latency_s": float(np.median(latencies)) if latencies else float("nan"),
+        "wall_s": time.perf_counter() - started,
+    }

@@ -77,5 +77,7 @@ def describe(stars: dict[str, float], against: str) -> str:
     """One line naming both t* and which one the t errors that follow compare against."""
     parts = [f"{name} = {value:.4f} s ({DEFINITIONS[name]})" for name, value in stars.items()]
     if X_AVG in stars and not differ(stars):
-        parts = [f"{LAW} = {X_AVG} = {stars[LAW]:.4f} s (the two definitions coincide here: {DEFINITIONS[LAW]}, and {DEFINITIONS[X_AVG]})"]
+        parts = [
+            f"{LAW} = {X_AVG} = {stars[LAW]:.4f} s (the two definitions coincide here: {DEFINITIONS[LAW]}, and {DEFINITIONS[X_AVG]})"
+        ]
     return "; ".join(parts) + f"; t errors below compare against {against}"

@@ -69,10 +69,12 @@ class Replay:
 def config_for(kind: str, shots: int, remote: bool):
     base = "pfm.yaml" if kind == "spectrum" else "forrester.yaml"
     config = validated(load_config(ROOT / "data/configs" / base)).with_overrides(
-        schedule={"n_seed": 1, "n_steps": 0, "shots_before": shots}, space={"n_x": 40, "n_t": 30})
+        schedule={"n_seed": 1, "n_steps": 0, "shots_before": shots}, space={"n_x": 40, "n_t": 30}
+    )
     if remote:
-        config = validated(config.with_overrides(instrument={"kind": "remote", "settings": {
-            "port": 0, "shape": {"reading": kind}}}))
+        config = validated(
+            config.with_overrides(instrument={"kind": "remote", "settings": {"port": 0, "shape": {"reading": kind}}})
+        )
     return config
 
 
@@ -81,6 +83,7 @@ def shot_intervals(config, instrument, path: Path, client=None) -> np.ndarray:
     stamps: list[float] = []
     info = driver_info(config.instrument) if client is not None else DriverInfo("replay", "1", {})
     with Recorder.create(path, new_campaign(config, 0, info, {}, now_utc())) as recorder:
+
         def commit(state, events):
             new = recorder.commit(state, events)
             if any(isinstance(e, ShotTaken) for e in events):
@@ -103,9 +106,13 @@ def measure(kind: str, shots: int, workdir: Path) -> tuple[float, float]:
     instrument = build(remote_config.instrument)
     instrument.open()
     try:
+
         def client():
-            subprocess.run([sys.executable, __file__, "--client", instrument.url, str(items)], check=True,
-                           env={**os.environ, "NOISEBO_BRIDGE_TOKEN": TOKEN})
+            subprocess.run(
+                [sys.executable, __file__, "--client", instrument.url, str(items)],
+                check=True,
+                env={**os.environ, "NOISEBO_BRIDGE_TOKEN": TOKEN},
+            )
 
         remote = shot_intervals(remote_config, instrument, workdir / f"{kind}_remote.h5", client)
     finally:
@@ -140,8 +147,11 @@ def main(argv=None) -> int:
             local, remote = measure(kind, args.shots, Path(tmp))
             overhead = (remote - local) * 1e3
             label = "0.5-s PFM sweep" if kind == "spectrum" else kind
-            print(f"{label:<16} {local * 1e3:>11.2f} {remote * 1e3:>9.2f} {overhead:>9.2f} {target:>7.0f}"
-                  f"  {'ok' if overhead <= target else 'OVER'}", flush=True)
+            print(
+                f"{label:<16} {local * 1e3:>11.2f} {remote * 1e3:>9.2f} {overhead:>9.2f} {target:>7.0f}"
+                f"  {'ok' if overhead <= target else 'OVER'}",
+                flush=True,
+            )
     return 0
 
 

@@ -85,8 +85,17 @@ INFO_RATE = "info_rate"
 COLD, WARM, GPCAM, BUDGET_RATE = "budget cold", "budget warm", "gpcam", "budget info_rate"
 PROFILE_SEEDS = (1000, 1001, 1002)  # the warm design's profile campaigns: none of the benchmark's seeds
 # What --help lists: a fixed design's name depends on the config (its t range and t*).
-DESIGNS = (*paper_policies(), FIXED_PREFIX + "<t>", FIXED_PREFIX + "<t*>" + STAR_TAG, FIXED, INFO_RATE, COLD,
-           BUDGET_RATE, WARM, GPCAM)
+DESIGNS = (
+    *paper_policies(),
+    FIXED_PREFIX + "<t>",
+    FIXED_PREFIX + "<t*>" + STAR_TAG,
+    FIXED,
+    INFO_RATE,
+    COLD,
+    BUDGET_RATE,
+    WARM,
+    GPCAM,
+)
 RENAMED = {"info rate": INFO_RATE}  # a JSON written before the names were one spelling
 BEST_FIXED = "best fixed t (in hindsight)"
 
@@ -157,8 +166,10 @@ def design_config(base, name: str, fixed: dict[str, float], profile=None):
     if name == BUDGET_RATE:
         return base.with_overrides(schedule={"mode": "budget"}, acquisition={"policy": INFO_RATE})
     if name == WARM:
-        return base.with_overrides(schedule={"mode": "budget"}, noise_model={
-            "profile": profile.model_dump(mode="json"), "profile_check": describes(profile, base)})
+        return base.with_overrides(
+            schedule={"mode": "budget"},
+            noise_model={"profile": profile.model_dump(mode="json"), "profile_check": describes(profile, base)},
+        )
     if name in paper_policies():
         return base.with_overrides(acquisition={"policy": name})
     if name == GPCAM:
@@ -167,8 +178,10 @@ def design_config(base, name: str, fixed: dict[str, float], profile=None):
         return base.with_overrides(acquisition={"policy": INFO_RATE})
     t = fixed[name]  # nominal: the campaign takes the t grid's nearest entry
     after = base.schedule.shots_after  # no t to learn: every point gets the few shots a converged campaign takes
-    return base.with_overrides(acquisition={"policy": "reward", "fixed_t": float(t)},
-                               schedule={"shots_before": max(after, 2), "shots_after": after})
+    return base.with_overrides(
+        acquisition={"policy": "reward", "fixed_t": float(t)},
+        schedule={"shots_before": max(after, 2), "shots_after": after},
+    )
 
 
 def describes(profile, base) -> bool:
@@ -211,16 +224,20 @@ def warm_profile(args, base):
 
     if args.profile is not None:
         profile = NoiseProfile.model_validate(read_profile(args.profile, "--profile"))
-        return profile, (f"profile {args.profile} ({len(profile.campaigns)} campaigns of {profile.driver.name}"
-                         f"{'' if describes(profile, base) else '; other driver or settings, used with profile_check: false'})")
+        return profile, (
+            f"profile {args.profile} ({len(profile.campaigns)} campaigns of {profile.driver.name}"
+            f"{'' if describes(profile, base) else '; other driver or settings, used with profile_check: false'})"
+        )
     folder = (args.json.parent / f"{args.json.stem}_profile") if args.json else Path("budget_profile")
     folder.mkdir(parents=True, exist_ok=True)
     profile = made_profile(base, folder)
     (folder / "profile.yaml").write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
     law = ", ".join(f"{k} = {p.mean:.4g} ± {p.sd:.2g}" for k, p in profile.parameters.items())
-    return profile, (f"profile made here from 3 paper-protocol campaigns (15 steps) of {base.name} with the same "
-                     f"instrument and settings, seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}: {law} "
-                     f"({folder / 'profile.yaml'})")
+    return profile, (
+        f"profile made here from 3 paper-protocol campaigns (15 steps) of {base.name} with the same "
+        f"instrument and settings, seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}: {law} "
+        f"({folder / 'profile.yaml'})"
+    )
 
 
 def scorer(config, instrument):
@@ -247,13 +264,20 @@ def run_one(config, instrument, seed: int, score, t_star: float) -> dict:
     times = list(spent_at) + [final.spent_s]
     summary = final.summary
     errors = [score(d.f_mean) for d in final.decisions] + [score(summary.f_mean) if summary else float("nan")]
-    return {"seed": seed, "times_s": [float(v) for v in times], "rmse": [float(v) for v in errors],
-            "points": len(final.points), "status": final.status.value, "spent_s": float(final.spent_s),
-            "t_opt": float(summary.t_opt) if summary else float("nan"),
-            "t_rel_error": relative_error(summary.t_opt, t_star) if summary else float("nan"),
-            "shots": [int(d.shots) for d in final.decisions], "t": [float(d.t) for d in final.decisions],
-            "latency_s": float(np.median(result.latencies_s[1:])) if len(result.latencies_s) > 1 else float("nan"),
-            "wall_s": time.perf_counter() - started}
+    return {
+        "seed": seed,
+        "times_s": [float(v) for v in times],
+        "rmse": [float(v) for v in errors],
+        "points": len(final.points),
+        "status": final.status.value,
+        "spent_s": float(final.spent_s),
+        "t_opt": float(summary.t_opt) if summary else float("nan"),
+        "t_rel_error": relative_error(summary.t_opt, t_star) if summary else float("nan"),
+        "shots": [int(d.shots) for d in final.decisions],
+        "t": [float(d.t) for d in final.decisions],
+        "latency_s": float(np.median(result.latencies_s[1:])) if len(result.latencies_s) > 1 else float("nan"),
+        "wall_s": time.perf_counter() - started,
+    }
 
 
 def rmse_at(record: dict, budget: float) -> float:
@@ -279,8 +303,11 @@ def quartiles(values) -> tuple[float, float, float]:
 def best_in_hindsight(records: dict, at) -> list[tuple[float, str] | None]:
     """At each time in ``at``: (the lowest median RMSE over the fixed designs in ``records``, that
     design's name), None where no fixed design has a median (half its seeds with a model)."""
-    medians = {name: [quartiles([rmse_at(r, b) for r in recs])[0] for b in at]
-               for name, recs in records.items() if is_fixed(name) and recs}
+    medians = {
+        name: [quartiles([rmse_at(r, b) for r in recs])[0] for b in at]
+        for name, recs in records.items()
+        if is_fixed(name) and recs
+    }
     out = []
     for i in range(len(at)):
         finite = [(m[i], name) for name, m in medians.items() if np.isfinite(m[i])]
@@ -304,7 +331,7 @@ def figure(records: dict, budget: float, path: Path, title: str) -> None:
         if not ok.any():
             continue
         style = {"ls": ":", "lw": 1.2} if is_fixed(name) else {"ls": "-", "lw": 1.8}  # fixed designs dotted
-        line, = ax.plot(grid[ok], mid[ok], label=name, color=palette[(2 * k) % 20 + (2 * k // 20) % 2], **style)
+        (line,) = ax.plot(grid[ok], mid[ok], label=name, color=palette[(2 * k) % 20 + (2 * k // 20) % 2], **style)
         ax.fill_between(grid[ok], lo[ok], np.where(np.isfinite(hi), hi, np.nan)[ok], color=line.get_color(), alpha=0.15)
     best = best_in_hindsight(records, grid)
     if sum(is_fixed(n) for n in records) > 1 and any(b is not None for b in best):
@@ -321,26 +348,42 @@ def main(argv=None) -> int:
     parser.add_argument("--overhead", type=float, default=0.0)
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
-    parser.add_argument("--designs", type=design_names, default=None, metavar="NAME[,NAME...]",
-                        help="comma-separated designs, quoted where a name has a space (default: all): "
-                             f"{', '.join(DESIGNS)}. <t>: five log-spaced t (s) across [t_min, t_max], <t*>: "
-                             "t*(law), in s to 4 significant digits, e.g. for [0.2, 10] s 'fixed t=0.2', "
-                             "'fixed t=0.5318', 'fixed t=1.414', 'fixed t=3.761', 'fixed t=10', "
-                             "'fixed t=2.512 (t*)'; 'fixed': all six. An unknown name is refused "
-                             "naming the config's designs")
+    parser.add_argument(
+        "--designs",
+        type=design_names,
+        default=None,
+        metavar="NAME[,NAME...]",
+        help="comma-separated designs, quoted where a name has a space (default: all): "
+        f"{', '.join(DESIGNS)}. <t>: five log-spaced t (s) across [t_min, t_max], <t*>: "
+        "t*(law), in s to 4 significant digits, e.g. for [0.2, 10] s 'fixed t=0.2', "
+        "'fixed t=0.5318', 'fixed t=1.414', 'fixed t=3.761', 'fixed t=10', "
+        "'fixed t=2.512 (t*)'; 'fixed': all six. An unknown name is refused "
+        "naming the config's designs",
+    )
     parser.add_argument("--at", default="100,200,300,500,860", help="times (s) to report the RMSE at")
     parser.add_argument("--target", type=float, default=0.46)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--figure", type=Path, default=None)
-    parser.add_argument("--profile", type=Path, default=None, metavar="PROFILE.yaml",
-                        help="the warm design's noise profile (default: made here from 3 paper-protocol campaigns, "
-                             f"seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}, kept beside --json)")
-    parser.add_argument("--report", action="store_true",
-                        help="measure nothing: report every seed --json holds for each design")
+    parser.add_argument(
+        "--profile",
+        type=Path,
+        default=None,
+        metavar="PROFILE.yaml",
+        help="the warm design's noise profile (default: made here from 3 paper-protocol campaigns, "
+        f"seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}, kept beside --json)",
+    )
+    parser.add_argument(
+        "--report", action="store_true", help="measure nothing: report every seed --json holds for each design"
+    )
     args = parser.parse_args(argv)
 
-    base, instrument = benchmark_config(parser, args.config, lambda c: c.with_overrides(
-        schedule={"budget_s": args.budget, "point_overhead_s": args.overhead, "n_steps": NO_STEP_LIMIT}))
+    base, instrument = benchmark_config(
+        parser,
+        args.config,
+        lambda c: c.with_overrides(
+            schedule={"budget_s": args.budget, "point_overhead_s": args.overhead, "n_steps": NO_STEP_LIMIT}
+        ),
+    )
     stars = t_stars(base, instrument)
     t_star = stars[LAW]
     both = differ(stars)
@@ -350,8 +393,10 @@ def main(argv=None) -> int:
     known = [*paper_policies(), *fixed, INFO_RATE, COLD, BUDGET_RATE, WARM, GPCAM]
     names, unknown = resolve(args.designs or known, known)
     if unknown:
-        parser.error(f"argument --designs: unknown design {', '.join(repr(n) for n in unknown)}; "
-                     f"known: {', '.join([*known, FIXED])}")
+        parser.error(
+            f"argument --designs: unknown design {', '.join(repr(n) for n in unknown)}; "
+            f"known: {', '.join([*known, FIXED])}"
+        )
     at = [float(v) for v in args.at.split(",") if v.strip()] + [args.budget]
     records: dict[str, list] = {}
     done = json.loads(args.json.read_text()) if args.json and args.json.exists() else {}
@@ -362,12 +407,16 @@ def main(argv=None) -> int:
         if args.report and args.designs is None:  # everything it holds, under names of another config too
             names += [k for k in done["records"] if k not in names]
     on_grid = {name: grid_t(base, t) for name, t in fixed.items()}
-    snapped = [f"{name} at t = {on_grid[name]:.4g} s" for name in names
-               if name in fixed and abs(on_grid[name] / fixed[name] - 1.0) > 1e-9]
+    snapped = [
+        f"{name} at t = {on_grid[name]:.4g} s"
+        for name in names
+        if name in fixed and abs(on_grid[name] / fixed[name] - 1.0) > 1e-9
+    ]
     wanted = list(range(args.first_seed, args.first_seed + args.seeds))
     notes = []
     if GPCAM in names and not args.report:
         from _gpcam import available, run_gpcam
+
         missing_peer = available()
         if missing_peer is not None:
             names.remove(GPCAM)
@@ -390,37 +439,59 @@ def main(argv=None) -> int:
             run = run_gpcam if name == GPCAM else run_one
             rec = run(config, instrument, seed, score, t_star)
             kept[seed] = rec
-            print(f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
-                  f"{rec['rmse'][-1]:.3f}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, "
-                  f"wall {rec['wall_s']:.0f} s", file=sys.stderr, flush=True)
+            print(
+                f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
+                f"{rec['rmse'][-1]:.3f}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, "
+                f"wall {rec['wall_s']:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
             if args.json:  # after every seed: a long run interrupted keeps what it measured
                 done.setdefault("records", {})[name] = sorted(
                     {**{r["seed"]: r for r in done.get("records", {}).get(name, [])}, **kept}.values(),
-                    key=lambda r: r["seed"])
+                    key=lambda r: r["seed"],
+                )
                 args.json.parent.mkdir(parents=True, exist_ok=True)
-                args.json.write_text(json.dumps({"config": base.model_dump(mode="json"), "t_star": t_star,
-                                                 "t_star_definition": LAW, "t_stars": stars,
-                                                 "fixed_t": {n: {"nominal_s": t, "grid_s": on_grid[n]}
-                                                             for n, t in fixed.items()},
-                                                 "records": done["records"]}, default=float))
+                args.json.write_text(
+                    json.dumps(
+                        {
+                            "config": base.model_dump(mode="json"),
+                            "t_star": t_star,
+                            "t_star_definition": LAW,
+                            "t_stars": stars,
+                            "fixed_t": {n: {"nominal_s": t, "grid_s": on_grid[n]} for n, t in fixed.items()},
+                            "records": done["records"],
+                        },
+                        default=float,
+                    )
+                )
         records[name] = [kept[seed] for seed in wanted]
     counts = sorted({len(r) for r in records.values() if r}) or [0]
-    print(f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, "
-          f"{'/'.join(str(c) for c in counts)} seeds per design; "
-          f"{describe(stars, LAW + (f' and {X_AVG}' if both else ''))}")
+    print(
+        f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, "
+        f"{'/'.join(str(c) for c in counts)} seeds per design; "
+        f"{describe(stars, LAW + (f' and {X_AVG}' if both else ''))}"
+    )
     for note in notes:
         print(note)
     missing = [n for n, r in records.items() if not r]
     if missing and args.report:
         print(f"Not in {args.json}: {', '.join(missing)}")
     if snapped:
-        print(f"A fixed design measures at the nearest of the config's {s.n_t} grid t in [{s.t_min:g}, {s.t_max:g}] s: "
-              + "; ".join(snapped))
+        print(
+            f"A fixed design measures at the nearest of the config's {s.n_t} grid t in [{s.t_min:g}, {s.t_max:g}] s: "
+            + "; ".join(snapped)
+        )
     print()
     print("RMSE of f once this much instrument time is spent, median [IQR] over seeds:\n")
     against = [LAW, X_AVG] if both else [LAW]
-    print("| design | " + " | ".join(f"{v:g} s" for v in at) + f" | time to RMSE {args.target:g} (s) | points | "
-          + " | ".join(f"final t within 5 % of {name} | final t error vs {name}" for name in against) + " |")
+    print(
+        "| design | "
+        + " | ".join(f"{v:g} s" for v in at)
+        + f" | time to RMSE {args.target:g} (s) | points | "
+        + " | ".join(f"final t within 5 % of {name} | final t error vs {name}" for name in against)
+        + " |"
+    )
     print("|---" * (len(at) + 3 + 2 * len(against)) + "|")
     for name, recs in records.items():
         if not recs:
@@ -429,8 +500,12 @@ def main(argv=None) -> int:
         for b in at:
             values = [rmse_at(r, b) for r in recs]
             m, lo, hi = quartiles(values)
-            cells.append("-" if not np.isfinite(m) else f"{m:.3f} [{lo:.3f}, {'-' if not np.isfinite(hi) else f'{hi:.3f}'}]"
-                         + ("" if all(np.isfinite(values)) else f" ({sum(np.isfinite(values))} with a model)"))
+            cells.append(
+                "-"
+                if not np.isfinite(m)
+                else f"{m:.3f} [{lo:.3f}, {'-' if not np.isfinite(hi) else f'{hi:.3f}'}]"
+                + ("" if all(np.isfinite(values)) else f" ({sum(np.isfinite(values))} with a model)")
+            )
         reach = [time_to(r, args.target) for r in recs]
         reached = [v for v in reach if np.isfinite(v)]
         when = f"{np.median(reach):.0f}" if len(reached) == len(reach) else f"{len(reached)} of {len(reach)} reach it"
@@ -438,8 +513,13 @@ def main(argv=None) -> int:
         for star in against:
             errors = [relative_error(r["t_opt"], stars[star]) for r in recs]
             t_cells.append(f"{sum(e <= 0.05 for e in errors)} of {len(recs)} | {100 * median_iqr(errors)[0]:.1f} %")
-        print(f"| {name} ({len(recs)} seeds) | " + " | ".join(cells) + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
-              + " | ".join(t_cells) + " |")
+        print(
+            f"| {name} ({len(recs)} seeds) | "
+            + " | ".join(cells)
+            + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
+            + " | ".join(t_cells)
+            + " |"
+        )
     fixed_shown = [n for n, recs in records.items() if is_fixed(n) and recs]
     if len(fixed_shown) > 1:
         best = best_in_hindsight({n: records[n] for n in fixed_shown}, at)
@@ -450,12 +530,20 @@ def main(argv=None) -> int:
             if all(np.isfinite(times)):
                 reach.append((float(np.median(times)), n))
         when = "-" if not reach else f"{min(reach)[0]:.0f} ({min(reach)[1]})"
-        print(f"| {BEST_FIXED} | " + " | ".join(cells) + f" | {when} | - | " + " | ".join("- | -" for _ in against) + " |")
-        print(f"\n{BEST_FIXED}: at each time the lowest median over the {len(fixed_shown)} fixed designs above "
-              "(which one in brackets), chosen after the fact: no campaign could have known which t to fix.")
+        print(
+            f"| {BEST_FIXED} | " + " | ".join(cells) + f" | {when} | - | " + " | ".join("- | -" for _ in against) + " |"
+        )
+        print(
+            f"\n{BEST_FIXED}: at each time the lowest median over the {len(fixed_shown)} fixed designs above "
+            "(which one in brackets), chosen after the fact: no campaign could have known which t to fix."
+        )
     if args.figure:
-        figure({n: r for n, r in records.items() if r}, args.budget, args.figure,
-               f"{base.name}: budget {args.budget:g} s, {'/'.join(str(c) for c in counts)} seeds")
+        figure(
+            {n: r for n, r in records.items() if r},
+            args.budget,
+            args.figure,
+            f"{base.name}: budget {args.budget:g} s, {'/'.join(str(c) for c in counts)} seeds",
+        )
         print(f"\nwrote {args.figure}")
     return 0
 

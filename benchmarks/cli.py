@@ -91,8 +91,9 @@ def timings(repeats: int) -> dict[str, list[float]]:
             path = started(work, f"told{i}")
             answer(path, work, keep_last=True)
             request = json.loads(noisebo("ask", "--json", str(path), cwd=work)[1])
-            found["tell (decides)"].append(noisebo("tell", str(path), "--point", str(request["point"]), "1.0",
-                                                   cwd=work)[0])
+            found["tell (decides)"].append(
+                noisebo("tell", str(path), "--point", str(request["point"]), "1.0", cwd=work)[0]
+            )
         return found
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -103,8 +104,10 @@ def table(found: dict[str, list[float]]) -> str:
     for name, values in found.items():
         median, target = statistics.median(values), TARGETS_S[name]
         verdict = "" if target is None else ("met" if median <= target else "missed")
-        lines.append(f"| `{name}` | {median:.2f} | {min(values):.2f}-{max(values):.2f} | "
-                     f"{'-' if target is None else f'{target:g}'} | {verdict} |")
+        lines.append(
+            f"| `{name}` | {median:.2f} | {min(values):.2f}-{max(values):.2f} | "
+            f"{'-' if target is None else f'{target:g}'} | {verdict} |"
+        )
     return "\n".join(lines)
 
 

@@ -28,18 +28,39 @@ CONFIGS = ROOT / "data" / "configs"
 
 def campaigns() -> list[tuple[str, CampaignConfig, int]]:
     forrester = load_config(CONFIGS / "forrester.yaml").with_overrides(
-        space={"n_x": 60, "n_t": 40}, schedule={"n_steps": 6})
-    out = [(f"forrester-{policy}-s{seed}", forrester.with_overrides(acquisition={"policy": policy}), seed)
-           for policy in ("reward", "double") for seed in range(3)]
+        space={"n_x": 60, "n_t": 40}, schedule={"n_steps": 6}
+    )
+    out = [
+        (f"forrester-{policy}-s{seed}", forrester.with_overrides(acquisition={"policy": policy}), seed)
+        for policy in ("reward", "double")
+        for seed in range(3)
+    ]
     out.append(("pfm-s0", load_config(CONFIGS / "pfm.yaml").with_overrides(schedule={"n_steps": 3}), 0))
     out.append(("branin-s0", load_config(CONFIGS / "branin.yaml").with_overrides(schedule={"n_steps": 3}), 0))
-    out.append(("forrester-info_rate-budget-s0", forrester.with_overrides(
-        acquisition={"policy": "info_rate"}, schedule={"n_steps": 10, "budget_s": 400.0}), 0))
-    out.append(("forrester-power-s0", forrester.with_overrides(
-        noise_model={"mean": "power"}, acquisition={"policy": "double"}), 0))
+    out.append(
+        (
+            "forrester-info_rate-budget-s0",
+            forrester.with_overrides(acquisition={"policy": "info_rate"}, schedule={"n_steps": 10, "budget_s": 400.0}),
+            0,
+        )
+    )
+    out.append(
+        (
+            "forrester-power-s0",
+            forrester.with_overrides(noise_model={"mean": "power"}, acquisition={"policy": "double"}),
+            0,
+        )
+    )
     out.append(("forrester-quadrature-s0", forrester.with_overrides(noise_model={"mean": "quadrature"}), 0))
-    out.append(("forrester_patch-quadrature-field-s0", load_config(CONFIGS / "forrester_patch.yaml").with_overrides(
-        space={"n_x": 60, "n_t": 40}, schedule={"n_steps": 3}), 0))
+    out.append(
+        (
+            "forrester_patch-quadrature-field-s0",
+            load_config(CONFIGS / "forrester_patch.yaml").with_overrides(
+                space={"n_x": 60, "n_t": 40}, schedule={"n_steps": 3}
+            ),
+            0,
+        )
+    )
     return out
 
 
@@ -49,11 +70,29 @@ def exact(value) -> str:
 
 def record(config: CampaignConfig, seed: int) -> dict:
     run = run_campaign(config, build(config.instrument), seed)
-    points = [{"x": [exact(v) for v in p.x], "t": exact(p.t), "value": exact(p.value), "noise": exact(p.noise),
-               "shots": p.n_shots} for p in run.state.points]
-    decisions = [{"step": d.step, "x": [exact(v) for v in d.x], "t": exact(d.t), "acq_value": exact(d.acq_value),
-                  "shots": d.shots, "t_opt": exact(d.t_opt), "noise_at_t": exact(d.noise_at_t),
-                  "converged": d.converged} for d in run.decisions]
+    points = [
+        {
+            "x": [exact(v) for v in p.x],
+            "t": exact(p.t),
+            "value": exact(p.value),
+            "noise": exact(p.noise),
+            "shots": p.n_shots,
+        }
+        for p in run.state.points
+    ]
+    decisions = [
+        {
+            "step": d.step,
+            "x": [exact(v) for v in d.x],
+            "t": exact(d.t),
+            "acq_value": exact(d.acq_value),
+            "shots": d.shots,
+            "t_opt": exact(d.t_opt),
+            "noise_at_t": exact(d.noise_at_t),
+            "converged": d.converged,
+        }
+        for d in run.decisions
+    ]
     final = run.summary.t_opt if run.summary is not None else run.decisions[-1].t_opt
     return {"points": points, "decisions": decisions, "final_t_opt": exact(final)}
 
@@ -90,8 +129,11 @@ def main(argv=None) -> int:
             continue
         out[name] = record(config, seed)
         last = out[name]["decisions"][-1] if out[name]["decisions"] else {}
-        print(f"{name}: {len(out[name]['points'])} points, final t_opt {float.fromhex(out[name]['final_t_opt']):.6g} s"
-              + (f", last acq {float.fromhex(last['acq_value']):.6g}" if last else ""), flush=True)
+        print(
+            f"{name}: {len(out[name]['points'])} points, final t_opt {float.fromhex(out[name]['final_t_opt']):.6g} s"
+            + (f", last acq {float.fromhex(last['acq_value']):.6g}" if last else ""),
+            flush=True,
+        )
     args.json.write_text(json.dumps(out, indent=1))
     if args.compare is None:
         return 0

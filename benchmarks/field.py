@@ -75,8 +75,12 @@ def truth_of(config, instrument) -> dict:
     t = np.linspace(s.t_min, s.t_max, N_FINE)
     noise = instrument.noise_law_at(x, t)
     per_x = t[np.argmax(np.asarray(reward(t[None, :], noise, rew.alpha, rew.beta)), axis=1)]
-    return {"t_star_map": per_x, "t_star": x_averaged_t_star(config, instrument),
-            "t_star_law": law_t_star(config, instrument), "f": instrument.truth(x)}
+    return {
+        "t_star_map": per_x,
+        "t_star": x_averaged_t_star(config, instrument),
+        "t_star_law": law_t_star(config, instrument),
+        "f": instrument.truth(x),
+    }
 
 
 def score(result, truth: dict) -> dict:
@@ -102,8 +106,10 @@ def score(result, truth: dict) -> dict:
 def models(base, law: str | None) -> dict:
     noise = {} if law is None else {"mean": law}
     field = base.noise_model.field.model_dump() if base.noise_model.field is not None else DEFAULT_FIELD
-    return {"x-independent": base.with_overrides(noise_model=noise | {"field": None}),
-            "noise field": base.with_overrides(noise_model=noise | {"field": field})}
+    return {
+        "x-independent": base.with_overrides(noise_model=noise | {"field": None}),
+        "noise field": base.with_overrides(noise_model=noise | {"field": field}),
+    }
 
 
 def fmt(values, scale: float = 1.0, digits: int = 1) -> str:
@@ -131,17 +137,23 @@ def main(argv=None) -> int:
 
     base, instrument = benchmark_config(parser, args.config, edit)
     if not callable(getattr(instrument, "noise_law_at", None)):
-        refuse(parser, f"{args.config}: the {base.instrument.kind} simulator has no noise at each position "
-                       "(noise_law_at) to score a noise field against")
+        refuse(
+            parser,
+            f"{args.config}: the {base.instrument.kind} simulator has no noise at each position "
+            "(noise_law_at) to score a noise field against",
+        )
     truth = truth_of(base, instrument)
     t_map = truth["t_star_map"]
-    print(f"{base.name}: {base.space.dimensions} axis(es), law {base.noise_model.mean if args.law is None else args.law}, "
-          f"{base.schedule.n_seed} seeds + {base.schedule.n_steps} steps; simulator {X_AVG} for the whole sample "
-          f"(the optimum of the x-averaged reward, what the single t is scored against) {truth['t_star']:.3f} s, "
-          f"{LAW} (with the x-independent noise law, as in pfm.py and budget.py) {truth['t_star_law']:.3f} s "
-          f"({100 * (truth['t_star_law'] / truth['t_star'] - 1):+.1f} %); t*(x) from {t_map.min():.3f} to "
-          f"{t_map.max():.3f} s ({100 * np.mean(np.abs(t_map / truth['t_star'] - 1) > 0.1):.0f} % of x more than "
-          f"10 % away from {X_AVG})", flush=True)
+    print(
+        f"{base.name}: {base.space.dimensions} axis(es), law {base.noise_model.mean if args.law is None else args.law}, "
+        f"{base.schedule.n_seed} seeds + {base.schedule.n_steps} steps; simulator {X_AVG} for the whole sample "
+        f"(the optimum of the x-averaged reward, what the single t is scored against) {truth['t_star']:.3f} s, "
+        f"{LAW} (with the x-independent noise law, as in pfm.py and budget.py) {truth['t_star_law']:.3f} s "
+        f"({100 * (truth['t_star_law'] / truth['t_star'] - 1):+.1f} %); t*(x) from {t_map.min():.3f} to "
+        f"{t_map.max():.3f} s ({100 * np.mean(np.abs(t_map / truth['t_star'] - 1) > 0.1):.0f} % of x more than "
+        f"10 % away from {X_AVG})",
+        flush=True,
+    )
     records: dict[str, list] = {}
     for name, config in models(base, args.law).items():
         records[name] = []
@@ -149,29 +161,54 @@ def main(argv=None) -> int:
             started = time.perf_counter()
             rec = score(run_campaign(config, instrument, seed), truth) | {"seed": seed}
             records[name].append(rec)
-            print(f"{name:>13} seed {seed:3d}: t {rec['t_opt']:.3f} s ({100 * rec['t_rel_error']:.1f} % from {X_AVG}, "
-                  f"{100 * rec['t_rel_error_law']:.1f} % from {LAW}), t*(x) median "
-                  f"error {100 * rec['map_median_error']:.1f} %, {100 * rec['map_within_10']:.0f} % of x within 10 %, "
-                  f"RMSE {rec['rmse_f']:.3f}, {rec['time_s']:.0f} s, decision {rec['latency_s']:.3f} s, "
-                  f"wall {time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
-    print(f"\n| model | single t within 10 % of {X_AVG} | single t within 10 % of {LAW} | t*(x) error, median over x (%) "
-          "| x with t*(x) within 10 % (%) | RMSE of f | instrument time (s) | decision (s) |")
+            print(
+                f"{name:>13} seed {seed:3d}: t {rec['t_opt']:.3f} s ({100 * rec['t_rel_error']:.1f} % from {X_AVG}, "
+                f"{100 * rec['t_rel_error_law']:.1f} % from {LAW}), t*(x) median "
+                f"error {100 * rec['map_median_error']:.1f} %, {100 * rec['map_within_10']:.0f} % of x within 10 %, "
+                f"RMSE {rec['rmse_f']:.3f}, {rec['time_s']:.0f} s, decision {rec['latency_s']:.3f} s, "
+                f"wall {time.perf_counter() - started:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+    print(
+        f"\n| model | single t within 10 % of {X_AVG} | single t within 10 % of {LAW} | t*(x) error, median over x (%) "
+        "| x with t*(x) within 10 % (%) | RMSE of f | instrument time (s) | decision (s) |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     table = {}
     for name, recs in records.items():
         within = sum(r["t_rel_error"] <= 0.10 for r in recs)
         within_law = sum(r["t_rel_error_law"] <= 0.10 for r in recs)
-        table[name] = {"single_t_within_10": within, "single_t_within_10_law": within_law, "campaigns": len(recs),
-                       **{k: median_iqr([r[k] for r in recs]) for k in
-                          ("map_median_error", "map_within_10", "rmse_f", "time_s", "latency_s")}}
-        print(f"| {name} | {within} of {len(recs)} | {within_law} of {len(recs)} | {fmt([r['map_median_error'] for r in recs], 100)} | "
-              f"{fmt([r['map_within_10'] for r in recs], 100, 0)} | {fmt([r['rmse_f'] for r in recs], 1, 3)} | "
-              f"{np.median([r['time_s'] for r in recs]):.0f} | {np.median([r['latency_s'] for r in recs]):.3f} |")
+        table[name] = {
+            "single_t_within_10": within,
+            "single_t_within_10_law": within_law,
+            "campaigns": len(recs),
+            **{
+                k: median_iqr([r[k] for r in recs])
+                for k in ("map_median_error", "map_within_10", "rmse_f", "time_s", "latency_s")
+            },
+        }
+        print(
+            f"| {name} | {within} of {len(recs)} | {within_law} of {len(recs)} | {fmt([r['map_median_error'] for r in recs], 100)} | "
+            f"{fmt([r['map_within_10'] for r in recs], 100, 0)} | {fmt([r['rmse_f'] for r in recs], 1, 3)} | "
+            f"{np.median([r['time_s'] for r in recs]):.0f} | {np.median([r['latency_s'] for r in recs]):.3f} |"
+        )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"config": base.model_dump(mode="json"), "t_star": truth["t_star"],
-                                         "t_star_definition": X_AVG, "t_star_law": truth["t_star_law"],
-                                         "table": table, "records": records}, indent=1, default=float))
+        args.json.write_text(
+            json.dumps(
+                {
+                    "config": base.model_dump(mode="json"),
+                    "t_star": truth["t_star"],
+                    "t_star_definition": X_AVG,
+                    "t_star_law": truth["t_star_law"],
+                    "table": table,
+                    "records": records,
+                },
+                indent=1,
+                default=float,
+            )
+        )
         print(f"\nwrote {args.json}")
     return 0
 

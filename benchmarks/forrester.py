@@ -77,8 +77,14 @@ def run_one(config, instrument, seed: int) -> dict:
     wall = time.perf_counter() - started
     points = result.state.points
     record = campaign_figures(
-        config, instrument, result.state.t_opt_history, result.summary.t_opt, grids(config).x,
-        result.summary.f_mean, [p.t for p in points for _ in range(p.n_shots)], result.latencies_s,
+        config,
+        instrument,
+        result.state.t_opt_history,
+        result.summary.t_opt,
+        grids(config).x,
+        result.summary.f_mean,
+        [p.t for p in points for _ in range(p.n_shots)],
+        result.latencies_s,
         shown_step(result.state.converged_step),
     )
     after_first = compiles["after_first"]
@@ -100,8 +106,12 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--inference", choices=["map", "nuts"], default=None, help="override the config's mode")
-    parser.add_argument("--quadrature", type=int, default=None,
-                        help="override inference.primary_quadrature (nodes per dimension, 0 = MAP)")
+    parser.add_argument(
+        "--quadrature",
+        type=int,
+        default=None,
+        help="override inference.primary_quadrature (nodes per dimension, 0 = MAP)",
+    )
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
@@ -136,24 +146,36 @@ def main(argv=None) -> int:
         rows[policy] = summarise_campaigns(mine)
         rows[policy]["regret"] = float(np.median([r["regret"] for r in mine]))
         rows[policy]["recompiles_after_first"] = sum(r["recompiles_after_first_step"] or 0 for r in mine)
-    print(f"\n{describe(stars, LAW)} (the table's t*)\ninference = {base.inference.mode}   "
-          f"primary quadrature = {base.inference.primary_quadrature}   f acquisition = {base.acquisition.f_acquisition}   "
-          f"shots {base.schedule.shots_before} / {base.schedule.shots_after}   (median [IQR])")
+    print(
+        f"\n{describe(stars, LAW)} (the table's t*)\ninference = {base.inference.mode}   "
+        f"primary quadrature = {base.inference.primary_quadrature}   f acquisition = {base.acquisition.f_acquisition}   "
+        f"shots {base.schedule.shots_before} / {base.schedule.shots_after}   (median [IQR])"
+    )
     print(benchmark_table(rows))
     if base.acquisition.f_acquisition != "ue":  # EI and UCB look for the optimum; UE explores
         best = "maximum" if base.acquisition.maximize else "minimum"
-        print(f"regret of the final model's {best} (|f(x_hat) - f*| on the grid), median: "
-              + ", ".join(f"{p} {r['regret']:.3g}" for p, r in rows.items()))
+        print(
+            f"regret of the final model's {best} (|f(x_hat) - f*| on the grid), median: "
+            + ", ".join(f"{p} {r['regret']:.3g}" for p, r in rows.items())
+        )
     if differ(stars):
-        print(f"final t within 10 % of {X_AVG}: " + ", ".join(
-            f"{p} {sum(relative_error(r['t_opt_pred'][-1], stars[X_AVG]) <= 0.10 for r in records if r['policy'] == p)}"
-            f" of {sum(r['policy'] == p for r in records)}" for p in rows))
-    print("XLA recompilations after the first BO step, all campaigns: "
-          + ", ".join(f"{p} {r['recompiles_after_first']}" for p, r in rows.items()))
+        print(
+            f"final t within 10 % of {X_AVG}: "
+            + ", ".join(
+                f"{p} {sum(relative_error(r['t_opt_pred'][-1], stars[X_AVG]) <= 0.10 for r in records if r['policy'] == p)}"
+                f" of {sum(r['policy'] == p for r in records)}"
+                for p in rows
+            )
+        )
+    print(
+        "XLA recompilations after the first BO step, all campaigns: "
+        + ", ".join(f"{p} {r['recompiles_after_first']}" for p, r in rows.items())
+    )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"records": records, "summary": rows, "t_star_definition": LAW,
-                                         "t_stars": stars}, indent=1))
+        args.json.write_text(
+            json.dumps({"records": records, "summary": rows, "t_star_definition": LAW, "t_stars": stars}, indent=1)
+        )
         print(f"\nwrote {args.json}")
     return 0
 

@@ -40,8 +40,7 @@ STEP_LINE = re.compile(r"^step (\d+)/\d+:")
 def timed_lines(command: list[str], env: dict) -> tuple[list[tuple[float, str]], int]:
     """Each stdout line of ``command`` with the time (s, from start) it arrived, and the exit code."""
     started = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env,
-                               cwd=ROOT)
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env, cwd=ROOT)
     lines = [(time.perf_counter() - started, line.rstrip("\n")) for line in process.stdout]
     return lines, process.wait()
 
@@ -70,11 +69,15 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-rrd", action="store_true", help="without the Rerun recording")
     parser.add_argument("--json", type=Path, default=None)
-    parser.add_argument("--reports", choices=["on", "off", "both"], default="on",
-                        help="the flow run's Prefect reports (names, logs, artifacts, events)")
+    parser.add_argument(
+        "--reports",
+        choices=["on", "off", "both"],
+        default="on",
+        help="the flow run's Prefect reports (names, logs, artifacts, events)",
+    )
     args = parser.parse_args(argv)
     results = {}
-    for mode in (["off", "on"] if args.reports == "both" else [args.reports]):
+    for mode in ["off", "on"] if args.reports == "both" else [args.reports]:
         print(f"\nPrefect reports {mode}:")
         results[mode] = one_run(args, mode)
         if results[mode] is None:
@@ -96,8 +99,21 @@ def one_run(args, reports: str) -> dict | None:
     config_path.write_text(yaml.safe_dump(config.model_dump(mode="json")))
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "NOISEBO_PREFECT_REPORTS": "1" if reports == "on" else "0"}
     env.pop("PREFECT_API_URL", None)
-    lines, code = timed_lines([sys.executable, "-m", "noisebo.cli.main", "run", str(config_path), "--seed", str(args.seed),
-                               "--out", str(work), *(["--no-rrd"] if args.no_rrd else [])], env)
+    lines, code = timed_lines(
+        [
+            sys.executable,
+            "-m",
+            "noisebo.cli.main",
+            "run",
+            str(config_path),
+            "--seed",
+            str(args.seed),
+            "--out",
+            str(work),
+            *(["--no-rrd"] if args.no_rrd else []),
+        ],
+        env,
+    )
     if code != 0:
         print(f"noisebo run failed (exit {code}); last lines:\n" + "\n".join(line for _, line in lines[-5:]))
         return None
@@ -112,25 +128,38 @@ def one_run(args, reports: str) -> dict | None:
             continue
         gap = at[step] - at[step - 1]
         k = step - 1  # 0-based BO step of this point
-        rows.append({"n": base.schedule.n_seed + k, "gap_s": gap, "decision_s": float(latency[k]),
-                     "instrument_s": float(instrument[k]), "rest_s": gap - float(latency[k]) - float(instrument[k])})
+        rows.append(
+            {
+                "n": base.schedule.n_seed + k,
+                "gap_s": gap,
+                "decision_s": float(latency[k]),
+                "instrument_s": float(instrument[k]),
+                "rest_s": gap - float(latency[k]) - float(instrument[k]),
+            }
+        )
     size = path.stat().st_size
-    print(f"noisebo run{' --no-rrd' if args.no_rrd else ''} on {Path(args.config).name} to {args.points} points "
-          f"({path.name}: {size / 2**20:.1f} MiB, {size / args.points / 1024:.1f} KiB per point, finished layout)")
+    print(
+        f"noisebo run{' --no-rrd' if args.no_rrd else ''} on {Path(args.config).name} to {args.points} points "
+        f"({path.name}: {size / 2**20:.1f} MiB, {size / args.points / 1024:.1f} KiB per point, finished layout)"
+    )
     print(f"{'points':>11} {'decision':>9} {'other, median':>14} {'other, max':>11} {'gap, median':>12}")
     summary = []
     for lo in range(0, args.points, args.window):
         window = [r for r in rows if lo < r["n"] + 1 <= lo + args.window]
         if not window:
             continue
-        row = {"points": f"{lo + 1}-{lo + args.window}",
-               "decision_s": statistics.median(r["decision_s"] for r in window),
-               "other_median_s": statistics.median(r["rest_s"] for r in window),
-               "other_max_s": max(r["rest_s"] for r in window),
-               "gap_median_s": statistics.median(r["gap_s"] for r in window)}
+        row = {
+            "points": f"{lo + 1}-{lo + args.window}",
+            "decision_s": statistics.median(r["decision_s"] for r in window),
+            "other_median_s": statistics.median(r["rest_s"] for r in window),
+            "other_max_s": max(r["rest_s"] for r in window),
+            "gap_median_s": statistics.median(r["gap_s"] for r in window),
+        }
         summary.append(row)
-        print(f"{row['points']:>11} {row['decision_s']:>8.3f}s {1e3 * row['other_median_s']:>12.1f}ms "
-              f"{1e3 * row['other_max_s']:>9.1f}ms {row['gap_median_s']:>11.3f}s")
+        print(
+            f"{row['points']:>11} {row['decision_s']:>8.3f}s {1e3 * row['other_median_s']:>12.1f}ms "
+            f"{1e3 * row['other_max_s']:>9.1f}ms {row['gap_median_s']:>11.3f}s"
+        )
     os.environ.get("KEEP") or __import__("shutil").rmtree(work, ignore_errors=True)
     return {"summary": summary, "points": rows}
 

@@ -51,8 +51,12 @@ def _main(argv) -> int:
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--policy", choices=[*policy_names(), "both", "all"], default="both")
-    parser.add_argument("--reports", choices=["on", "off", "both"], default="both",
-                        help="the flow runs' Prefect reports (names, logs, artifacts, events)")
+    parser.add_argument(
+        "--reports",
+        choices=["on", "off", "both"],
+        default="both",
+        help="the flow runs' Prefect reports (names, logs, artifacts, events)",
+    )
     args = parser.parse_args(argv)
     modes = ["off", "on"] if args.reports == "both" else [args.reports]
     base = load_config(args.config)
@@ -62,8 +66,10 @@ def _main(argv) -> int:
     started = time.perf_counter()
     campaign(base, seed=10_000, out_dir=str(out / "warmup"), show_progress=False)
     print(f"warm-up flow run (temporary Prefect server start + compilation): {time.perf_counter() - started:.1f} s")
-    print("| policy | seed | reports | pure loop (s) | flow (s) | added per BO step (s) | flow minus decisions, per "
-          "step (s) | same points |")
+    print(
+        "| policy | seed | reports | pure loop (s) | flow (s) | added per BO step (s) | flow minus decisions, per "
+        "step (s) | same points |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     rows = {mode: [] for mode in modes}
     for policy in policies:
@@ -83,13 +89,18 @@ def _main(argv) -> int:
                 added = (t3 - t2 - (t1 - t0)) / n_steps
                 literal = (t3 - t2 - decisions) / n_steps
                 rows[mode].append((added, literal, same))
-                print(f"| {policy} | {seed} | {mode} | {t1 - t0:.2f} | {t3 - t2:.2f} | {added:.3f} | {literal:.3f} "
-                      f"| {same} |", flush=True)
+                print(
+                    f"| {policy} | {seed} | {mode} | {t1 - t0:.2f} | {t3 - t2:.2f} | {added:.3f} | {literal:.3f} "
+                    f"| {same} |",
+                    flush=True,
+                )
     print()
     for mode in modes:
         added, literal, same = zip(*rows[mode])
-        print(f"reports {mode}: median added per BO step: {np.median(added):.3f} s; median flow minus decisions per "
-              f"step: {np.median(literal):.3f} s; identical points in {sum(same)}/{len(same)} campaigns")
+        print(
+            f"reports {mode}: median added per BO step: {np.median(added):.3f} s; median flow minus decisions per "
+            f"step: {np.median(literal):.3f} s; identical points in {sum(same)}/{len(same)} campaigns"
+        )
     os.environ.get("KEEP") or __import__("shutil").rmtree(out, ignore_errors=True)
     return 0
 

@@ -56,9 +56,17 @@ def law_check(instrument, config, ts=(0.1, 0.5, 2.0), positions=16, repeats=20) 
     for t in ts:
         var = []
         for x in rng.uniform(config.space.x_min, config.space.x_max, positions):
-            values = [shot_value(instrument.simulate(np.array([x]), t, rng), config.reduction).value for _ in range(repeats)]
+            values = [
+                shot_value(instrument.simulate(np.array([x]), t, rng), config.reduction).value for _ in range(repeats)
+            ]
             var.append(np.nanvar(values, ddof=1))
-        rows.append({"t": t, "empirical_sd": float(np.sqrt(np.mean(var))), "law_sd": float(instrument.noise_law(np.array([t]))[0])})
+        rows.append(
+            {
+                "t": t,
+                "empirical_sd": float(np.sqrt(np.mean(var))),
+                "law_sd": float(instrument.noise_law(np.array([t]))[0]),
+            }
+        )
     return rows
 
 
@@ -67,8 +75,12 @@ def main(argv=None) -> int:
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "pfm.yaml"))
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=0)
-    parser.add_argument("--baseline-seeds", type=int, default=None,
-                        help="seeds per fixed-t baseline (default: --seeds; 0 skips the baselines)")
+    parser.add_argument(
+        "--baseline-seeds",
+        type=int,
+        default=None,
+        help="seeds per fixed-t baseline (default: --seeds; 0 skips the baselines)",
+    )
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
 
@@ -90,19 +102,23 @@ def main(argv=None) -> int:
             print(
                 f"{name:>20} seed {seed:3d}: converged step {rec['converged_step']}, t_opt {rec['t_opt_pred'][-1]:.3f} s "
                 f"({100 * rec['t_opt_rel_error']:.1f} %), RMSE {rec['rmse_f']:.2f} pm, time {rec['total_measurement_time']:.0f} s",
-                file=sys.stderr, flush=True,
+                file=sys.stderr,
+                flush=True,
             )
         records += mine
         rows[name] = summarise_campaigns(mine)
         for star in against:  # {LAW: {variant: share}, X_AVG: ...}
             within.setdefault(star, {})[name] = sum(
-                relative_error(r["t_opt_pred"][-1], stars[star]) <= 0.10 for r in mine) / len(mine)
+                relative_error(r["t_opt_pred"][-1], stars[star]) <= 0.10 for r in mine
+            ) / len(mine)
 
     print(f"\n{describe(stars, LAW)} (the table's t*)   (median [IQR], RMSE in pm)")
     print(benchmark_table(rows))
     for star in against:
-        print(f"\nfinal predicted optimal t within 10 % of {star}: "
-              + ", ".join(f"{k} {100 * v:.0f} %" for k, v in within.get(star, {}).items() if "optimised" in k))
+        print(
+            f"\nfinal predicted optimal t within 10 % of {star}: "
+            + ", ".join(f"{k} {100 * v:.0f} %" for k, v in within.get(star, {}).items() if "optimised" in k)
+        )
     print("\n| campaign | final RMSE of the profile (pm) | total measurement time (s) |\n|---|---|---|")
     for name, row in rows.items():
         rm, tm = row["rmse_f"], row["measurement_time_s"]
@@ -110,18 +126,31 @@ def main(argv=None) -> int:
     speeds = {n: fit_speed(instrument, base, n / instrument.config.sample_rate_hz) for n in (1000, 20000)}
     print("\nSHO fits per second: " + ", ".join(f"{n} samples {v:.0f}/s" for n, v in speeds.items()))
     check = law_check(instrument, base)
-    print("noise law vs fitted scatter (pooled over 16 random positions, 20 sweeps each): "
-          + ", ".join(f"t={c['t']} s law {c['law_sd']:.2f} pm, measured {c['empirical_sd']:.2f} pm" for c in check))
+    print(
+        "noise law vs fitted scatter (pooled over 16 random positions, 20 sweeps each): "
+        + ", ".join(f"t={c['t']} s law {c['law_sd']:.2f} pm, measured {c['empirical_sd']:.2f} pm" for c in check)
+    )
     static = instrument.static_sd(np.linspace(0.0, instrument.length_um, 1001))
     static_q = dict(zip(("median", "p99", "max"), np.quantile(static, [0.5, 0.99, 1.0]).tolist()))
-    print(f"time-independent noise along the profile: median {static_q['median']:.2f} pm, 99th percentile "
-          f"{static_q['p99']:.2f} pm, max {static_q['max']:.2f} pm (the law uses its rms, "
-          f"{np.sqrt(np.mean(static**2)):.2f} pm)")
+    print(
+        f"time-independent noise along the profile: median {static_q['median']:.2f} pm, 99th percentile "
+        f"{static_q['p99']:.2f} pm, max {static_q['max']:.2f} pm (the law uses its rms, "
+        f"{np.sqrt(np.mean(static**2)):.2f} pm)"
+    )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        out = {"t_star": t_star, "t_star_definition": LAW, "t_stars": stars, "records": records, "summary": rows,
-               "within_10pct": within.get(LAW, {}), "within_10pct_x_avg": within.get(X_AVG),
-               "fits_per_second": speeds, "noise_law_check": check, "static_sd": static_q}
+        out = {
+            "t_star": t_star,
+            "t_star_definition": LAW,
+            "t_stars": stars,
+            "records": records,
+            "summary": rows,
+            "within_10pct": within.get(LAW, {}),
+            "within_10pct_x_avg": within.get(X_AVG),
+            "fits_per_second": speeds,
+            "noise_law_check": check,
+            "static_sd": static_q,
+        }
         args.json.write_text(json.dumps(out, indent=1))
         print(f"\nwrote {args.json}")
     return 0

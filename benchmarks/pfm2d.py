@@ -46,7 +46,9 @@ BUDGETS_S = (30, 60, 120, 240, 480, 960)
 def on_scan(config, scan: str):
     """The config moved onto another scan: its whole area, the axes spanning its extent."""
     settings = dict(config.instrument.settings)
-    settings["profile"] = {k: v for k, v in settings["profile"].items() if k in ("source", "smooth_px")} | {"file": scan}
+    settings["profile"] = {k: v for k, v in settings["profile"].items() if k in ("source", "smooth_px")} | {
+        "file": scan
+    }
     moved = config.with_overrides(instrument={"settings": settings})
     extent = build(validated(moved).instrument).bounds_um
     axes = [a.model_dump() | {"low": lo, "high": hi} for a, (lo, hi) in zip(config.space.axes, extent)]
@@ -67,9 +69,16 @@ def run_design(config, instrument, seed: int) -> dict:
     errors = [rmse(d.f_mean, truth) for d in result.decisions]
     times.append(float(spent[-1]))
     errors.append(rmse(result.summary.f_mean, truth))
-    return {"seed": seed, "times_s": times, "rmse": errors, "t_opt": result.summary.t_opt,
-            "points": len(points), "latency_s": [float(v) for v in result.latencies_s], "wall_s": wall,
-            "result": result}
+    return {
+        "seed": seed,
+        "times_s": times,
+        "rmse": errors,
+        "t_opt": result.summary.t_opt,
+        "points": len(points),
+        "latency_s": [float(v) for v in result.latencies_s],
+        "wall_s": wall,
+        "result": result,
+    }
 
 
 def rmse_within(record: dict, budget: float) -> float:
@@ -87,13 +96,19 @@ def _median_of_finite(values) -> float:
 def latency(config_path: str, sizes: list[int]) -> list[dict]:
     rows = []
     for n in sizes:
-        code = ("import json, sys; sys.path.insert(0, 'benchmarks'); from scaling import one_size; "
-                f"print(json.dumps(one_size({config_path!r}, {n}, 5, 'map', 'grid')))")
+        code = (
+            "import json, sys; sys.path.insert(0, 'benchmarks'); from scaling import one_size; "
+            f"print(json.dumps(one_size({config_path!r}, {n}, 5, 'map', 'grid')))"
+        )
         out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
         rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
         r = rows[-1]
-        print(f"latency at {n} points: warm {r['median_s']:.3f} s, multi-start {r['restart_s']:.3f} s, first "
-              f"{r['first_s']:.1f} s, peak {r['peak_gb']:.2f} GB", file=sys.stderr, flush=True)
+        print(
+            f"latency at {n} points: warm {r['median_s']:.3f} s, multi-start {r['restart_s']:.3f} s, first "
+            f"{r['first_s']:.1f} s, peak {r['peak_gb']:.2f} GB",
+            file=sys.stderr,
+            flush=True,
+        )
     return rows
 
 
@@ -109,11 +124,25 @@ def figure(record: dict, config, instrument, path: Path) -> None:
     fig = Figure(figsize=(15, 4.4), layout="constrained")
     axes = fig.subplots(1, 3)
     draw_image(axes[0], instrument.truth(g.x), config, "truth: signed response of the scan", "pm")
-    draw_image(axes[1], result.summary.f_mean, config,
-               f"GP mean after {len(t)} points ({record['times_s'][-1]:.0f} s of sweeps)", "pm",
-               points=xy, point_colours=np.log10(t))
-    draw_image(axes[2], np.sqrt(result.summary.f_var), config, "GP sd; points coloured by log10 t", "pm",
-               cmap="magma", points=xy, point_colours=np.log10(t))
+    draw_image(
+        axes[1],
+        result.summary.f_mean,
+        config,
+        f"GP mean after {len(t)} points ({record['times_s'][-1]:.0f} s of sweeps)",
+        "pm",
+        points=xy,
+        point_colours=np.log10(t),
+    )
+    draw_image(
+        axes[2],
+        np.sqrt(result.summary.f_var),
+        config,
+        "GP sd; points coloured by log10 t",
+        "pm",
+        cmap="magma",
+        points=xy,
+        point_colours=np.log10(t),
+    )
     fig.savefig(path, dpi=110)
 
 
@@ -146,11 +175,17 @@ def main(argv=None) -> int:
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             rec = run_design(config, instrument, seed)
             records[name].append(rec)
-            print(f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['times_s'][-1]:.0f} s of sweeps, final "
-                  f"RMSE {rec['rmse'][-1]:.2f} pm, t_opt {rec['t_opt']:.3f} s, median decision "
-                  f"{np.median(rec['latency_s']):.3f} s, wall {rec['wall_s']:.0f} s", file=sys.stderr, flush=True)
-    print(f"\n{base.name}: {s.dimensions} axes {[a.name for a in s.axes]}, {base.schedule.n_seed} seed points + "
-          f"{base.schedule.n_steps} steps, {len(records['t optimised'])} seeds; {describe(stars, ' and '.join(against))}")
+            print(
+                f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['times_s'][-1]:.0f} s of sweeps, final "
+                f"RMSE {rec['rmse'][-1]:.2f} pm, t_opt {rec['t_opt']:.3f} s, median decision "
+                f"{np.median(rec['latency_s']):.3f} s, wall {rec['wall_s']:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+    print(
+        f"\n{base.name}: {s.dimensions} axes {[a.name for a in s.axes]}, {base.schedule.n_seed} seed points + "
+        f"{base.schedule.n_steps} steps, {len(records['t optimised'])} seeds; {describe(stars, ' and '.join(against))}"
+    )
     print("\nRMSE of the GP mean over the area (pm) once this much instrument time is spent (median over seeds):\n")
     print("| design | " + " | ".join(f"{b} s" for b in BUDGETS_S) + " | final RMSE | total time (s) |")
     print("|---" * (len(BUDGETS_S) + 3) + "|")
@@ -166,21 +201,31 @@ def main(argv=None) -> int:
     for star in against:
         errors = [relative_error(r["t_opt"], stars[star]) for r in records["t optimised"]]
         within.append(f"within 10 % of {star} in {sum(e <= 0.10 for e in errors)} of {len(errors)} campaigns")
-    print(f"\nfinal predicted optimal t (t optimised): median {np.median([r['t_opt'] for r in records['t optimised']]):.3f} s, "
-          + ", ".join(within))
+    print(
+        f"\nfinal predicted optimal t (t optimised): median {np.median([r['t_opt'] for r in records['t optimised']]):.3f} s, "
+        + ", ".join(within)
+    )
     lat = [v for r in records["t optimised"] for v in r["latency_s"][1:]]
     print(f"decision latency in these campaigns: median {np.median(lat):.3f} s (first decision aside)")
     sizes = [int(v) for v in args.latency.split(",") if v.strip()]
     latencies = latency(args.config, sizes) if sizes else []
     for r in latencies:
-        print(f"decision latency at {r['n']} points over the area: warm {r['median_s']:.3f} s, multi-start "
-              f"{r['restart_s']:.3f} s, peak memory {r['peak_gb']:.2f} GB")
+        print(
+            f"decision latency at {r['n']} points over the area: warm {r['median_s']:.3f} s, multi-start "
+            f"{r['restart_s']:.3f} s, peak memory {r['peak_gb']:.2f} GB"
+        )
     if args.figure:
         figure(records["t optimised"][0], base, instrument, args.figure)
         print(f"\nwrote {args.figure}")
     if args.json:
-        out = {"t_star": t_star, "t_star_definition": LAW, "t_stars": stars, "table": table, "latency": latencies,
-               "records": {k: [{kk: vv for kk, vv in r.items() if kk != "result"} for r in v] for k, v in records.items()}}
+        out = {
+            "t_star": t_star,
+            "t_star_definition": LAW,
+            "t_stars": stars,
+            "table": table,
+            "latency": latencies,
+            "records": {k: [{kk: vv for kk, vv in r.items() if kk != "result"} for r in v] for k, v in records.items()},
+        }
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(out, indent=1, default=float))
         print(f"wrote {args.json}")

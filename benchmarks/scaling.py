@@ -84,7 +84,8 @@ def _compile_counter():
 
     compiles = []
     jax.monitoring.register_event_duration_secs_listener(
-        lambda event, duration, **kw: compiles.append(duration) if event.endswith("backend_compile_duration") else None)
+        lambda event, duration, **kw: compiles.append(duration) if event.endswith("backend_compile_duration") else None
+    )
     return compiles
 
 
@@ -109,10 +110,21 @@ def one_size(config_path: str, n: int, repeats: int, mode: str, design: str) -> 
     times = [_timed(decide, config, state, 0, step, first.hyperparameters)[1] for step in warm_steps]
     (_, _), restart_s = _timed(decide, config, state, 0, every, first.hyperparameters)
     peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return {"n": n, "mode": mode, "design": design, "first_s": first_s, "median_s": statistics.median(times),
-            "times_s": times, "restart_s": restart_s, "compiles_first": first_compiles,
-            "compiles_later": len(compiles) - first_compiles, "primary_inputs": first.primary_inputs,
-            "noise_inputs": first.noise_inputs, "binned": first.binned, "peak_gb": peak_kib / 2**20}
+    return {
+        "n": n,
+        "mode": mode,
+        "design": design,
+        "first_s": first_s,
+        "median_s": statistics.median(times),
+        "times_s": times,
+        "restart_s": restart_s,
+        "compiles_first": first_compiles,
+        "compiles_later": len(compiles) - first_compiles,
+        "primary_inputs": first.primary_inputs,
+        "noise_inputs": first.noise_inputs,
+        "binned": first.binned,
+        "peak_gb": peak_kib / 2**20,
+    }
 
 
 def crossing(config_path: str) -> dict:
@@ -130,12 +142,12 @@ def crossing(config_path: str) -> dict:
         before = type(state)(points=state.points[:32])
         first, _ = decide(config, before, 0, 0)
         if name == "compiled_ahead":
-            (_, ahead_s) = _timed(compile_ahead, config, before, first.hyperparameters,
-                                  capacities_ahead(config, first))
+            (_, ahead_s) = _timed(compile_ahead, config, before, first.hyperparameters, capacities_ahead(config, first))
             out["compile_ahead_s"] = ahead_s
         count = len(compiles)
-        (crossed, _), seconds = _timed(decide, config, type(state)(points=state.points[:33]), 0, 1,
-                                       first.hyperparameters)
+        (crossed, _), seconds = _timed(
+            decide, config, type(state)(points=state.points[:33]), 0, 1, first.hyperparameters
+        )
         assert capacities_ahead(config, first) == (64, 64) and crossed.primary_inputs == crossed.noise_inputs == 33
         out[name] = {"seconds": seconds, "compiles": len(compiles) - count}
     return out
@@ -162,9 +174,23 @@ def cold_starts(config_path: str) -> list[dict]:
         env = {**env, "NOISEBO_JAX_CACHE": str(work / f"jax-{server}"), "PYTHONUNBUFFERED": "1"}
         for run in ("first run", "cache warm"):
             started = time.perf_counter()
-            process = subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(path), "--out",
-                                        str(work / f"{server}-{run}"), "--no-rrd"], cwd=ROOT, env=env,
-                                       stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            process = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "noisebo.cli.main",
+                    "run",
+                    str(path),
+                    "--out",
+                    str(work / f"{server}-{run}"),
+                    "--no-rrd",
+                ],
+                cwd=ROOT,
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                text=True,
+            )
             first = next((time.perf_counter() - started for line in process.stdout if line.startswith("step 1/")), None)
             process.wait()
             rows.append({"server": server, "run": run, "first_point_s": first, "exit": process.returncode})
@@ -177,8 +203,13 @@ def cold_starts(config_path: str) -> list[dict]:
 
 
 def _run_alone(args, *extra) -> dict | str:
-    done = subprocess.run([sys.executable, __file__, "--config", args.config, *extra], capture_output=True,
-                          text=True, check=False, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    done = subprocess.run(
+        [sys.executable, __file__, "--config", args.config, *extra],
+        capture_output=True,
+        text=True,
+        check=False,
+        env={**os.environ, "PYTHONWARNINGS": "ignore"},
+    )
     if done.returncode != 0:
         return done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit {done.returncode}"
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -224,26 +255,38 @@ def main(argv=None) -> int:
         print("the decision that crosses capacity 32 -> 64 (both GPs), forrester, map:")
         for name in ("in_line", "compiled_ahead"):
             print(f"  {name:<15} {out[name]['seconds']:6.2f} s  {out[name]['compiles']:3} compilations")
-        print(f"  compiling ahead took {out['compile_ahead_s']:.2f} s (a background thread, while the instrument measures)")
+        print(
+            f"  compiling ahead took {out['compile_ahead_s']:.2f} s (a background thread, while the instrument measures)"
+        )
         if args.json:
             args.json.write_text(json.dumps(out, indent=1))
         return 0
-    print(f"decide() on a state of n points ({args.mode}, {args.design} design, {Path(args.config).name}); warm: "
-          f"median of {args.repeats} steps from the previous fit; multi-start: one step of restarts", flush=True)
-    print(f"{'n':>6} {'warm':>9} {'vs first n':>10} {'multi-start':>11} {'first call':>10} {'compiles':>9} "
-          f"{'later':>6} {'inputs x/t':>14} {'peak':>7}", flush=True)
+    print(
+        f"decide() on a state of n points ({args.mode}, {args.design} design, {Path(args.config).name}); warm: "
+        f"median of {args.repeats} steps from the previous fit; multi-start: one step of restarts",
+        flush=True,
+    )
+    print(
+        f"{'n':>6} {'warm':>9} {'vs first n':>10} {'multi-start':>11} {'first call':>10} {'compiles':>9} "
+        f"{'later':>6} {'inputs x/t':>14} {'peak':>7}",
+        flush=True,
+    )
     rows, base = [], None
     for n in (int(v) for v in args.n.split(",")):
-        row = _run_alone(args, "--one", str(n), "--repeats", str(args.repeats), "--mode", args.mode,
-                         "--design", args.design)
+        row = _run_alone(
+            args, "--one", str(n), "--repeats", str(args.repeats), "--mode", args.mode, "--design", args.design
+        )
         if isinstance(row, str):
             print(f"{n:>6} failed: {row}", flush=True)
             continue
         rows.append(row)
         base = base or row["median_s"]
-        print(f"{n:>6} {row['median_s']:>8.3f}s {row['median_s'] / base:>10.1f} {row['restart_s']:>10.2f}s "
-              f"{row['first_s']:>9.1f}s {row['compiles_first']:>9} {row['compiles_later']:>6} {_inputs(row):>14} "
-              f"{row['peak_gb']:>5.2f}GB", flush=True)
+        print(
+            f"{n:>6} {row['median_s']:>8.3f}s {row['median_s'] / base:>10.1f} {row['restart_s']:>10.2f}s "
+            f"{row['first_s']:>9.1f}s {row['compiles_first']:>9} {row['compiles_later']:>6} {_inputs(row):>14} "
+            f"{row['peak_gb']:>5.2f}GB",
+            flush=True,
+        )
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

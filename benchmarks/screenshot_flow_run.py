@@ -55,11 +55,18 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--config", default="data/configs/forrester.yaml", help="campaign YAML (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "images", help="folder of the PNGs")
-    parser.add_argument("--budget-ms", type=int, default=20_000,
-                        help="Chromium's virtual time budget for the page to render; doubled (twice) "
-                             "if the page is not rendered yet (default: %(default)s)")
-    parser.add_argument("--only-logs", action="store_true",
-                        help="only the flow run page's Logs tab, not its Task Runs and Artifacts tabs")
+    parser.add_argument(
+        "--budget-ms",
+        type=int,
+        default=20_000,
+        help="Chromium's virtual time budget for the page to render; doubled (twice) "
+        "if the page is not rendered yet (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--only-logs",
+        action="store_true",
+        help="only the flow run page's Logs tab, not its Task Runs and Artifacts tabs",
+    )
     return parser.parse_args(argv)
 
 
@@ -72,18 +79,31 @@ def find_chromium() -> str:
 
 
 def run_campaign(env: dict, config: str, seed: int, folder: Path) -> None:
-    command = [sys.executable, "-m", "noisebo.cli.main", "run", config, "--seed", str(seed), "--out", str(folder / "runs"),
-               "--no-rrd"]
+    command = [
+        sys.executable,
+        "-m",
+        "noisebo.cli.main",
+        "run",
+        config,
+        "--seed",
+        str(seed),
+        "--out",
+        str(folder / "runs"),
+        "--no-rrd",
+    ]
     print("campaign:", "noisebo", *command[3:], flush=True)
     started = time.monotonic()
-    process = subprocess.Popen(command, env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                               start_new_session=True)
+    process = subprocess.Popen(
+        command, env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True
+    )
     try:
         output, _ = process.communicate(timeout=600)
     finally:
         stop_group(process)
     if process.returncode != 0:
-        raise SystemExit(f"screenshot_flow_run: the campaign failed (exit code {process.returncode}):\n{output[-3000:]}")
+        raise SystemExit(
+            f"screenshot_flow_run: the campaign failed (exit code {process.returncode}):\n{output[-3000:]}"
+        )
     last = [line for line in output.splitlines() if line.strip()][-2:]
     print(f"  done in {time.monotonic() - started:.1f} s: {' / '.join(last)}", flush=True)
 
@@ -119,8 +139,9 @@ class Api:
         return [run["name"] for run in runs]
 
     def first_log(self, flow_run_id: str) -> str | None:
-        logs = self.post("logs/filter", {"logs": {"flow_run_id": {"any_": [flow_run_id]}}, "sort": "TIMESTAMP_ASC",
-                                         "limit": 1})
+        logs = self.post(
+            "logs/filter", {"logs": {"flow_run_id": {"any_": [flow_run_id]}}, "sort": "TIMESTAMP_ASC", "limit": 1}
+        )
         return logs[0]["message"] if logs else None
 
     def artifact_keys(self, flow_run_id: str) -> list[str]:
@@ -131,8 +152,11 @@ class Api:
 def settled(api: Api, flow_run_id: str) -> tuple[dict, int]:
     """The flow run once it is final and the server has recorded all of its task runs (their
     count is the same over 2 s: the server records them from events, after the flow has ended)."""
-    wait_for(lambda: api.flow_run(flow_run_id)["state_type"] in ("COMPLETED", "FAILED", "CRASHED", "CANCELLED"),
-             60, "the flow run's final state")
+    wait_for(
+        lambda: api.flow_run(flow_run_id)["state_type"] in ("COMPLETED", "FAILED", "CRASHED", "CANCELLED"),
+        60,
+        "the flow run's final state",
+    )
     counts = [-1]
 
     def steady() -> bool:
@@ -146,11 +170,22 @@ def settled(api: Api, flow_run_id: str) -> tuple[dict, int]:
 def chromium_run(chromium: str, profile: Path, args: list[str], timeout_s: float) -> str:
     """Run headless Chromium once (its own profile, its own process group, stopped on any exit);
     its stdout."""
-    command = [chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--no-first-run",
-               "--disable-extensions", "--mute-audio", f"--user-data-dir={profile}",
-               f"--window-size={WINDOW[0]},{WINDOW[1]}", *args]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                               start_new_session=True)
+    command = [
+        chromium,
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        "--no-first-run",
+        "--disable-extensions",
+        "--mute-audio",
+        f"--user-data-dir={profile}",
+        f"--window-size={WINDOW[0]},{WINDOW[1]}",
+        *args,
+    ]
+    process = subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True
+    )
     try:
         output, _ = process.communicate(timeout=timeout_s)
     finally:
@@ -173,18 +208,26 @@ def stop_group(process: subprocess.Popen) -> None:
             process.wait()
 
 
-def missing_from_page(chromium: str, profile: Path, url: str, expected: list[str], any_of: list[str],
-                      budget_ms: int) -> list[str]:
-    dom = html.unescape(chromium_run(chromium, profile, [f"--virtual-time-budget={budget_ms}", "--dump-dom", url],
-                                     timeout_s=budget_ms / 1000 + 90))
+def missing_from_page(
+    chromium: str, profile: Path, url: str, expected: list[str], any_of: list[str], budget_ms: int
+) -> list[str]:
+    dom = html.unescape(
+        chromium_run(
+            chromium,
+            profile,
+            [f"--virtual-time-budget={budget_ms}", "--dump-dom", url],
+            timeout_s=budget_ms / 1000 + 90,
+        )
+    )
     missing = [text for text in expected if text not in dom]
     if any_of and not any(text in dom for text in any_of):
         missing.append(f"one of {len(any_of)} task run names")
     return missing
 
 
-def screenshot(chromium: str, profile: Path, url: str, expected: list[str], any_of: list[str], budget_ms: int,
-               target: Path) -> Path:
+def screenshot(
+    chromium: str, profile: Path, url: str, expected: list[str], any_of: list[str], budget_ms: int, target: Path
+) -> Path:
     """A PNG of ``url`` once its DOM holds every one of ``expected`` and one of ``any_of`` (if any);
     written to ``target``."""
     for budget in (budget_ms, 2 * budget_ms, 4 * budget_ms):
@@ -194,8 +237,12 @@ def screenshot(chromium: str, profile: Path, url: str, expected: list[str], any_
             continue
         raw = profile.parent / "screenshot.png"
         raw.unlink(missing_ok=True)
-        chromium_run(chromium, profile, [f"--virtual-time-budget={budget}", f"--screenshot={raw}", url],
-                     timeout_s=budget / 1000 + 90)
+        chromium_run(
+            chromium,
+            profile,
+            [f"--virtual-time-budget={budget}", f"--screenshot={raw}", url],
+            timeout_s=budget / 1000 + 90,
+        )
         image = Image.open(raw).convert("RGB")
         colours = image.getcolors(maxcolors=1 << 16)
         if colours is not None and len(colours) < 50:
@@ -234,8 +281,11 @@ def main(argv=None) -> int:
         with local_server(folder / "prefect") as env:
             env.pop("NOISEBO_PREFECT_REPORTS", None)  # the run's logs and artifacts are what is shown
             base = env["PREFECT_API_URL"].removesuffix("/api")
-            print(f"Prefect server: {base} (PREFECT_HOME {env['PREFECT_HOME']}), up in "
-                  f"{time.monotonic() - started:.1f} s", flush=True)
+            print(
+                f"Prefect server: {base} (PREFECT_HOME {env['PREFECT_HOME']}), up in "
+                f"{time.monotonic() - started:.1f} s",
+                flush=True,
+            )
             run_campaign(env, args.config, args.seed, folder)
             api = Api(env["PREFECT_API_URL"])
             run, n_tasks = settled(api, api.newest_flow_run()["id"])
@@ -246,8 +296,9 @@ def main(argv=None) -> int:
             profile = folder / "chromium-profile"
             shots = [(f"{page}?tab=Logs", expected, [], "prefect-flow-run.png")]
             if not args.only_logs:
-                shots.append((f"{page}?tab=TaskRuns", [run["name"]], api.task_run_names(run["id"]),
-                              "prefect-flow-run-tasks.png"))
+                shots.append(
+                    (f"{page}?tab=TaskRuns", [run["name"]], api.task_run_names(run["id"]), "prefect-flow-run-tasks.png")
+                )
                 keys = api.artifact_keys(run["id"])
                 shots.append((f"{page}?tab=Artifacts", [run["name"], *keys], [], "prefect-flow-run-artifacts.png"))
             for url, texts, any_of, name in shots:

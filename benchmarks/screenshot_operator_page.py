@@ -46,9 +46,11 @@ CONFIG = ROOT / "data" / "configs" / "forrester_remote.yaml"
 SIMULATED = ROOT / "data" / "configs" / "forrester.yaml"  # the instrument the client simulates
 WINDOW = (1280, 1000)
 CHROMIUMS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
-INSTALL_CHROMIUM = ("headless Chromium is needed for the operator's page check and was not found on PATH "
-                    f"(tried {', '.join(CHROMIUMS)}); on Debian or Ubuntu: sudo apt-get update && "
-                    "sudo apt-get install -y chromium")
+INSTALL_CHROMIUM = (
+    "headless Chromium is needed for the operator's page check and was not found on PATH "
+    f"(tried {', '.join(CHROMIUMS)}); on Debian or Ubuntu: sudo apt-get update && "
+    "sudo apt-get install -y chromium"
+)
 START_TIMEOUT_S = 300  # Prefect's temporary server, JAX's first compilations, the seed points
 SILENCE_S = 600  # the held shot must not time out while the page is shot
 
@@ -68,11 +70,22 @@ def find_chromium() -> str:
 
 def chromium_run(chromium: str, profile: Path, args: list[str], timeout_s: float = 120) -> str:
     """Headless Chromium once (its own profile and process group, stopped on any exit); its stdout."""
-    command = [chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--no-first-run",
-               "--disable-extensions", "--mute-audio", f"--user-data-dir={profile}",
-               f"--window-size={WINDOW[0]},{WINDOW[1]}", *args]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)
+    command = [
+        chromium,
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        "--no-first-run",
+        "--disable-extensions",
+        "--mute-audio",
+        f"--user-data-dir={profile}",
+        f"--window-size={WINDOW[0]},{WINDOW[1]}",
+        *args,
+    ]
+    process = subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
     try:
         output, errors = process.communicate(timeout=timeout_s)
     finally:
@@ -174,30 +187,35 @@ def running_campaign(folder: Path, held_at: int = 8, seed: int = 0, env: dict | 
     config = write_config(folder, port)
     out, log = folder / "runs", folder / "noisebo-run.log"
     run_env = {**(os.environ if env is None else env), "NOISEBO_BRIDGE_TOKEN": token}
-    process = start([str(BIN / "noisebo"), "run", str(config), "--seed", str(seed), "--out", str(out), "--no-rrd"],
-                    run_env, log)
+    process = start(
+        [str(BIN / "noisebo"), "run", str(config), "--seed", str(seed), "--out", str(out), "--no-rrd"], run_env, log
+    )
     holding, release = threading.Event(), threading.Event()
     url, result = f"http://127.0.0.1:{port}", {}
     said: list[str] = []
 
     def client():
         try:
-            result["status"] = serve_instrument(url, token, simulated_measure(held_at, holding, release), poll_s=5.0,
-                                                retry_s=0.5, log=said.append)
+            result["status"] = serve_instrument(
+                url, token, simulated_measure(held_at, holding, release), poll_s=5.0, retry_s=0.5, log=said.append
+            )
         except Exception as error:  # noqa: BLE001 - said by whoever waits on the campaign
             result["error"] = f"{type(error).__name__}: {error}"
 
     thread = threading.Thread(target=client, name="instrument-pc", daemon=True)
     thread.start()
-    running = Running(url, token, out / f"forrester_remote_reward_s{seed:04d}.h5", held_at, process, log, release,
-                      thread, result)
+    running = Running(
+        url, token, out / f"forrester_remote_reward_s{seed:04d}.h5", held_at, process, log, release, thread, result
+    )
     try:
         deadline = time.monotonic() + START_TIMEOUT_S
         while not holding.wait(0.5):
             if process.poll() is not None or "error" in result or time.monotonic() > deadline:
-                raise RuntimeError(f"the campaign never came to point {held_at} (noisebo run "
-                                   f"{'exited ' + str(process.returncode) if process.poll() is not None else 'running'}"
-                                   f"; client: {result or said[-3:]})\n{log.read_text()[-3000:]}")
+                raise RuntimeError(
+                    f"the campaign never came to point {held_at} (noisebo run "
+                    f"{'exited ' + str(process.returncode) if process.poll() is not None else 'running'}"
+                    f"; client: {result or said[-3:]})\n{log.read_text()[-3000:]}"
+                )
         while (running.status().get("current") or {}).get("point") != held_at:  # the campaign's view of the same
             time.sleep(0.1)
         yield running
@@ -223,13 +241,17 @@ def screenshot(chromium: str, profile: Path, url: str, target: Path) -> Path:
 def rendered(text: str, running: Running, status: dict) -> list[str]:
     """What a rendered page of ``running`` must say, missing from ``text`` (the page's text)."""
     current = status["current"]
-    expected = [f"noisebo campaign {status['campaign']}",
-                f"measuring point {running.held_at} (BO step {current['step']})",
-                f"shot 1 of {current['shots_wanted']}",
-                f"{running.held_at} of {status['points_total']} points, {status['shots']} shots",
-                "instrument PC: connected", "What the campaign has learned",
-                "f: the model (mean ± 2 sd) and the measured points",
-                "single-shot noise: the model and the measured sd", "Last points"]
+    expected = [
+        f"noisebo campaign {status['campaign']}",
+        f"measuring point {running.held_at} (BO step {current['step']})",
+        f"shot 1 of {current['shots_wanted']}",
+        f"{running.held_at} of {status['points_total']} points, {status['shots']} shots",
+        "instrument PC: connected",
+        "What the campaign has learned",
+        "f: the model (mean ± 2 sd) and the measured points",
+        "single-shot noise: the model and the measured sd",
+        "Last points",
+    ]
     return [line for line in expected if line not in text]
 
 
@@ -255,8 +277,11 @@ def main(argv=None) -> int:
                 print(f"screenshot_operator_page: the page does not show {missing}:\n{text[:2000]}", file=sys.stderr)
                 return 1
             screenshot(chromium, folder / "chromium", running.page_url, args.out)
-            print(f"wrote {args.out} ({args.out.stat().st_size / 1000:.0f} KB): {status['campaign']} at point "
-                  f"{running.held_at} of {status['points_total']}", flush=True)
+            print(
+                f"wrote {args.out} ({args.out.stat().st_size / 1000:.0f} KB): {status['campaign']} at point "
+                f"{running.held_at} of {status['points_total']}",
+                flush=True,
+            )
             code, final = running.finish()
         print(f"the campaign then ran to its end: noisebo run exited {code}, the instrument PC saw {final!r}")
     return 0

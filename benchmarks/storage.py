@@ -62,8 +62,9 @@ CONVERGED_AT = 5  # BO step from which points get shots_after shots
 
 
 def started(config: CampaignConfig, seed: int = 0) -> Started:
-    return Started(config, seed, DriverInfo("synthetic", "0", {}), {"python": sys.version.split()[0]},
-                   "2026-01-01T00:00:00+00:00")
+    return Started(
+        config, seed, DriverInfo("synthetic", "0", {}), {"python": sys.version.split()[0]}, "2026-01-01T00:00:00+00:00"
+    )
 
 
 def decision(config: CampaignConfig, step: int, rng: np.random.Generator) -> Decision:
@@ -71,13 +72,23 @@ def decision(config: CampaignConfig, step: int, rng: np.random.Generator) -> Dec
     n_x, n_t, s = config.space.n_x, config.space.n_t, config.space
     converged = step >= CONVERGED_AT
     return Decision(
-        step=step, x=float(rng.uniform(s.x_min, s.x_max)), t=float(rng.uniform(s.t_min, s.t_max)),
-        acq_value=float(rng.normal()), shots=config.schedule.shots_after if converged else config.schedule.shots_before,
-        measure_noise=not converged, noise_at_t=float(rng.uniform(0.1, 1)), t_opt=float(rng.uniform(s.t_min, s.t_max)),
-        converged=converged, hyperparameters={k: float(rng.normal()) for k in HYPERPARAMETERS},
-        acq_map=rng.normal(size=(n_x, n_t)).astype(np.float32), f_mean=rng.normal(size=n_x),
-        f_var=rng.uniform(size=n_x), noise_mean=rng.uniform(size=n_t), noise_var=rng.uniform(size=n_t),
-        latency_s=float(rng.uniform(0.1, 1)))
+        step=step,
+        x=float(rng.uniform(s.x_min, s.x_max)),
+        t=float(rng.uniform(s.t_min, s.t_max)),
+        acq_value=float(rng.normal()),
+        shots=config.schedule.shots_after if converged else config.schedule.shots_before,
+        measure_noise=not converged,
+        noise_at_t=float(rng.uniform(0.1, 1)),
+        t_opt=float(rng.uniform(s.t_min, s.t_max)),
+        converged=converged,
+        hyperparameters={k: float(rng.normal()) for k in HYPERPARAMETERS},
+        acq_map=rng.normal(size=(n_x, n_t)).astype(np.float32),
+        f_mean=rng.normal(size=n_x),
+        f_var=rng.uniform(size=n_x),
+        noise_mean=rng.uniform(size=n_t),
+        noise_var=rng.uniform(size=n_t),
+        latency_s=float(rng.uniform(0.1, 1)),
+    )
 
 
 def sweep(t: float, rng: np.random.Generator) -> np.ndarray:
@@ -93,14 +104,30 @@ def shot_value(reading: Reading, k: int, spectra: bool, reject: bool) -> ShotVal
     if not spectra:
         return ShotValue(float(reading.value), True, "", None)
     amplitude = float(np.mean(reading.spectrum[1]))
-    fit = SHOFit(value=amplitude, amplitude=amplitude, amplitude_se=0.1, resonance_hz=372_000.0 + k,
-                 resonance_se=5.0, q=250.0, q_se=3.0, phase_deg=90.0, sign=1.0, ok=True,
-                 reason="" if k % 7 else "nominal resonance used: the free fit did not converge")
+    fit = SHOFit(
+        value=amplitude,
+        amplitude=amplitude,
+        amplitude_se=0.1,
+        resonance_hz=372_000.0 + k,
+        resonance_se=5.0,
+        q=250.0,
+        q_se=3.0,
+        phase_deg=90.0,
+        sign=1.0,
+        ok=True,
+        reason="" if k % 7 else "nominal resonance used: the free fit did not converge",
+    )
     return ShotValue(amplitude, True, "", fit)
 
 
-def point_commits(config: CampaignConfig, index: int, seed: int = 0, spectra: bool = False, fail_every: int = 25,
-                  reject_every: int = 0) -> list[list[Event]]:
+def point_commits(
+    config: CampaignConfig,
+    index: int,
+    seed: int = 0,
+    spectra: bool = False,
+    fail_every: int = 25,
+    reject_every: int = 0,
+) -> list[list[Event]]:
     """The event batches one point commits, in order, as a campaign loop commits them: its
     decision (a BO point), a failed attempt at its first shot (every ``fail_every``-th point),
     each shot, the last with the point. ``reject_every``: every such shot of the point is rejected."""
@@ -113,8 +140,12 @@ def point_commits(config: CampaignConfig, index: int, seed: int = 0, spectra: bo
         x, t, n_shots, step = d.x, d.t, d.shots, d.step
     else:
         s = config.space
-        x, t, n_shots, step = (float(rng.uniform(s.x_min, s.x_max)),), float(rng.uniform(s.t_min, s.t_max)), \
-            config.schedule.shots_before, -1
+        x, t, n_shots, step = (
+            (float(rng.uniform(s.x_min, s.x_max)),),
+            float(rng.uniform(s.t_min, s.t_max)),
+            config.schedule.shots_before,
+            -1,
+        )
     if spectra:
         t = float(np.clip(rng.lognormal(np.log(0.47), 0.3), config.space.t_min, config.space.t_max))
     if fail_every and index % fail_every == fail_every - 1:
@@ -193,7 +224,7 @@ def grow_new(config: CampaignConfig, sizes: list[int], repeats: int, spectra: bo
     out[max(sizes)]["finished_bytes"] = finished.stat().st_size
     finished.unlink()
     for n in sizes:
-        total, hdf5 = zip(*times[n:n + repeats])
+        total, hdf5 = zip(*times[n : n + repeats])
         out[n] |= {"s": statistics.median(total), "hdf5_s": statistics.median(hdf5)}
     return out
 
@@ -213,8 +244,10 @@ def grow_pair(config: CampaignConfig, sizes: list[int], repeats: int, spectra: b
     """The same campaign grown twice, point by point in turn, with and without the tables'
     checksums: {n: {"checked_s", "unchecked_s": medians per point over the ``repeats`` points
     after n, "checked_bytes", "unchecked_bytes": the running files' sizes at n}}."""
-    recorders = {"checked": AppendingRecorder.create(folder / "checked.h5", started(config)),
-                 "unchecked": UncheckedRecorder.create(folder / "unchecked.h5", started(config))}
+    recorders = {
+        "checked": AppendingRecorder.create(folder / "checked.h5", started(config)),
+        "unchecked": UncheckedRecorder.create(folder / "unchecked.h5", started(config)),
+    }
     times: dict[str, list[float]] = {name: [] for name in recorders}
     out: dict[int, dict] = {}
     try:
@@ -228,7 +261,7 @@ def grow_pair(config: CampaignConfig, sizes: list[int], repeats: int, spectra: b
         for recorder in recorders.values():
             recorder.close()
     for n in sizes:
-        out[n] |= {f"{name}_s": statistics.median(times[name][n:n + repeats]) for name in recorders}
+        out[n] |= {f"{name}_s": statistics.median(times[name][n : n + repeats]) for name in recorders}
     return out
 
 
@@ -237,20 +270,34 @@ def compare_checksums(configs: dict, kinds: list[str], sizes: list[int], repeats
     rows = []
     for kind in kinds:
         config = configs[kind].with_overrides(schedule={"n_steps": max(sizes) + repeats})
-        print(f"{kind}: Recorder.commit per point (journal + HDF5), median of {repeats} points after n, the two "
-              "campaigns grown in turn", flush=True)
-        print(f"{'n':>6} {'no checksums ms':>16} {'fletcher32 ms':>14} {'ratio':>6} {'file MB':>8} {'file MB':>8}",
-              flush=True)
+        print(
+            f"{kind}: Recorder.commit per point (journal + HDF5), median of {repeats} points after n, the two "
+            "campaigns grown in turn",
+            flush=True,
+        )
+        print(
+            f"{'n':>6} {'no checksums ms':>16} {'fletcher32 ms':>14} {'ratio':>6} {'file MB':>8} {'file MB':>8}",
+            flush=True,
+        )
         with tempfile.TemporaryDirectory(prefix="noisebo-storage-") as tmp:
             pair = grow_pair(config, sizes, repeats, kind == "spectra", Path(tmp))
         for n in sizes:
             p = pair[n]
-            row = {"kind": kind, "n": n, "unchecked_ms": p["unchecked_s"] * 1e3, "checked_ms": p["checked_s"] * 1e3,
-                   "ratio": p["checked_s"] / p["unchecked_s"], "unchecked_mb": p["unchecked_bytes"] / 1e6,
-                   "checked_mb": p["checked_bytes"] / 1e6}
+            row = {
+                "kind": kind,
+                "n": n,
+                "unchecked_ms": p["unchecked_s"] * 1e3,
+                "checked_ms": p["checked_s"] * 1e3,
+                "ratio": p["checked_s"] / p["unchecked_s"],
+                "unchecked_mb": p["unchecked_bytes"] / 1e6,
+                "checked_mb": p["checked_bytes"] / 1e6,
+            }
             rows.append(row)
-            print(f"{n:>6} {row['unchecked_ms']:>16.2f} {row['checked_ms']:>14.2f} {row['ratio']:>6.3f} "
-                  f"{row['unchecked_mb']:>8.2f} {row['checked_mb']:>8.2f}", flush=True)
+            print(
+                f"{n:>6} {row['unchecked_ms']:>16.2f} {row['checked_ms']:>14.2f} {row['ratio']:>6.3f} "
+                f"{row['unchecked_mb']:>8.2f} {row['checked_mb']:>8.2f}",
+                flush=True,
+            )
     return rows
 
 
@@ -275,12 +322,17 @@ def main(argv=None) -> int:
     parser.add_argument("--old-repeats", type=int, default=3, help="points timed after each n (old)")
     parser.add_argument("--kind", default="scalar,spectra")
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
-    parser.add_argument("--checksums", action="store_true",
-                        help="instead: the commit time with and without the tables' fletcher32 checksums")
+    parser.add_argument(
+        "--checksums",
+        action="store_true",
+        help="instead: the commit time with and without the tables' fletcher32 checksums",
+    )
     args = parser.parse_args(argv)
     sizes = [int(v) for v in args.n.split(",")]
-    configs = {"scalar": load_config(ROOT / "data/configs/forrester.yaml"),
-               "spectra": load_config(ROOT / "data/configs/pfm.yaml")}
+    configs = {
+        "scalar": load_config(ROOT / "data/configs/forrester.yaml"),
+        "spectra": load_config(ROOT / "data/configs/pfm.yaml"),
+    }
     if args.checksums:
         rows = compare_checksums(configs, args.kind.split(","), sizes, args.repeats)
         if args.json:
@@ -290,10 +342,16 @@ def main(argv=None) -> int:
     for kind in args.kind.split(","):
         config, spectra = configs[kind], kind == "spectra"
         config = config.with_overrides(schedule={"n_steps": max(sizes) + args.repeats})
-        print(f"{kind}: grid {config.space.n_x} x {config.space.n_t}; per point: Recorder.commit of its decision, "
-              f"shots and point (journal + HDF5), median", flush=True)
-        print(f"{'n':>6} {'old ms':>8} {'of which HDF5':>13} {'new ms':>7} {'of which HDF5':>13} {'old file':>9} "
-              f"{'new file':>9} {'finished':>9}", flush=True)
+        print(
+            f"{kind}: grid {config.space.n_x} x {config.space.n_t}; per point: Recorder.commit of its decision, "
+            f"shots and point (journal + HDF5), median",
+            flush=True,
+        )
+        print(
+            f"{'n':>6} {'old ms':>8} {'of which HDF5':>13} {'new ms':>7} {'of which HDF5':>13} {'old file':>9} "
+            f"{'new file':>9} {'finished':>9}",
+            flush=True,
+        )
         with tempfile.TemporaryDirectory(prefix="noisebo-storage-") as tmp:
             new = grow_new(config, sizes, args.repeats, spectra, Path(tmp))
             state, built = engine.start(started(config)), 0
@@ -303,13 +361,24 @@ def main(argv=None) -> int:
                         state = engine.apply_all(state, batch)
                 built = n
                 old = old_at(config, n, args.old_repeats, spectra, Path(tmp), state)
-                row = {"kind": kind, "n": n, "old_ms": old["s"] * 1e3, "old_hdf5_ms": old["hdf5_s"] * 1e3,
-                       "new_ms": new[n]["s"] * 1e3, "new_hdf5_ms": new[n]["hdf5_s"] * 1e3, "old_mb": old["bytes"] / 1e6,
-                       "new_mb": new[n]["bytes"] / 1e6, "finished_mb": new[n]["finished_bytes"] / 1e6}
+                row = {
+                    "kind": kind,
+                    "n": n,
+                    "old_ms": old["s"] * 1e3,
+                    "old_hdf5_ms": old["hdf5_s"] * 1e3,
+                    "new_ms": new[n]["s"] * 1e3,
+                    "new_hdf5_ms": new[n]["hdf5_s"] * 1e3,
+                    "old_mb": old["bytes"] / 1e6,
+                    "new_mb": new[n]["bytes"] / 1e6,
+                    "finished_mb": new[n]["finished_bytes"] / 1e6,
+                }
                 rows.append(row)
-                print(f"{n:>6} {row['old_ms']:>8.1f} {row['old_hdf5_ms']:>13.1f} {row['new_ms']:>7.1f} "
-                      f"{row['new_hdf5_ms']:>13.1f} {row['old_mb']:>7.1f}MB {row['new_mb']:>7.1f}MB "
-                      f"{row['finished_mb']:>7.1f}MB", flush=True)
+                print(
+                    f"{n:>6} {row['old_ms']:>8.1f} {row['old_hdf5_ms']:>13.1f} {row['new_ms']:>7.1f} "
+                    f"{row['new_hdf5_ms']:>13.1f} {row['old_mb']:>7.1f}MB {row['new_mb']:>7.1f}MB "
+                    f"{row['finished_mb']:>7.1f}MB",
+                    flush=True,
+                )
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

@@ -74,8 +74,12 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory(prefix="noisebo-sweeps-") as tmp, local_server(Path(tmp) / "server") as env:
         tmp = Path(tmp)
-        deployed = subprocess.run([str(BIN / "noisebo"), "deploy", args.config, "--pool", "bench", "--out",
-                                   str(tmp / "unused")], env=env, capture_output=True, text=True)
+        deployed = subprocess.run(
+            [str(BIN / "noisebo"), "deploy", args.config, "--pool", "bench", "--out", str(tmp / "unused")],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         if deployed.returncode:
             raise SystemExit(deployed.stdout + deployed.stderr)
         for name, options in ENGINES.items():
@@ -83,12 +87,29 @@ def main(argv=None) -> int:
             workers = []
             if "--runner" in options and options[options.index("--runner") + 1] == "workers":
                 logs = [tmp / f"worker{i}.log" for i in (1, 2)]
-                workers = [start([str(BIN / "prefect"), "worker", "start", "--pool", "bench", "--limit", "1"],
-                                 env, log) for log in logs]
+                workers = [
+                    start([str(BIN / "prefect"), "worker", "start", "--pool", "bench", "--limit", "1"], env, log)
+                    for log in logs
+                ]
                 wait_for(lambda logs=logs: all("started" in log.read_text() for log in logs), 120, "two workers", logs)
             started = time.perf_counter()
-            done = subprocess.run([str(BIN / "noisebo"), "sweep", args.config, "--seeds", args.seeds, "--policy",
-                                   args.policy, "--out", str(folder), *options], env=env, capture_output=True, text=True)
+            done = subprocess.run(
+                [
+                    str(BIN / "noisebo"),
+                    "sweep",
+                    args.config,
+                    "--seeds",
+                    args.seeds,
+                    "--policy",
+                    args.policy,
+                    "--out",
+                    str(folder),
+                    *options,
+                ],
+                env=env,
+                capture_output=True,
+                text=True,
+            )
             wall = time.perf_counter() - started
             for worker in workers:
                 stop(worker)
@@ -96,13 +117,20 @@ def main(argv=None) -> int:
                 raise SystemExit(f"{name}: sweep failed\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
             same, total = equal_to_alone(config, seeds, policies, folder)
             rows.append({"engine": name, "campaigns": n, "wall_s": wall, "equal_to_alone": same})
-            print(f"{name:>24}: {n} campaigns in {wall:6.1f} s, {same}/{total} equal to the seed run alone",
-                  file=sys.stderr, flush=True)
+            print(
+                f"{name:>24}: {n} campaigns in {wall:6.1f} s, {same}/{total} equal to the seed run alone",
+                file=sys.stderr,
+                flush=True,
+            )
     base = rows[0]["wall_s"]
-    print(f"\n{config.name}: seeds {args.seeds} x {policies} ({n} campaigns), wall time including each command's start-up")
+    print(
+        f"\n{config.name}: seeds {args.seeds} x {policies} ({n} campaigns), wall time including each command's start-up"
+    )
     print("| engine | wall time (s) | vs sequential | campaigns equal to the seed alone |\n|---|---|---|---|")
     for r in rows:
-        print(f"| {r['engine']} | {r['wall_s']:.1f} | {r['wall_s'] / base:.2f} | {r['equal_to_alone']}/{r['campaigns']} |")
+        print(
+            f"| {r['engine']} | {r['wall_s']:.1f} | {r['wall_s'] / base:.2f} | {r['equal_to_alone']}/{r['campaigns']} |"
+        )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(rows, indent=1))

@@ -80,16 +80,20 @@ def main(argv=None) -> int:
     s = base.space
     t_star = law_t_star(base, instrument)
     a0, a1 = law_amplitudes(instrument.noise_law, s.t_min, s.t_max)
-    print(f"{base.name}: t* = {LAW} = {t_star:.4f} s (the optimum with the x-independent noise law); true law ~ sqrt(A1^2/t + A0^2) with A1 = {a1:.3f}, A0 = {a0:.3f} "
-          f"(A0 is {100 * a0**2 / (a1**2 / t_star + a0**2):.0f} % of the noise variance at t*); {args.trials} trials")
+    print(
+        f"{base.name}: t* = {LAW} = {t_star:.4f} s (the optimum with the x-independent noise law); true law ~ sqrt(A1^2/t + A0^2) with A1 = {a1:.3f}, A0 = {a0:.3f} "
+        f"(A0 is {100 * a0**2 / (a1**2 / t_star + a0**2):.0f} % of the noise variance at t*); {args.trials} trials"
+    )
     print("| seed times | shots before convergence | median abs(t_opt - t*)/t* | within 10 % |\n|---|---|---|---|")
     for scale in ("log", "log_span"):
         for shots in sorted({base.schedule.shots_before, 30, 50, 100}):
             config = base.with_overrides(schedule={"seed_t_scale": scale, "shots_before": shots})
             errors = simulate(config, instrument.noise_law, t_star, args.trials)
             mark = " (config)" if (scale, shots) == (base.schedule.seed_t_scale, base.schedule.shots_before) else ""
-            print(f"| {scale}{mark} | {shots} | {100 * np.median(errors):.1f} % | {100 * np.mean(errors <= 0.10):.0f} % |",
-                  flush=True)
+            print(
+                f"| {scale}{mark} | {shots} | {100 * np.median(errors):.1f} % | {100 * np.mean(errors <= 0.10):.0f} % |",
+                flush=True,
+            )
     return 0
 
 

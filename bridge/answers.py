@@ -21,18 +21,24 @@ class ShotRequest(Answer):
     ``/shots/{point}/{shot}``."""
 
     kind: Literal["shot"] = Field(description="a shot is wanted")
-    campaign: str = Field(description="the campaign's id, NAME/POLICY/sSEED@START (UTC); copy it into the reading "
-                                      "to have a reading for another campaign refused")
+    campaign: str = Field(
+        description="the campaign's id, NAME/POLICY/sSEED@START (UTC); copy it into the reading "
+        "to have a reading for another campaign refused"
+    )
     point: int = Field(description="the point's index in the campaign, from 0 (seed points first)")
     shot: int = Field(description="the shot's index within the point, from 0: the one to measure now")
     step: int = Field(description="the BO step that proposed the point, counted from 1; 0 for a seed point")
-    x: list[float] = Field(description="the position: one coordinate per axis of `space.axes`, in that axis's "
-                                       "`units` (the config's own units, not scaled)")
+    x: list[float] = Field(
+        description="the position: one coordinate per axis of `space.axes`, in that axis's "
+        "`units` (the config's own units, not scaled)"
+    )
     t: float = Field(description="the exposure or sweep time (s)")
-    wanted: int = Field(description="the shots the point gets in all: shots 0 to wanted - 1; those from `shot` on "
-                                    "are still to come")
-    attempt: int = Field(description="failed attempts at this shot so far (0: the first try); an error posted for "
-                                     "this shot carries it")
+    wanted: int = Field(
+        description="the shots the point gets in all: shots 0 to wanted - 1; those from `shot` on are still to come"
+    )
+    attempt: int = Field(
+        description="failed attempts at this shot so far (0: the first try); an error posted for this shot carries it"
+    )
     seed: int = Field(description="the campaign's seed (with point and shot, it keys a simulator's random draws)")
     reading: Literal["scalar", "spectrum"] = Field(description="what to post: a value, or a spectrum")
 
@@ -62,8 +68,9 @@ class Recorded(Answer):
     duplicate: bool = Field(description="true: it was journaled before, by an earlier post of the same reading")
     point: int = Field(description="the point it belongs to")
     shot: int = Field(description="the shot it belongs to")
-    next: ShotRequest | None = Field(None, description="the next wanted shot, when one is wanted at once (saves a "
-                                                       "poll of /next); absent otherwise")
+    next: ShotRequest | None = Field(
+        None, description="the next wanted shot, when one is wanted at once (saves a poll of /next); absent otherwise"
+    )
 
 
 class ErrorAnswer(Answer):
@@ -89,8 +96,9 @@ class LastPoint(Answer):
     x: list[float] = Field(description="its position, in the units of `space.axes`")
     t: float = Field(description="its exposure or sweep time (s)")
     value: float = Field(description="the mean of its shots, in the units of f")
-    noise: float = Field(description="the single-shot noise sd it was given (measured or from the noise model), in "
-                                     "the units of f")
+    noise: float = Field(
+        description="the single-shot noise sd it was given (measured or from the noise model), in the units of f"
+    )
     shots: int = Field(description="its number of shots")
 
 

@@ -65,8 +65,15 @@ class CampaignRefused(RuntimeError):
 Measure = Callable[[ShotRequest], Any]
 
 
-def serve_instrument(url: str, token: str, measure: Measure, poll_s: float = 25.0, retry_s: float = 10.0,
-                     log: Callable[[str], None] | None = None, cafile: str | None = None) -> str:
+def serve_instrument(
+    url: str,
+    token: str,
+    measure: Measure,
+    poll_s: float = 25.0,
+    retry_s: float = 10.0,
+    log: Callable[[str], None] | None = None,
+    cafile: str | None = None,
+) -> str:
     """Measure the shots the campaign at ``url`` asks for until it ends; returns its final
     status ("completed", "failed", "aborted"). ``measure(request)`` returns a number, a
     ``Spectrum``, or rows (a list of lists or a 2-D array) for a spectrum with the "sho"
@@ -82,7 +89,11 @@ def serve_instrument(url: str, token: str, measure: Measure, poll_s: float = 25.
         answer = answer.get("next") or link.call("GET", f"/next?wait={poll_s:g}")
         kind = answer.get("kind")
         if kind == "done":
-            say("campaign ended: " + answer.get("status", "?") + (": " + answer["reason"] if answer.get("reason") else ""))
+            say(
+                "campaign ended: "
+                + answer.get("status", "?")
+                + (": " + answer["reason"] if answer.get("reason") else "")
+            )
             return answer.get("status", "?")
         if kind != "shot":
             answer = {}
@@ -99,8 +110,7 @@ def reading_body(request: ShotRequest, measure: Measure) -> dict:
     try:
         result = measure(request)
     except Exception as error:  # noqa: BLE001 - reported to the campaign, which asks again
-        return {"error": f"{type(error).__name__}: {error}", "attempt": request.attempt,
-                "campaign": request.campaign}
+        return {"error": f"{type(error).__name__}: {error}", "attempt": request.attempt, "campaign": request.campaign}
     failed = {"attempt": request.attempt, "campaign": request.campaign}
     if isinstance(result, (int, float)) or (hasattr(result, "ndim") and result.ndim == 0):
         value = float(result)
@@ -135,15 +145,25 @@ def packed_spectrum(rows: Any) -> dict | None:
         return None
     if sys.byteorder == "big":
         flat.byteswap()
-    return {"rows": n_rows, "dtype": "float32" if code == "f" else "float64",
-            "data": base64.b64encode(flat.tobytes()).decode("ascii")}
+    return {
+        "rows": n_rows,
+        "dtype": "float32" if code == "f" else "float64",
+        "data": base64.b64encode(flat.tobytes()).decode("ascii"),
+    }
 
 
 class _Link:
     """HTTP calls to the campaign that wait out network errors and restarts."""
 
-    def __init__(self, url: str, token: str, poll_s: float, retry_s: float, say: Callable[[str], None],
-                 context: ssl.SSLContext | None = None):
+    def __init__(
+        self,
+        url: str,
+        token: str,
+        poll_s: float,
+        retry_s: float,
+        say: Callable[[str], None],
+        context: ssl.SSLContext | None = None,
+    ):
         self.url, self.token, self.poll_s, self.retry_s, self.say = url, token, poll_s, retry_s, say
         self.context = context
         self.connected = False
@@ -155,8 +175,12 @@ class _Link:
         data = None if body is None else json.dumps(body, allow_nan=False).encode()
         delay = 0.25
         while True:
-            request = urllib.request.Request(self.url + path, data=data, method=method, headers={
-                "Authorization": "Bearer " + self.token, "Content-Type": "application/json"})
+            request = urllib.request.Request(
+                self.url + path,
+                data=data,
+                method=method,
+                headers={"Authorization": "Bearer " + self.token, "Content-Type": "application/json"},
+            )
             try:
                 with urllib.request.urlopen(request, timeout=self.poll_s + 30.0, context=self.context) as response:
                     answer = json.loads(response.read() or b"{}")

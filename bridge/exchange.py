@@ -85,8 +85,9 @@ class Exchange:
         with self._cond:
             request = self._wanted()
             if request is None or tuple(float(v) for v in x) != request.x or float(t) != request.t:
-                raise InstrumentError(f"the bridge was asked for a shot at x={list(x)}, t={t} that the campaign does not "
-                                      "want now")
+                raise InstrumentError(
+                    f"the bridge was asked for a shot at x={list(x)}, t={t} that the campaign does not want now"
+                )
             key, started = (request.point, request.taken), self._clock()
             while True:
                 handed = self._handed.get(key)
@@ -95,9 +96,11 @@ class Exchange:
                         raise InstrumentError(handed.outcome.reason)
                     return handed.outcome
                 if self._silent_since(key, t, started):
-                    raise InstrumentTimeout(f"no reading from the instrument PC for point {key[0]} shot {key[1]}: "
-                                            f"nothing heard from it for {self.silence_s:g} s"
-                                            + (f" beyond the shot's t = {t:g} s" if key in self._taken_at else ""))
+                    raise InstrumentTimeout(
+                        f"no reading from the instrument PC for point {key[0]} shot {key[1]}: "
+                        f"nothing heard from it for {self.silence_s:g} s"
+                        + (f" beyond the shot's t = {t:g} s" if key in self._taken_at else "")
+                    )
                 if self.closed:
                     raise InstrumentError("the bridge was shut down")
                 signal_name = stop_requested()
@@ -196,8 +199,9 @@ class Exchange:
             if state is None:
                 raise WireError(503, "the campaign is starting; send the reading again in a moment")
             if body.campaign is not None and body.campaign != campaign_id(state):
-                raise WireError(409, f"campaign: the reading is for {body.campaign!r}; this bridge serves "
-                                     f"{campaign_id(state)!r}")
+                raise WireError(
+                    409, f"campaign: the reading is for {body.campaign!r}; this bridge serves {campaign_id(state)!r}"
+                )
             handed = _Handed(outcome, body.attempt)
             if _recorded(state, point, shot, handed):
                 return self._duplicate(state, point, shot, handed)
@@ -229,16 +233,21 @@ class Exchange:
         if isinstance(step, Done):
             raise WireError(409, f"the campaign has ended ({step.status.value}); no reading is wanted")
         if not isinstance(step, Request):
-            raise WireError(409, f"point {point} shot {shot} is not wanted: the campaign is deciding its next point; "
-                                 "take the next shot from /next")
+            raise WireError(
+                409,
+                f"point {point} shot {shot} is not wanted: the campaign is deciding its next point; "
+                "take the next shot from /next",
+            )
         if (point, shot) != (step.point, step.taken):
             where = "is finished" if point < step.point else "is not wanted"
-            raise WireError(409, f"point {point} shot {shot} {where}; the shot wanted now is point {step.point} shot "
-                                 f"{step.taken}")
+            raise WireError(
+                409, f"point {point} shot {shot} {where}; the shot wanted now is point {step.point} shot {step.taken}"
+            )
         attempts = attempts_at(state, point, shot)
         if isinstance(handed.outcome, ShotError) and handed.attempt != attempts:
-            raise WireError(409, f"attempt {handed.attempt} at point {point} shot {shot}: the current attempt is "
-                                 f"{attempts}")
+            raise WireError(
+                409, f"attempt {handed.attempt} at point {point} shot {shot}: the current attempt is {attempts}"
+            )
 
     def campaign(self) -> EngineState | None:
         """The campaign as last committed (None before it starts), for the operator's page."""
@@ -256,20 +265,34 @@ class Exchange:
         step = engine.ask(state)
         current = None
         if isinstance(step, Request):
-            current = {"point": step.point, "step": shown_step(step.step), "shot": step.taken, "shots_wanted": step.wanted,
-                       "x": list(step.x), "t": step.t}
+            current = {
+                "point": step.point,
+                "step": shown_step(step.step),
+                "shot": step.taken,
+                "shots_wanted": step.wanted,
+                "x": list(step.x),
+                "t": step.t,
+            }
         last_point = None
         if state.points:
             p = state.points[-1].committed.point
             last_point = {"x": p.x, "t": p.t, "value": p.value, "noise": p.noise, "shots": p.n_shots}
         return {
-            "status": state.status.value, "reason": state.reason, "campaign": campaign_id(state),
-            "points": len(state.points), "points_total": sched.n_seed + sched.n_steps,
-            "shots": state.n_shots, "failed_attempts": len(state.failures),
+            "status": state.status.value,
+            "reason": state.reason,
+            "campaign": campaign_id(state),
+            "points": len(state.points),
+            "points_total": sched.n_seed + sched.n_steps,
+            "shots": state.n_shots,
+            "failed_attempts": len(state.failures),
             "now": "measuring" if current else ("deciding" if state.status.value == "running" else "done"),
-            "current": current, "last_point": last_point,
-            "instrument_pc": {"connected": last is not None, "polling": polling > 0,
-                              "last_seen_s_ago": None if last is None else round(now - last, 1)},
+            "current": current,
+            "last_point": last_point,
+            "instrument_pc": {
+                "connected": last is not None,
+                "polling": polling > 0,
+                "last_seen_s_ago": None if last is None else round(now - last, 1),
+            },
         }
 
     def _wanted(self) -> Request | None:

@@ -46,8 +46,11 @@ def next_step(recorder: Recorder, say: Say, commit: Callable | None = None) -> R
         if not isinstance(step, DecisionDue):
             return step
         if not step.reduce:
-            say("deciding the final summary" if step.final else f"deciding step {step.step + 1} (the first decision "
-                "in a process compiles the models, about 10 s)")
+            say(
+                "deciding the final summary"
+                if step.final
+                else f"deciding step {step.step + 1} (the first decision in a process compiles the models, about 10 s)"
+            )
         commit(recorder.state, engine.advance(recorder.state))
 
 
@@ -60,14 +63,19 @@ def ask(path: Path, say: Say, resume: bool = False) -> tuple[EngineState, Reques
         return recorder.state, next_step(recorder, say)
 
 
-def tell(path: Path, point: int | None, outcomes_for: Callable[[ReadingShape], Sequence[Reading | ShotError]],
-         say: Say, on_events: Callable[[EngineState, Sequence[Event]], None] = lambda state, events: None,
-         ) -> tuple[EngineState, Request | Done, int]:
+def tell(
+    path: Path,
+    point: int | None,
+    outcomes_for: Callable[[ReadingShape], Sequence[Reading | ShotError]],
+    say: Say,
+    on_events: Callable[[EngineState, Sequence[Event]], None] = lambda state, events: None,
+) -> tuple[EngineState, Request | Done, int]:
     """Record the outcomes that ``outcomes_for(the campaign's reading shape)`` gives for the next
     wanted shots of the point being measured (``point``, when given, must be it), then make any
     decision that falls due; returns the state, the next request and the number recorded.
     ``ManualError`` before anything is recorded when they do not fit."""
     with Recorder.attach(path) as recorder:
+
         def commit(state, events):
             on_events(state, events)
             return recorder.commit(state, events)
@@ -75,14 +83,19 @@ def tell(path: Path, point: int | None, outcomes_for: Callable[[ReadingShape], S
         outcomes = outcomes_for(reading_shape(recorder.state))
         request = next_step(recorder, say, commit)
         if isinstance(request, Done):
-            raise ManualError(f"the campaign has ended ({request.status.value}"
-                              + (f": {request.reason}" if request.reason else "") + "); nothing is wanted")
+            raise ManualError(
+                f"the campaign has ended ({request.status.value}"
+                + (f": {request.reason}" if request.reason else "")
+                + "); nothing is wanted"
+            )
         if point is not None and point != request.point:
             raise ManualError(f"--point {point}: the point being measured is {request.point}")
         left = request.wanted - request.taken
         if not outcomes or len(outcomes) > left:
-            raise ManualError(f"point {request.point} wants {left} more shot{'s' * (left != 1)} "
-                              f"(shots {request.taken}-{request.wanted - 1}); got {len(outcomes)}")
+            raise ManualError(
+                f"point {request.point} wants {left} more shot{'s' * (left != 1)} "
+                f"(shots {request.taken}-{request.wanted - 1}); got {len(outcomes)}"
+            )
         for outcome in outcomes:
             step = engine.ask(recorder.state)
             if not isinstance(step, Request):
@@ -139,8 +152,10 @@ def describe(state: EngineState, step: Request | Done, path: Path) -> list[str]:
     left, last = step.wanted - step.taken, step.wanted - 1
     shots = f"1 more shot (shot {last})" if left == 1 else f"{left} more shots (shots {step.taken}-{last})"
     readings = "VALUE..." if reading_shape(state).reading == "scalar" else "--spectrum FILE..."
-    return [f"point {step.point} ({label}): measure at x = {where} for t = {step.t:.6g} s; {shots}",
-            f"then: noisebo tell {path} --point {step.point} {readings}"]
+    return [
+        f"point {step.point} ({label}): measure at x = {where} for t = {step.t:.6g} s; {shots}",
+        f"then: noisebo tell {path} --point {step.point} {readings}",
+    ]
 
 
 def as_json(state: EngineState, step: Request | Done) -> dict:

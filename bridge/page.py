@@ -20,11 +20,13 @@ if TYPE_CHECKING:
 REFRESH_S = 2
 LAST_POINTS = 8
 WIDTH, HEIGHT, MARGIN = 440, 240, (46, 14, 34, 40)  # px; margin: left, right, top, bottom
-STYLE = ("body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}h1{font-size:1.3em;margin:0 0 .4em}"
-         "h2{font-size:1.05em;margin:1.2em 0 .4em}.now{font-size:1.15em;background:#eef4fb;padding:.6em .8em;"
-         "border-radius:6px}.bad{color:#b00}.ok{color:#070}table{border-collapse:collapse}"
-         "td,th{padding:.15em .7em;text-align:right}th{border-bottom:1px solid #999}"
-         "svg{background:#fff;border:1px solid #ddd;margin-right:1em}.plots{display:flex;flex-wrap:wrap}")
+STYLE = (
+    "body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}h1{font-size:1.3em;margin:0 0 .4em}"
+    "h2{font-size:1.05em;margin:1.2em 0 .4em}.now{font-size:1.15em;background:#eef4fb;padding:.6em .8em;"
+    "border-radius:6px}.bad{color:#b00}.ok{color:#070}table{border-collapse:collapse}"
+    "td,th{padding:.15em .7em;text-align:right}th{border-bottom:1px solid #999}"
+    "svg{background:#fff;border:1px solid #ddd;margin-right:1em}.plots{display:flex;flex-wrap:wrap}"
+)
 
 
 def number(value, digits: int = 4) -> str:
@@ -45,19 +47,30 @@ def render(status: dict, state: EngineState | None) -> str:
     if state is None:
         body.append("<p class='now'>starting: the campaign has not begun yet</p>")
     else:
-        body += [_now(status, state), _progress(status, state), _connection(status["instrument_pc"]),
-                 "<h2>What the campaign has learned</h2><div class='plots'>", _f_plot(state), _noise_plot(state),
-                 "</div>", _last_points(state)]
-    return (f"<!doctype html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='{REFRESH_S}'>"
-            f"<title>noisebo campaign</title><style>{STYLE}</style></head><body>{''.join(body)}</body></html>")
+        body += [
+            _now(status, state),
+            _progress(status, state),
+            _connection(status["instrument_pc"]),
+            "<h2>What the campaign has learned</h2><div class='plots'>",
+            _f_plot(state),
+            _noise_plot(state),
+            "</div>",
+            _last_points(state),
+        ]
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='{REFRESH_S}'>"
+        f"<title>noisebo campaign</title><style>{STYLE}</style></head><body>{''.join(body)}</body></html>"
+    )
 
 
 def _now(status: dict, state: EngineState) -> str:
     current = status.get("current")
     if current:
         kind = "seed point" if current["step"] == 0 else f"BO step {current['step']}"
-        return (f"<p class='now'>measuring point {current['point']} ({kind}) at x = {number(tuple(current['x']))}, "
-                f"t = {number(current['t'])} s: shot {current['shot'] + 1} of {current['shots_wanted']}</p>")
+        return (
+            f"<p class='now'>measuring point {current['point']} ({kind}) at x = {number(tuple(current['x']))}, "
+            f"t = {number(current['t'])} s: shot {current['shot'] + 1} of {current['shots_wanted']}</p>"
+        )
     if status["now"] == "deciding":
         return "<p class='now'>deciding where and how long to measure next</p>"
     reason = f": {html.escape(state.reason)}" if state.reason else ""
@@ -66,15 +79,20 @@ def _now(status: dict, state: EngineState) -> str:
 
 def _progress(status: dict, state: EngineState) -> str:
     done, total = status["points"], status["points_total"]
-    budget = ("" if state.budget_s is None else
-              f"; budget {number(state.budget_s)} s, {number(max(state.budget_s - state.spent_s, 0.0))} s left")
+    budget = (
+        ""
+        if state.budget_s is None
+        else f"; budget {number(state.budget_s)} s, {number(max(state.budget_s - state.spent_s, 0.0))} s left"
+    )
     t_opt = number(state.decisions[-1].t_opt) if state.decisions else "-"
     converged = "yes" if state.data.is_converged else "not yet"
-    return (f"<h2>Progress</h2><p><progress value='{done}' max='{max(total, 1)}'></progress> {done} of {total} points, "
-            f"{status['shots']} shots, {status['failed_attempts']} failed attempt{'s' * (status['failed_attempts'] != 1)}; "
-            f"instrument time "
-            f"{number(state.spent_s)} s{budget}</p><p>predicted optimal t {t_opt} s; noise model converged: "
-            f"{converged}</p>")
+    return (
+        f"<h2>Progress</h2><p><progress value='{done}' max='{max(total, 1)}'></progress> {done} of {total} points, "
+        f"{status['shots']} shots, {status['failed_attempts']} failed attempt{'s' * (status['failed_attempts'] != 1)}; "
+        f"instrument time "
+        f"{number(state.spent_s)} s{budget}</p><p>predicted optimal t {t_opt} s; noise model converged: "
+        f"{converged}</p>"
+    )
 
 
 def _connection(pc: dict) -> str:
@@ -90,12 +108,16 @@ def _last_points(state: EngineState) -> str:
     for index in range(len(state.points) - 1, max(len(state.points) - LAST_POINTS, 0) - 1, -1):
         p = state.points[index].committed.point
         measured = "" if p.noise_measured else " (model)"
-        rows.append(f"<tr><td>{index}</td><td>{number(p.x)}</td><td>{number(p.t)}</td><td>{p.n_shots}</td>"
-                    f"<td>{number(p.value)}</td><td>{number(p.noise, 3)}{measured}</td></tr>")
+        rows.append(
+            f"<tr><td>{index}</td><td>{number(p.x)}</td><td>{number(p.t)}</td><td>{p.n_shots}</td>"
+            f"<td>{number(p.value)}</td><td>{number(p.noise, 3)}{measured}</td></tr>"
+        )
     if not rows:
         return "<h2>Last points</h2><p>none yet</p>"
-    return ("<h2>Last points</h2><table><tr><th>point</th><th>x</th><th>t (s)</th><th>shots</th><th>value</th>"
-            f"<th>noise</th></tr>{''.join(rows)}</table>")
+    return (
+        "<h2>Last points</h2><table><tr><th>point</th><th>x</th><th>t (s)</th><th>shots</th><th>value</th>"
+        f"<th>noise</th></tr>{''.join(rows)}</table>"
+    )
 
 
 def _f_plot(state: EngineState) -> str:
@@ -110,16 +132,21 @@ def _f_plot(state: EngineState) -> str:
         x = grids(state.config).x
         x = x[:, 0] if x.ndim == 2 else x
         sd = np.sqrt(np.maximum(last.f_var, 0.0))
-        series += [("band", x, last.f_mean - 2 * sd, last.f_mean + 2 * sd, "#cfe0f3"),
-                   ("line", x, last.f_mean, None, "#1f5fa8")]
+        series += [
+            ("band", x, last.f_mean - 2 * sd, last.f_mean + 2 * sd, "#cfe0f3"),
+            ("line", x, last.f_mean, None, "#1f5fa8"),
+        ]
     if pts:
         series.append(("points", [p.x[0] for p in pts], [p.value for p in pts], None, "#d2540a"))
     return plot("f: the model (mean ± 2 sd) and the measured points", "x", "f", series)
 
 
 def _noise_plot(state: EngineState) -> str:
-    measured = [e.committed.point for e in state.points if e.committed.point.noise_measured
-                and math.isfinite(e.committed.point.shot_std)]
+    measured = [
+        e.committed.point
+        for e in state.points
+        if e.committed.point.noise_measured and math.isfinite(e.committed.point.shot_std)
+    ]
     series: list[tuple] = []
     if state.decisions:
         from noisebo.models.grids import grids
@@ -128,16 +155,20 @@ def _noise_plot(state: EngineState) -> str:
         if last.noise_mean.ndim == 1 and len(last.noise_mean) == len(t):
             sd = np.sqrt(np.maximum(last.noise_var, 0.0))
             low = np.maximum(last.noise_mean - 2 * sd, 0.0)  # an sd is never negative
-            series += [("band", t, low, last.noise_mean + 2 * sd, "#d9ecd0"),
-                       ("line", t, last.noise_mean, None, "#2d7a1f")]
+            series += [
+                ("band", t, low, last.noise_mean + 2 * sd, "#d9ecd0"),
+                ("line", t, last.noise_mean, None, "#2d7a1f"),
+            ]
     if measured:
         series.append(("points", [p.t for p in measured], [p.shot_std for p in measured], None, "#d2540a"))
     return plot("single-shot noise: the model and the measured sd", "t (s)", "noise", series, log_x=True)
 
 
 def _message_plot(title: str, message: str) -> str:
-    return (f"<svg width='{WIDTH}' height='{HEIGHT}' role='img'><text x='10' y='20'>{html.escape(title)}</text>"
-            f"<text x='{WIDTH // 2}' y='{HEIGHT // 2}' text-anchor='middle' fill='#777'>{html.escape(message)}</text></svg>")
+    return (
+        f"<svg width='{WIDTH}' height='{HEIGHT}' role='img'><text x='10' y='20'>{html.escape(title)}</text>"
+        f"<text x='{WIDTH // 2}' y='{HEIGHT // 2}' text-anchor='middle' fill='#777'>{html.escape(message)}</text></svg>"
+    )
 
 
 def ticks(lo: float, hi: float, n: int = 5) -> list[float]:
@@ -157,8 +188,10 @@ def plot(title: str, xlabel: str, ylabel: str, series: Sequence[tuple], log_x: b
         return _message_plot(title, "nothing measured yet")
     fx = (lambda v: np.log10(np.asarray(v, dtype=float))) if log_x else (lambda v: np.asarray(v, dtype=float))
     xs = np.concatenate([fx(s[1]) for s in series])
-    ys = np.concatenate([np.asarray(s[2], dtype=float) for s in series]
-                        + [np.asarray(s[3], dtype=float) for s in series if s[3] is not None])
+    ys = np.concatenate(
+        [np.asarray(s[2], dtype=float) for s in series]
+        + [np.asarray(s[3], dtype=float) for s in series if s[3] is not None]
+    )
     xs, ys = xs[np.isfinite(xs)], ys[np.isfinite(ys)]
     if not len(xs) or not len(ys):
         return _message_plot(title, "nothing measured yet")
@@ -170,8 +203,10 @@ def plot(title: str, xlabel: str, ylabel: str, series: Sequence[tuple], log_x: b
     left, right, top, bottom = MARGIN
     px = lambda v: left + (v - x0) / (x1 - x0) * (WIDTH - left - right)  # noqa: E731
     py = lambda v: HEIGHT - bottom - (v - y0) / (y1 - y0) * (HEIGHT - top - bottom)  # noqa: E731
-    parts = [f"<svg width='{WIDTH}' height='{HEIGHT}' role='img' font-size='11'>",
-             f"<text x='{left}' y='14' font-size='12'>{html.escape(title)}</text>"]
+    parts = [
+        f"<svg width='{WIDTH}' height='{HEIGHT}' role='img' font-size='11'>",
+        f"<text x='{left}' y='14' font-size='12'>{html.escape(title)}</text>",
+    ]
     for kind, sx, sy, hi, colour in series:
         sx, sy = fx(sx), np.asarray(sy, dtype=float)
         if kind == "band":
@@ -182,17 +217,24 @@ def plot(title: str, xlabel: str, ylabel: str, series: Sequence[tuple], log_x: b
             path = " ".join(f"{px(a):.1f},{py(b):.1f}" for a, b in zip(sx, sy) if math.isfinite(b))
             parts.append(f"<polyline points='{path}' fill='none' stroke='{colour}' stroke-width='1.6'/>")
         else:
-            parts += [f"<circle cx='{px(a):.1f}' cy='{py(b):.1f}' r='2.6' fill='{colour}'/>"
-                      for a, b in zip(sx, sy) if math.isfinite(a) and math.isfinite(b)]
-    parts.append(f"<line x1='{left}' y1='{HEIGHT - bottom}' x2='{WIDTH - right}' y2='{HEIGHT - bottom}' stroke='#555'/>"
-                 f"<line x1='{left}' y1='{top}' x2='{left}' y2='{HEIGHT - bottom}' stroke='#555'/>")
+            parts += [
+                f"<circle cx='{px(a):.1f}' cy='{py(b):.1f}' r='2.6' fill='{colour}'/>"
+                for a, b in zip(sx, sy)
+                if math.isfinite(a) and math.isfinite(b)
+            ]
+    parts.append(
+        f"<line x1='{left}' y1='{HEIGHT - bottom}' x2='{WIDTH - right}' y2='{HEIGHT - bottom}' stroke='#555'/>"
+        f"<line x1='{left}' y1='{top}' x2='{left}' y2='{HEIGHT - bottom}' stroke='#555'/>"
+    )
     for v in ticks(x0, x1):
-        label = number(10 ** v, 2) if log_x else number(v, 3)
+        label = number(10**v, 2) if log_x else number(v, 3)
         parts.append(f"<text x='{px(v):.1f}' y='{HEIGHT - bottom + 14}' text-anchor='middle'>{label}</text>")
     for v in ticks(y0, y1):
         parts.append(f"<text x='{left - 4}' y='{py(v) + 4:.1f}' text-anchor='end'>{number(v, 3)}</text>")
-    parts.append(f"<text x='{(left + WIDTH - right) / 2:.0f}' y='{HEIGHT - 6}' text-anchor='middle'>"
-                 f"{html.escape(xlabel)}</text><text x='12' y='{(top + HEIGHT - bottom) / 2:.0f}' "
-                 f"transform='rotate(-90 12 {(top + HEIGHT - bottom) / 2:.0f})' text-anchor='middle'>"
-                 f"{html.escape(ylabel)}</text></svg>")
+    parts.append(
+        f"<text x='{(left + WIDTH - right) / 2:.0f}' y='{HEIGHT - 6}' text-anchor='middle'>"
+        f"{html.escape(xlabel)}</text><text x='12' y='{(top + HEIGHT - bottom) / 2:.0f}' "
+        f"transform='rotate(-90 12 {(top + HEIGHT - bottom) / 2:.0f})' text-anchor='middle'>"
+        f"{html.escape(ylabel)}</text></svg>"
+    )
     return "".join(parts)

@@ -27,9 +27,11 @@ TOKEN_ENV = "NOISEBO_BRIDGE_TOKEN"
 DEFAULT_TOKEN_FILE = "~/.noisebo/bridge.token"
 MIN_TOKEN_CHARS = 32  # the shortest token accepted by a bridge that listens beyond this computer
 NEW_TOKEN_BYTES = 32  # a new token: 32 random bytes, 43 characters of URL-safe base64
-NEW_TOKEN_HINT = "python -c \"import secrets; print(secrets.token_urlsafe(32))\""
-MEASURED_BY_HAND = ("this campaign is measured by hand: create its file with `noisebo start {config}`, then repeat "
-                    "`noisebo ask FILE` and `noisebo tell FILE --point P VALUE...`")
+NEW_TOKEN_HINT = 'python -c "import secrets; print(secrets.token_urlsafe(32))"'
+MEASURED_BY_HAND = (
+    "this campaign is measured by hand: create its file with `noisebo start {config}`, then repeat "
+    "`noisebo ask FILE` and `noisebo tell FILE --point P VALUE...`"
+)
 LINGER_S = 10.0  # how long an ended campaign waits for its instrument PC to hear so
 
 
@@ -42,27 +44,47 @@ class RemoteSettings(FrozenModel):
     timeout after this long without a word from the instrument PC (beyond the shot's own t);
     ``max_body_mib``: the largest reading accepted; ``shape``: what a reading must look like."""
 
-    host: str = Field(default="127.0.0.1", min_length=1, description="the address the bridge listens on: "
-                      "127.0.0.1 this computer only; another (0.0.0.0: every interface) lets other computers in and "
-                      "needs a token of at least 32 characters, and TLS to keep it off the network in the clear")
+    host: str = Field(
+        default="127.0.0.1",
+        min_length=1,
+        description="the address the bridge listens on: "
+        "127.0.0.1 this computer only; another (0.0.0.0: every interface) lets other computers in and "
+        "needs a token of at least 32 characters, and TLS to keep it off the network in the clear",
+    )
     port: Count = Field(default=8765, ge=0, le=65535, description="the TCP port (0: any free one)")
-    token_file: str = Field(default=DEFAULT_TOKEN_FILE, min_length=1, description="the file holding the bearer "
-                            "token, created with a new random token (mode 600) when missing; the environment "
-                            "variable NOISEBO_BRIDGE_TOKEN overrides it")
-    tls_certfile: str | None = Field(default=None, min_length=1, description="the certificate (PEM) to serve HTTPS "
-                                     "with; given with tls_keyfile or not at all")
+    token_file: str = Field(
+        default=DEFAULT_TOKEN_FILE,
+        min_length=1,
+        description="the file holding the bearer "
+        "token, created with a new random token (mode 600) when missing; the environment "
+        "variable NOISEBO_BRIDGE_TOKEN overrides it",
+    )
+    tls_certfile: str | None = Field(
+        default=None,
+        min_length=1,
+        description="the certificate (PEM) to serve HTTPS with; given with tls_keyfile or not at all",
+    )
     tls_keyfile: str | None = Field(default=None, min_length=1, description="its private key (PEM)")
-    silence_s: Number = Field(default=120.0, gt=0, description="a shot fails as a timeout after this long (s) "
-                              "without a word from the instrument PC, beyond the shot's own t")
-    max_body_mib: Number = Field(default=64.0, gt=0, description="the largest reading accepted (MiB); a larger body "
-                                 "is refused (413)")
+    silence_s: Number = Field(
+        default=120.0,
+        gt=0,
+        description="a shot fails as a timeout after this long (s) "
+        "without a word from the instrument PC, beyond the shot's own t",
+    )
+    max_body_mib: Number = Field(
+        default=64.0, gt=0, description="the largest reading accepted (MiB); a larger body is refused (413)"
+    )
     shape: ReadingShape = Field(ReadingShape(), description="what a reading must look like")
 
     @model_validator(mode="after")
     def _tls_pair(self) -> RemoteSettings:
         if (self.tls_certfile is None) != (self.tls_keyfile is None):
-            given, missing = ("tls_certfile", "tls_keyfile") if self.tls_keyfile is None else ("tls_keyfile", "tls_certfile")
-            raise ValueError(f"{given} is given without {missing}: HTTPS needs the certificate and its key (both PEM files)")
+            given, missing = (
+                ("tls_certfile", "tls_keyfile") if self.tls_keyfile is None else ("tls_keyfile", "tls_certfile")
+            )
+            raise ValueError(
+                f"{given} is given without {missing}: HTTPS needs the certificate and its key (both PEM files)"
+            )
         return self
 
     @property
@@ -90,8 +112,12 @@ def bridge_token(token_file: str, host: str = "127.0.0.1", say=print) -> str:
     What is said names where the token is, never the token."""
     from_env = os.environ.get(TOKEN_ENV, "").strip()
     if from_env:
-        _long_enough(from_env, f"${TOKEN_ENV}", host, f"set it to a longer one ({NEW_TOKEN_HINT}) or unset it to use "
-                     "instrument.settings.token_file")
+        _long_enough(
+            from_env,
+            f"${TOKEN_ENV}",
+            host,
+            f"set it to a longer one ({NEW_TOKEN_HINT}) or unset it to use instrument.settings.token_file",
+        )
         say(f"bridge: token from ${TOKEN_ENV}")
         return from_env
     path = Path(token_file).expanduser()
@@ -99,8 +125,12 @@ def bridge_token(token_file: str, host: str = "127.0.0.1", say=print) -> str:
         token = path.read_text().strip()
         if not token:
             raise InstrumentUnavailable(f"the bridge's token file {path} is empty; delete it for a new token")
-        _long_enough(token, f"the token file {path}", host, f"delete it for a new one, or write a longer one there "
-                     f"({NEW_TOKEN_HINT})")
+        _long_enough(
+            token,
+            f"the token file {path}",
+            host,
+            f"delete it for a new one, or write a longer one there ({NEW_TOKEN_HINT})",
+        )
         say(f"bridge: token in {path}")
         return token
     token = secrets.token_urlsafe(NEW_TOKEN_BYTES)
@@ -114,7 +144,8 @@ def _long_enough(token: str, source: str, host: str, cure: str) -> None:
         return
     raise InstrumentUnavailable(
         f"instrument.settings.host {host} lets other computers reach the bridge, which then needs a token of at "
-        f"least {MIN_TOKEN_CHARS} characters; {source} holds one of {len(token)}: {cure}")
+        f"least {MIN_TOKEN_CHARS} characters; {source} holds one of {len(token)}: {cure}"
+    )
 
 
 def write_token(path: Path, token: str) -> None:
@@ -139,8 +170,10 @@ def check_tls(settings: RemoteSettings) -> None:
     try:
         ssl.create_default_context(ssl.Purpose.CLIENT_AUTH).load_cert_chain(certfile, keyfile)
     except (OSError, ssl.SSLError) as error:
-        raise InstrumentUnavailable(f"instrument.settings.tls_certfile/tls_keyfile: {certfile} and {keyfile} are not "
-                                    f"a PEM certificate and its key: {error}") from None
+        raise InstrumentUnavailable(
+            f"instrument.settings.tls_certfile/tls_keyfile: {certfile} and {keyfile} are not "
+            f"a PEM certificate and its key: {error}"
+        ) from None
 
 
 class RemoteInstrument:
@@ -177,19 +210,28 @@ class RemoteInstrument:
         try:
             server.start()
         except OSError as error:
-            raise InstrumentUnavailable(f"the bridge cannot listen on {s.host}:{s.port}: {error.strerror or error} "
-                                        "(another campaign's bridge? set instrument.settings.port)") from None
+            raise InstrumentUnavailable(
+                f"the bridge cannot listen on {s.host}:{s.port}: {error.strerror or error} "
+                "(another campaign's bridge? set instrument.settings.port)"
+            ) from None
         self._server = server
         url = server.url
         if s.host in ("0.0.0.0", "::"):  # every interface: name this machine as the instrument PC would
             url = f"{server.scheme}://{socket.gethostname()}:{server.port}"
         exposed = "" if is_loopback(s.host) else " (reachable from the network: keep the token secret)"
         if not is_loopback(s.host) and s.tls is None:
-            print(f"bridge: warning: plain HTTP on {s.host}: the token and the readings cross the network unencrypted; "
-                  "give instrument.settings.tls_certfile and tls_keyfile to serve HTTPS", file=sys.stderr, flush=True)
+            print(
+                f"bridge: warning: plain HTTP on {s.host}: the token and the readings cross the network unencrypted; "
+                "give instrument.settings.tls_certfile and tls_keyfile to serve HTTPS",
+                file=sys.stderr,
+                flush=True,
+            )
         where = f"${TOKEN_ENV}" if os.environ.get(TOKEN_ENV, "").strip() else str(Path(s.token_file).expanduser())
-        print(f"bridge: serving {url}{exposed}; API at {url}/docs; waiting for the instrument PC "
-              f"(bridge/client.py: serve_instrument({url!r}, TOKEN, measure), TOKEN from {where})", flush=True)
+        print(
+            f"bridge: serving {url}{exposed}; API at {url}/docs; waiting for the instrument PC "
+            f"(bridge/client.py: serve_instrument({url!r}, TOKEN, measure), TOKEN from {where})",
+            flush=True,
+        )
 
     def close(self) -> None:
         if self._server is not None:

@@ -33,34 +33,47 @@ from noisebo.bridge.wire import ReadingBody, WireError, parse_body
 
 MAX_WAIT_S = 60.0
 DRAIN_MAX_BYTES = 256 * 2**20  # an unwanted body is read and discarded up to this; beyond it the connection is closed
-HEADER_ONLY = ("the token goes in the header `Authorization: Bearer TOKEN`; `?token=` opens only the status page /")
+HEADER_ONLY = "the token goes in the header `Authorization: Bearer TOKEN`; `?token=` opens only the status page /"
 
 
 def refusals(*statuses: int, **said_instead: str) -> dict:
     """The API description of refusals with these statuses (each answers ``{"error": ...}``);
     ``said_instead`` (``s422="..."``) words one of them for its path."""
-    said = {400: "the body is not JSON", 401: "no token, or the token in the URL", 403: "a wrong token",
-            409: "the shot is not wanted (finished, not yet due, recorded with another reading, or the campaign "
-                 "has ended): drop the reading and poll /next",
-            413: "the body is over `max_body_mib`",
-            422: "a field, a non-finite number, the wrong kind of reading or a spectrum of the wrong shape",
-            503: "the campaign is starting, or the reading is not journaled yet: send the same post again"}
-    return {status: {"model": ErrorAnswer, "description": said_instead.get(f"s{status}", said[status])}
-            for status in statuses}
+    said = {
+        400: "the body is not JSON",
+        401: "no token, or the token in the URL",
+        403: "a wrong token",
+        409: "the shot is not wanted (finished, not yet due, recorded with another reading, or the campaign "
+        "has ended): drop the reading and poll /next",
+        413: "the body is over `max_body_mib`",
+        422: "a field, a non-finite number, the wrong kind of reading or a spectrum of the wrong shape",
+        503: "the campaign is starting, or the reading is not journaled yet: send the same post again",
+    }
+    return {
+        status: {"model": ErrorAnswer, "description": said_instead.get(f"s{status}", said[status])}
+        for status in statuses
+    }
 
 
 def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
     """The bridge's API over ``exchange``, guarded by ``token``; bodies over ``max_body_bytes``
     are refused unread."""
-    app = FastAPI(title="noisebo instrument bridge", version="1",
-                  description="The instrument PC pulls shot requests and posts readings. Every campaign call needs "
-                              "`Authorization: Bearer TOKEN`. A reading is acknowledged only after the campaign has "
-                              "journaled it; posting it again is safe.", redoc_url=None)
+    app = FastAPI(
+        title="noisebo instrument bridge",
+        version="1",
+        description="The instrument PC pulls shot requests and posts readings. Every campaign call needs "
+        "`Authorization: Bearer TOKEN`. A reading is acknowledged only after the campaign has "
+        "journaled it; posting it again is safe.",
+        redoc_url=None,
+    )
 
     def check(given: str | None) -> None:
         if not given:
-            raise HTTPException(401, "missing token: send the header `Authorization: Bearer TOKEN`",
-                                headers={"WWW-Authenticate": "Bearer"})
+            raise HTTPException(
+                401,
+                "missing token: send the header `Authorization: Bearer TOKEN`",
+                headers={"WWW-Authenticate": "Bearer"},
+            )
         if not secrets.compare_digest(given.encode(), token.encode()):
             raise HTTPException(403, "wrong token")
 
@@ -81,33 +94,55 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
 
     @app.exception_handler(WireError)
     async def _wire_error(request: Request, error: WireError):
-        return JSONResponse({"error": str(error)}, error.status,
-                            headers={"Connection": "close"} if error.status == 413 else None)
+        return JSONResponse(
+            {"error": str(error)}, error.status, headers={"Connection": "close"} if error.status == 413 else None
+        )
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, error: RequestValidationError):
         where = "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in error.errors())
         return JSONResponse({"error": where}, 422)
 
-    @app.get("/next", dependencies=[Depends(authorised)], summary="The next wanted shot (long poll)",
-             responses={200: {"model": NextAnswer, "description": "a shot to measure, nothing yet, or the end"},
-                        **refusals(401, 403, 422, s422="`wait` is not a number of seconds from 0 to 60")})
-    async def next_shot(wait: float = Query(25.0, ge=0.0, le=MAX_WAIT_S,
-                                            description="how long to wait for a wanted shot (s), at most 60")):
+    @app.get(
+        "/next",
+        dependencies=[Depends(authorised)],
+        summary="The next wanted shot (long poll)",
+        responses={
+            200: {"model": NextAnswer, "description": "a shot to measure, nothing yet, or the end"},
+            **refusals(401, 403, 422, s422="`wait` is not a number of seconds from 0 to 60"),
+        },
+    )
+    async def next_shot(
+        wait: float = Query(
+            25.0, ge=0.0, le=MAX_WAIT_S, description="how long to wait for a wanted shot (s), at most 60"
+        ),
+    ):
         """`{"kind": "shot", "campaign", "point", "shot", "step", "x", "t", "wanted", "attempt", "seed",
         "reading"}`: measure at x for t seconds and post to /shots/{point}/{shot} ("step": the BO step,
         counted from 1; 0 for a seed point). `{"kind": "wait"}`:
         nothing wanted yet (ask again). `{"kind": "done", "status", "reason"}`: the campaign has ended."""
         return await run_in_threadpool(exchange.next_shot, wait)
 
-    @app.post("/shots/{point}/{shot}", dependencies=[Depends(authorised)], summary="Post a shot's reading",
-              responses={200: {"model": Recorded, "description": "journaled (or journaled before)"},
-                         **refusals(400, 401, 403, 409, 413, 422, 503)},
-              openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
-                  "schema": ReadingBody.model_json_schema()}}}})
-    async def post_shot(request: Request,
-                        point: int = Path(ge=0, description="the request's point: its index in the campaign, from 0"),
-                        shot: int = Path(ge=0, description="the request's shot: its index within the point, from 0")):
+    @app.post(
+        "/shots/{point}/{shot}",
+        dependencies=[Depends(authorised)],
+        summary="Post a shot's reading",
+        responses={
+            200: {"model": Recorded, "description": "journaled (or journaled before)"},
+            **refusals(400, 401, 403, 409, 413, 422, 503),
+        },
+        openapi_extra={
+            "requestBody": {
+                "required": True,
+                "content": {"application/json": {"schema": ReadingBody.model_json_schema()}},
+            }
+        },
+    )
+    async def post_shot(
+        request: Request,
+        point: int = Path(ge=0, description="the request's point: its index in the campaign, from 0"),
+        shot: int = Path(ge=0, description="the request's shot: its index within the point, from 0"),
+    ):
         """Body: `{"value": number}`, `{"spectrum": [[...], ...], "reduction": "sho"}` (rows × samples)
         or `{"error": "what went wrong", "attempt": n}`. 200 once journaled (`"duplicate": true` when it
         was already); 409 when the shot is not wanted; 413, 400, 422 for a bad body; nothing is
@@ -116,8 +151,12 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
         body = parse_body(raw)
         return await run_in_threadpool(exchange.hand_in, point, shot, body)
 
-    @app.get("/status", dependencies=[Depends(authorised)], summary="Campaign progress",
-             responses={200: {"model": StatusAnswer, "description": "the campaign's progress"}, **refusals(401, 403)})
+    @app.get(
+        "/status",
+        dependencies=[Depends(authorised)],
+        summary="Campaign progress",
+        responses={200: {"model": StatusAnswer, "description": "the campaign's progress"}, **refusals(401, 403)},
+    )
     async def status():
         return exchange.status()
 
@@ -195,15 +234,30 @@ class BridgeServer:
     certificate and its key (PEM files). The port is bound in ``start`` (``OSError`` when
     taken), so a campaign whose port is taken stops before its file is created."""
 
-    def __init__(self, exchange: Exchange, token: str, host: str, port: int, max_body_bytes: int,
-                 tls: tuple[str, str] | None = None):
+    def __init__(
+        self,
+        exchange: Exchange,
+        token: str,
+        host: str,
+        port: int,
+        max_body_bytes: int,
+        tls: tuple[str, str] | None = None,
+    ):
         self.exchange = exchange
         self.host, self.port, self.tls = host, port, tls
         app = make_app(exchange, token, max_body_bytes)
         certfile, keyfile = tls or (None, None)
-        self._server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off", access_log=False,
-                                                     timeout_graceful_shutdown=2, ssl_certfile=certfile,
-                                                     ssl_keyfile=keyfile))
+        self._server = uvicorn.Server(
+            uvicorn.Config(
+                app,
+                log_level="warning",
+                lifespan="off",
+                access_log=False,
+                timeout_graceful_shutdown=2,
+                ssl_certfile=certfile,
+                ssl_keyfile=keyfile,
+            )
+        )
         self._thread: threading.Thread | None = None
 
     @property
@@ -226,8 +280,9 @@ class BridgeServer:
             raise
         sock.listen(64)
         self.port = sock.getsockname()[1]
-        self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [sock]}, name="noisebo-bridge",
-                                        daemon=True)
+        self._thread = threading.Thread(
+            target=self._server.run, kwargs={"sockets": [sock]}, name="noisebo-bridge", daemon=True
+        )
         self._thread.start()
         while not self._server.started:
             if not self._thread.is_alive():

@@ -78,12 +78,17 @@ class ReadingShape(FrozenModel):
     named reduction that turns a spectrum into the shot's value; ``spectrum_rows``: the row
     counts accepted; ``min_samples``/``max_samples``: the samples per row accepted."""
 
-    reading: Literal["scalar", "spectrum"] = Field("scalar", description="scalar: one number per shot; spectrum: "
-                                                   "rows x samples per shot")
-    reduction: str = Field(default="sho", min_length=1, description="the named reduction that turns a spectrum into "
-                           "the shot's value (a reading may name its own)")
-    spectrum_rows: tuple[config.Count, ...] = Field((2, 3), description="the row counts a spectrum may have (e.g. "
-                                                    "frequency Hz, amplitude, phase deg)")
+    reading: Literal["scalar", "spectrum"] = Field(
+        "scalar", description="scalar: one number per shot; spectrum: rows x samples per shot"
+    )
+    reduction: str = Field(
+        default="sho",
+        min_length=1,
+        description="the named reduction that turns a spectrum into the shot's value (a reading may name its own)",
+    )
+    spectrum_rows: tuple[config.Count, ...] = Field(
+        (2, 3), description="the row counts a spectrum may have (e.g. frequency Hz, amplitude, phase deg)"
+    )
     min_samples: config.Count = Field(default=8, ge=1, description="the fewest samples per row accepted")
     max_samples: config.Count = Field(default=1_000_000, ge=1, description="the most samples per row accepted")
 
@@ -119,25 +124,43 @@ class ReadingBody(StrictModel):
     """A posted reading: exactly one of ``value``, ``spectrum`` or ``error``. NaN and infinities
     parse here and are refused by ``outcome_of`` with the field named."""
 
-    value: Number | None = Field(None, description="a scalar reading: the shot's value, in the units of f (a "
-                                 "finite number; an integer will do)")
-    spectrum: Annotated[Union[Annotated[list[list[Number]], Tag("rows")], Annotated[PackedSpectrum, Tag("packed")]],
-                        Discriminator(lambda v: "packed" if isinstance(v, (dict, PackedSpectrum)) else "rows")] | None = Field(
-        None, description="a spectrum reading: rows x samples as lists of numbers (e.g. frequency Hz, amplitude, "
-                          "phase deg), or packed as base64")
-    reduction: str | None = Field(None, description="how the campaign turns the spectrum into the shot's value "
-                                  "(default: the campaign's, e.g. sho)")
-    error: str | None = Field(default=None, min_length=1, max_length=2000, description="the shot failed: what went "
-                              "wrong (counts against the failure budget; the same shot is asked again)")
+    value: Number | None = Field(
+        None, description="a scalar reading: the shot's value, in the units of f (a finite number; an integer will do)"
+    )
+    spectrum: (
+        Annotated[
+            Union[Annotated[list[list[Number]], Tag("rows")], Annotated[PackedSpectrum, Tag("packed")]],
+            Discriminator(lambda v: "packed" if isinstance(v, (dict, PackedSpectrum)) else "rows"),
+        ]
+        | None
+    ) = Field(
+        None,
+        description="a spectrum reading: rows x samples as lists of numbers (e.g. frequency Hz, amplitude, "
+        "phase deg), or packed as base64",
+    )
+    reduction: str | None = Field(
+        None,
+        description="how the campaign turns the spectrum into the shot's value (default: the campaign's, e.g. sho)",
+    )
+    error: str | None = Field(
+        default=None,
+        min_length=1,
+        max_length=2000,
+        description="the shot failed: what went "
+        "wrong (counts against the failure budget; the same shot is asked again)",
+    )
     attempt: int = Field(default=0, ge=0, description="with error: the request's attempt number")
-    campaign: str | None = Field(None, description="the request's campaign id; a reading for another campaign is "
-                                 "refused (409)")
+    campaign: str | None = Field(
+        None, description="the request's campaign id; a reading for another campaign is refused (409)"
+    )
 
     @model_validator(mode="after")
     def _one_kind(self) -> ReadingBody:
         given = [name for name in ("value", "spectrum", "error") if getattr(self, name) is not None]
         if len(given) != 1:
-            raise ValueError("give exactly one of value, spectrum or error" + (f" (got {', '.join(given)})" if given else ""))
+            raise ValueError(
+                "give exactly one of value, spectrum or error" + (f" (got {', '.join(given)})" if given else "")
+            )
         return self
 
 
@@ -154,9 +177,19 @@ def attempts_at(state: EngineState, point: int, shot: int) -> int:
 
 def request_json(state: EngineState, request: Request, shape: ReadingShape) -> dict:
     """The shot request for the next wanted shot of ``request``."""
-    return {"kind": "shot", "campaign": campaign_id(state), "point": request.point, "shot": request.taken,
-            "step": shown_step(request.step), "x": list(request.x), "t": request.t, "wanted": request.wanted,
-            "attempt": attempts_at(state, request.point, request.taken), "seed": state.seed, "reading": shape.reading}
+    return {
+        "kind": "shot",
+        "campaign": campaign_id(state),
+        "point": request.point,
+        "shot": request.taken,
+        "step": shown_step(request.step),
+        "x": list(request.x),
+        "t": request.t,
+        "wanted": request.wanted,
+        "attempt": attempts_at(state, request.point, request.taken),
+        "seed": state.seed,
+        "reading": shape.reading,
+    }
 
 
 MAX_PROBLEMS = 5  # a refused body's message names at most this many of its problems
@@ -210,12 +243,12 @@ def outcome_of(body: ReadingBody, shape: ReadingShape) -> Reading | ShotError:
         return ShotError("instrument error", f"instrument PC: {body.error}")
     if body.value is not None:
         if shape.reading != "scalar":
-            raise WireError(422, "value: this campaign's instrument returns spectra; post \"spectrum\" (rows × samples)")
+            raise WireError(422, 'value: this campaign\'s instrument returns spectra; post "spectrum" (rows × samples)')
         if not math.isfinite(body.value):
-            raise WireError(422, f"value: {body.value} is not a finite number; post an \"error\" for a failed shot")
+            raise WireError(422, f'value: {body.value} is not a finite number; post an "error" for a failed shot')
         return Reading(float(body.value))
     if shape.reading != "spectrum":
-        raise WireError(422, "spectrum: this campaign's instrument returns one number per shot; post \"value\"")
+        raise WireError(422, 'spectrum: this campaign\'s instrument returns one number per shot; post "value"')
     assert body.spectrum is not None  # ReadingBody holds exactly one of value, spectrum and error
     return Reading(None, spectrum_of(body.spectrum, shape), body.reduction or shape.reduction)
 
@@ -232,15 +265,20 @@ def spectrum_of(rows: list[list[float]] | PackedSpectrum | np.ndarray, shape: Re
     n = rows.shape[1]
     if len(rows) not in shape.spectrum_rows:
         accepted = " or ".join(str(k) for k in shape.spectrum_rows)
-        raise WireError(422, f"spectrum: {len(rows)} rows × {n} samples; expected {accepted} rows "
-                             "(e.g. frequency Hz, amplitude, phase deg)")
+        raise WireError(
+            422,
+            f"spectrum: {len(rows)} rows × {n} samples; expected {accepted} rows "
+            "(e.g. frequency Hz, amplitude, phase deg)",
+        )
     if not shape.min_samples <= n <= shape.max_samples:
         raise WireError(422, f"spectrum: {n} samples per row; expected {shape.min_samples} to {shape.max_samples}")
     array = rows
     bad = np.argwhere(~np.isfinite(array))
     if bad.size:
         row, col = (int(v) for v in bad[0])
-        raise WireError(422, f"spectrum: {len(bad)} non-finite entries, the first at row {row}, sample {col} "
-                             f"({array[row, col]}); post an \"error\" for a failed shot")
+        raise WireError(
+            422,
+            f"spectrum: {len(bad)} non-finite entries, the first at row {row}, sample {col} "
+            f'({array[row, col]}); post an "error" for a failed shot',
+        )
     return array
-

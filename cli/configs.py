@@ -42,8 +42,10 @@ def config_path(text: str) -> Path:
         return found[name]
     from noisebo.config import ConfigError
 
-    raise ConfigError(f"{text}: cannot read config (no such file, and no shipped config of that name; shipped: "
-                      f"{', '.join(shipped())})")
+    raise ConfigError(
+        f"{text}: cannot read config (no such file, and no shipped config of that name; shipped: "
+        f"{', '.join(shipped())})"
+    )
 
 
 def run(args) -> int:

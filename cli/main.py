@@ -34,7 +34,7 @@ class UsageError(ValueError):
 
 
 def parse_seeds(text: str) -> list[int]:
-    """"3" -> [3]; "0-4" -> [0, 1, 2, 3, 4]; "1,5,9" -> [1, 5, 9]."""
+    """ "3" -> [3]; "0-4" -> [0, 1, 2, 3, 4]; "1,5,9" -> [1, 5, 9]."""
     try:
         if "-" in text:
             lo, hi = (int(v) for v in text.split("-", 1))
@@ -113,14 +113,17 @@ def _run(args) -> int:
     path = campaign_path(config, args.seed, args.out)
     if path.exists() or path.with_suffix(".journal").exists():
         raise CampaignFileError(f"{path} already exists; continue it with `noisebo resume {path}`")
-    print(f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}, instrument "
-          f"{config.instrument.kind}: {config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}",
-          flush=True)
+    print(
+        f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}, instrument "
+        f"{config.instrument.kind}: {config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}",
+        flush=True,
+    )
     _starting()
     campaign_flows, _ = _prefect()
     with flow_settings(), _abortable(path):
-        path = campaign_flows.campaign(config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd,
-                                       live=args.live)
+        path = campaign_flows.campaign(
+            config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd, live=args.live
+        )
     print(outcome_line(Path(path)))
     print(path)
     return 0
@@ -137,9 +140,11 @@ def outcome_line(path: Path) -> str:
     """One line of what a finished campaign found, from its file."""
     summary = inspect_summary(path)  # a file this process has just written: no need to isolate
     t_opt = summary["final_t_opt"]
-    return (f"{summary['status']}: {len(summary['points'])} points, {summary['n_shots']} shots, "
-            f"{summary['measurement_time_s']:.1f} s of instrument time; final predicted optimal t "
-            + ("none (no summary)" if t_opt is None else f"{t_opt:.4g} s"))
+    return (
+        f"{summary['status']}: {len(summary['points'])} points, {summary['n_shots']} shots, "
+        f"{summary['measurement_time_s']:.1f} s of instrument time; final predicted optimal t "
+        + ("none (no summary)" if t_opt is None else f"{t_opt:.4g} s")
+    )
 
 
 def _resume(args) -> int:
@@ -154,11 +159,14 @@ def _resume(args) -> int:
         raise CampaignFileError(f"cannot resume {path}: {error}") from None
     state = _journal_state(path)
     if args.budget_s is not None and args.budget_s <= state.spent_s:
-        raise CampaignFileError(f"cannot resume {path} with --budget-s {args.budget_s:g}: it has spent "
-                                f"{state.spent_s:.4g} s already")
+        raise CampaignFileError(
+            f"cannot resume {path} with --budget-s {args.budget_s:g}: it has spent {state.spent_s:.4g} s already"
+        )
     if state.status.value == "budget_spent" and args.budget_s is None:
-        raise CampaignFileError(f"{path}: {state.reason}; continue it with a larger budget: "
-                                f"`noisebo resume {path} --budget-s SECONDS` (in all)")
+        raise CampaignFileError(
+            f"{path}: {state.reason}; continue it with a larger budget: "
+            f"`noisebo resume {path} --budget-s SECONDS` (in all)"
+        )
     if state.status.value == "completed":
         # A kill during the finished file's write leaves the running file in place: write the
         # finished file from the journal (the same file again when it was not cut short).
@@ -232,14 +240,18 @@ def _abortable(path: Path):
     except CampaignAborted as stopped:
         raise Aborted(str(stopped), EXIT_SIGNAL.get(stopped.signal_name, 130)) from None
     except (KeyboardInterrupt, TerminationSignal) as stopped:  # a second signal, or one Prefect's engine took
-        raise Aborted(f"stopped at once; {path} keeps every shot taken: continue it with `noisebo resume {path}`",
-                      EXIT_SIGNAL.get(stopping_signal(stopped), 130)) from None
+        raise Aborted(
+            f"stopped at once; {path} keeps every shot taken: continue it with `noisebo resume {path}`",
+            EXIT_SIGNAL.get(stopping_signal(stopped), 130),
+        ) from None
 
 
 def _require_server(what: str) -> None:
     if not os.environ.get("PREFECT_API_URL"):
-        raise UsageError(f"{what}: start one with `prefect server start --host 127.0.0.1` "
-                         "and export PREFECT_API_URL=http://127.0.0.1:4200/api")
+        raise UsageError(
+            f"{what}: start one with `prefect server start --host 127.0.0.1` "
+            "and export PREFECT_API_URL=http://127.0.0.1:4200/api"
+        )
 
 
 def _serve(args) -> int:
@@ -253,8 +265,11 @@ def _serve(args) -> int:
     _runtime().configure()
     from noisebo.flows.deployments import deployments_for, serve_all
 
-    deployments = [d for path in map(config_path, args.config)
-                   for d in deployments_for(path, args.out, seeds, policies, args.cron, args.interval)]
+    deployments = [
+        d
+        for path in map(config_path, args.config)
+        for d in deployments_for(path, args.out, seeds, policies, args.cron, args.interval)
+    ]
     names = ", ".join(f"{d.flow_name}/{d.name}" for d in deployments)
     print(f"serving {names} on {os.environ['PREFECT_API_URL']} (Ctrl-C stops)", flush=True)
     serve_all(deployments, limit=args.limit)
@@ -270,7 +285,9 @@ def _deploy(args) -> int:
 
     for path in map(config_path, args.config):
         name = deploy_campaign(path, args.pool, args.out)
-        print(f"deployed {name} to work pool {args.pool!r}; start workers with: prefect worker start --pool {args.pool}")
+        print(
+            f"deployed {name} to work pool {args.pool!r}; start workers with: prefect worker start --pool {args.pool}"
+        )
     return 0
 
 
@@ -292,8 +309,10 @@ def _policies(choice: str) -> list[str]:
 def _policies_listed(args) -> int:
     from noisebo import registry
 
-    for group, title in ((registry.POLICIES, "policies (acquisition.policy)"),
-                         (registry.NOISE_LAWS, "noise laws (noise_model.mean)")):
+    for group, title in (
+        (registry.POLICIES, "policies (acquisition.policy)"),
+        (registry.NOISE_LAWS, "noise laws (noise_model.mean)"),
+    ):
         print(f"{title}:")
         for name, found in registry.installed(group).items():
             where = f"{found.distribution} {found.distribution_version}"
@@ -314,7 +333,9 @@ def _instruments(args) -> int:
             doc = (cls.__doc__ or "").strip().splitlines()
             version = cls.version
             fields = ", ".join(cls.Settings.model_fields)
-            line = f"{name:<16} {version:<10} {found.distribution} {found.distribution_version}: {doc[0] if doc else ''}"
+            line = (
+                f"{name:<16} {version:<10} {found.distribution} {found.distribution_version}: {doc[0] if doc else ''}"
+            )
             print(line.rstrip())
             print(f"{'':<16} settings: {fields or '(none)'}")
         except DriverBroken as error:
@@ -360,11 +381,16 @@ def _sweep(args) -> int:
         deployment = args.deployment or f"campaign/{config.name}"
     _, sweep_flows = _prefect()
     n_campaigns = len(seeds) * len(policies)
-    runner = sweep_flows.task_runner("threads" if deployment else args.runner,
-                                     n_campaigns if deployment else args.workers, args.dask_address)
+    runner = sweep_flows.task_runner(
+        "threads" if deployment else args.runner, n_campaigns if deployment else args.workers, args.dask_address
+    )
     flow = sweep_flows.sweep.with_options(task_runner=runner)
-    where = (f"the workers of {deployment}" if deployment else args.dask_address
-             or f"{args.workers} {'local Dask worker processes' if args.runner == 'dask' else 'threads'}")
+    where = (
+        f"the workers of {deployment}"
+        if deployment
+        else args.dask_address
+        or f"{args.workers} {'local Dask worker processes' if args.runner == 'dask' else 'threads'}"
+    )
     print(f"sweep {config.name!r}: seeds {seeds[0]}..{seeds[-1]} x {policies} on {where} -> {args.out}", flush=True)
     with flow_settings():
         table = flow(config, seeds=seeds, policies=policies, out_dir=str(args.out), deployment=deployment)
@@ -382,8 +408,13 @@ def _profile_summary(record) -> dict | None:
     steps = record.steps
     dropped = next((int(s) for s, used in zip(steps.step, steps.profile_in_use) if not used), None)
     law = ", ".join(f"{name} = {p['mean']:.4g} ± {p['sd']:.2g}" for name, p in profile["parameters"].items())
-    return {"law": profile["law"], "parameters": law, "driver": profile["driver"]["name"],
-            "campaigns": len(profile.get("campaigns", ())), "dropped_at_step": dropped}
+    return {
+        "law": profile["law"],
+        "parameters": law,
+        "driver": profile["driver"]["name"],
+        "campaigns": len(profile.get("campaigns", ())),
+        "dropped_at_step": dropped,
+    }
 
 
 def inspect_summary(path: Path) -> dict:
@@ -399,24 +430,30 @@ def inspect_summary(path: Path) -> dict:
     rows = []
     for i in range(len(points)):
         step = int(points.step[i])  # 0: a seed point; BO steps from 1 (storage.steps)
-        rows.append({
-            "point": i,
-            "step": step,
-            "x": list(as_position(points.x[i])) if np.ndim(points.x[i]) else float(points.x[i]),
-            "t": float(points.t[i]),
-            "n_shots": int(points.n_shots[i]),
-            "value": float(points.value[i]),
-            "noise": float(points.noise[i]),
-            "noise_measured": bool(points.noise_measured[i]),
-            "t_opt": t_opt.get(step),
-        })
+        rows.append(
+            {
+                "point": i,
+                "step": step,
+                "x": list(as_position(points.x[i])) if np.ndim(points.x[i]) else float(points.x[i]),
+                "t": float(points.t[i]),
+                "n_shots": int(points.n_shots[i]),
+                "value": float(points.value[i]),
+                "noise": float(points.noise[i]),
+                "noise_measured": bool(points.noise_measured[i]),
+                "t_opt": t_opt.get(step),
+            }
+        )
     field = None
     if summary is not None and summary.t_opt_map.size:
         t_map, noise_map = summary.t_opt_map, summary.noise_map
-        field = {"t_opt_min": float(t_map.min()), "t_opt_median": float(np.median(t_map)),
-                 "t_opt_max": float(t_map.max()), "noise_at_t_opt_min": float(noise_map.min()),
-                 "noise_at_t_opt_max": float(noise_map.max()),
-                 "x_at_shortest_t_opt": as_position(record.grid["x"][int(np.argmin(t_map))])}
+        field = {
+            "t_opt_min": float(t_map.min()),
+            "t_opt_median": float(np.median(t_map)),
+            "t_opt_max": float(t_map.max()),
+            "noise_at_t_opt_min": float(noise_map.min()),
+            "noise_at_t_opt_max": float(noise_map.max()),
+            "x_at_shortest_t_opt": as_position(record.grid["x"][int(np.argmin(t_map))]),
+        }
     return {
         "file": str(path),
         "noise_profile": _profile_summary(record),
@@ -450,35 +487,52 @@ def _inspect(args) -> int:
     conv = summary["first_converged_step"]
     driver = summary["driver"]
     x_width = max([9] + [len(format_position(row["x"])) for row in summary["points"]])
-    print(f"{summary['file']}: {summary['config']['name']} seed {summary['seed']}, policy {summary['policy']}, "
-          f"status {summary['status']}{' (' + summary['status_reason'] + ')' if summary['status_reason'] else ''}")
+    print(
+        f"{summary['file']}: {summary['config']['name']} seed {summary['seed']}, policy {summary['policy']}, "
+        f"status {summary['status']}{' (' + summary['status_reason'] + ')' if summary['status_reason'] else ''}"
+    )
     written_by = summary["versions"].get("noisebo")
-    print(f"  instrument {driver['name']} {driver['version']}"
-          + (f"; written by noisebo {written_by}" if written_by else ""))
-    print(f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
-          f"noise model {'not converged' if conv is None else f'converged at step {conv}'}; "
-          f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s")
+    print(
+        f"  instrument {driver['name']} {driver['version']}"
+        + (f"; written by noisebo {written_by}" if written_by else "")
+    )
+    print(
+        f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
+        f"noise model {'not converged' if conv is None else f'converged at step {conv}'}; "
+        f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s"
+    )
     if summary["budget_s"] is not None:
-        print(f"  instrument-time budget {summary['budget_s']:.4g} s, {summary['spent_s']:.4g} s spent "
-              f"(shots and {summary['config']['schedule']['point_overhead_s']:g} s per point)")
+        print(
+            f"  instrument-time budget {summary['budget_s']:.4g} s, {summary['spent_s']:.4g} s spent "
+            f"(shots and {summary['config']['schedule']['point_overhead_s']:g} s per point)"
+        )
     profile = summary["noise_profile"]
     if profile is not None:
-        fate = ("in use throughout" if profile["dropped_at_step"] is None else
-                f"contradicted by the replicate scatter and dropped at step {profile['dropped_at_step']}")
-        print(f"  noise profile ({profile['law']}: {profile['parameters']}; {profile['driver']}, "
-              f"{profile['campaigns']} campaigns): {fate}")
+        fate = (
+            "in use throughout"
+            if profile["dropped_at_step"] is None
+            else f"contradicted by the replicate scatter and dropped at step {profile['dropped_at_step']}"
+        )
+        print(
+            f"  noise profile ({profile['law']}: {profile['parameters']}; {profile['driver']}, "
+            f"{profile['campaigns']} campaigns): {fate}"
+        )
     field = summary["noise_field"]
     if field is not None:
-        print(f"  noise field: optimal t per position from {field['t_opt_min']:.4g} s (at x = "
-              f"{format_position(field['x_at_shortest_t_opt'])}) to {field['t_opt_max']:.4g} s, median "
-              f"{field['t_opt_median']:.4g} s; single-shot noise there from {field['noise_at_t_opt_min']:.3g} to "
-              f"{field['noise_at_t_opt_max']:.3g}")
+        print(
+            f"  noise field: optimal t per position from {field['t_opt_min']:.4g} s (at x = "
+            f"{format_position(field['x_at_shortest_t_opt'])}) to {field['t_opt_max']:.4g} s, median "
+            f"{field['t_opt_median']:.4g} s; single-shot noise there from {field['noise_at_t_opt_min']:.3g} to "
+            f"{field['noise_at_t_opt_max']:.3g}"
+        )
     print(f"  {'step':>5} {'x':>{x_width}} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
     for row in summary["points"]:
         step = "seed" if row["step"] == 0 else str(row["step"])
         t_opt = "" if row["t_opt"] is None else f"{row['t_opt']:.4f}"
-        print(f"  {step:>5} {format_position(row['x']):>{x_width}} {row['t']:>8.4g} {row['n_shots']:>5} {row['value']:>10.4g} "
-              f"{row['noise']:>8.3g}{'' if row['noise_measured'] else '*'} {t_opt:>9}")
+        print(
+            f"  {step:>5} {format_position(row['x']):>{x_width}} {row['t']:>8.4g} {row['n_shots']:>5} {row['value']:>10.4g} "
+            f"{row['noise']:>8.3g}{'' if row['noise_measured'] else '*'} {t_opt:>9}"
+        )
     print("  * noise from the noise model")
     return 0
 
@@ -568,9 +622,11 @@ def _show_next(args, state, step) -> None:
 def server_timeout_message() -> str:
     """What to do when Prefect's temporary server does not come up in time (a busy machine)."""
     waited = os.environ.get("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "?")
-    return (f"Prefect's temporary local server did not answer within {waited} s (is the machine busy?); "
-            "allow it longer with PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS=300, or start a server once "
-            "with `prefect server start --host 127.0.0.1` and export PREFECT_API_URL=http://127.0.0.1:4200/api")
+    return (
+        f"Prefect's temporary local server did not answer within {waited} s (is the machine busy?); "
+        "allow it longer with PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS=300, or start a server once "
+        "with `prefect server start --host 127.0.0.1` and export PREFECT_API_URL=http://127.0.0.1:4200/api"
+    )
 
 
 class _Parser(argparse.ArgumentParser):
@@ -593,9 +649,14 @@ def _positive_seconds(text: str) -> float:
 
 
 def _view_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--live", nargs="?", const="spawn", default=None, metavar="URL",
-                        help="stream to a Rerun viewer: spawn one (no URL) or connect to URL, "
-                             "e.g. rerun+http://127.0.0.1:9876/proxy")
+    parser.add_argument(
+        "--live",
+        nargs="?",
+        const="spawn",
+        default=None,
+        metavar="URL",
+        help="stream to a Rerun viewer: spawn one (no URL) or connect to URL, e.g. rerun+http://127.0.0.1:9876/proxy",
+    )
     parser.add_argument("--no-rrd", action="store_true", help="do not write the FILE.rrd recording")
 
 
@@ -622,18 +683,30 @@ def build_parser() -> argparse.ArgumentParser:
 
     resume = commands.add_parser("resume", help="continue an interrupted campaign")
     resume.add_argument("file", help="the campaign's .h5 file")
-    resume.add_argument("--budget-s", type=_positive_seconds, default=None,
-                        help="a new instrument-time budget in all (s), e.g. for a campaign whose budget is spent")
+    resume.add_argument(
+        "--budget-s",
+        type=_positive_seconds,
+        default=None,
+        help="a new instrument-time budget in all (s), e.g. for a campaign whose budget is spent",
+    )
     _view_options(resume)
     resume.set_defaults(handler=_resume)
 
     serve = commands.add_parser("serve", help="serve campaign and sweep deployments to a Prefect server")
     serve.add_argument("config", nargs="+", help="campaign YAML(s); deployments are named after each config's name")
-    serve.add_argument("--out", type=Path, default=Path("data/runs"),
-                       help="the folder under which each flow run writes a folder of its own")
+    serve.add_argument(
+        "--out",
+        type=Path,
+        default=Path("data/runs"),
+        help="the folder under which each flow run writes a folder of its own",
+    )
     serve.add_argument("--sweep-seeds", default="0-7", help="seeds of the sweep deployment: N, A-B or A,B,C")
-    serve.add_argument("--sweep-policy", choices=_policy_choices("both", "all"), default="both",
-                       help="an installed policy, both (the paper's two) or all (every installed one)")
+    serve.add_argument(
+        "--sweep-policy",
+        choices=_policy_choices("both", "all"),
+        default="both",
+        help="an installed policy, both (the paper's two) or all (every installed one)",
+    )
     when = serve.add_mutually_exclusive_group()
     when.add_argument("--cron", default=None, help="run the sweep on this cron schedule, e.g. '0 2 * * *'")
     when.add_argument("--interval", type=float, default=None, help="run the sweep every this many seconds")
@@ -643,8 +716,12 @@ def build_parser() -> argparse.ArgumentParser:
     deploy = commands.add_parser("deploy", help="register campaign deployments in a Prefect process work pool")
     deploy.add_argument("config", nargs="+", help="campaign YAML(s)")
     deploy.add_argument("--pool", default="noisebo", help="process work pool (created if missing)")
-    deploy.add_argument("--out", type=Path, default=Path("data/runs"),
-                        help="the folder under which each flow run writes a folder of its own")
+    deploy.add_argument(
+        "--out",
+        type=Path,
+        default=Path("data/runs"),
+        help="the folder under which each flow run writes a folder of its own",
+    )
     deploy.set_defaults(handler=_deploy)
 
     replay = commands.add_parser("replay", help="rebuild a campaign's Rerun recording from its .h5 file")
@@ -660,13 +737,22 @@ def build_parser() -> argparse.ArgumentParser:
     sweep = commands.add_parser("sweep", help="run campaigns over seeds and policies in parallel")
     sweep.add_argument("config", help=CONFIG_HELP)
     sweep.add_argument("--seeds", required=True, help="N, A-B or A,B,C")
-    sweep.add_argument("--policy", choices=_policy_choices("both", "all"), default="both",
-                       help="an installed policy, both (the paper's two) or all (every installed one)")
-    sweep.add_argument("--out", type=Path, default=Path("data/runs/sweep"),
-                       help="the sweep's folder: its campaigns' files and summary")
+    sweep.add_argument(
+        "--policy",
+        choices=_policy_choices("both", "all"),
+        default="both",
+        help="an installed policy, both (the paper's two) or all (every installed one)",
+    )
+    sweep.add_argument(
+        "--out", type=Path, default=Path("data/runs/sweep"), help="the sweep's folder: its campaigns' files and summary"
+    )
     sweep.add_argument("--workers", type=int, default=2, help="threads, or local Dask worker processes")
-    sweep.add_argument("--runner", choices=["threads", "dask", "workers"], default="threads",
-                       help="workers: each campaign a run of --deployment on its work pool's workers")
+    sweep.add_argument(
+        "--runner",
+        choices=["threads", "dask", "workers"],
+        default="threads",
+        help="workers: each campaign a run of --deployment on its work pool's workers",
+    )
     sweep.add_argument("--deployment", default=None, help="with --runner workers (default: campaign/CONFIG_NAME)")
     sweep.add_argument("--dask-address", default=None, help="an existing Dask scheduler, e.g. tcp://host:8786")
     sweep.set_defaults(handler=_sweep)
@@ -687,22 +773,37 @@ def build_parser() -> argparse.ArgumentParser:
     tell = commands.add_parser("tell", help="record readings of the shots a campaign asked for")
     tell.add_argument("file", help="the campaign's .h5 file")
     tell.add_argument("values", nargs="*", help="one number per shot, for the next wanted shots in order")
-    tell.add_argument("--point", type=int, default=None, help="the point they belong to (refused if it is not the "
-                                                               "one being measured)")
-    tell.add_argument("--spectrum", action="append", type=Path, default=[], metavar="FILE",
-                      help="one shot's spectrum (repeat for more shots): .npy rows × samples, or .csv/.txt one "
-                           "sample per line (frequency, amplitude[, phase])")
+    tell.add_argument(
+        "--point", type=int, default=None, help="the point they belong to (refused if it is not the one being measured)"
+    )
+    tell.add_argument(
+        "--spectrum",
+        action="append",
+        type=Path,
+        default=[],
+        metavar="FILE",
+        help="one shot's spectrum (repeat for more shots): .npy rows × samples, or .csv/.txt one "
+        "sample per line (frequency, amplitude[, phase])",
+    )
     tell.add_argument("--reduction", default=None, help="the reduction of the spectra (default: the campaign's)")
-    tell.add_argument("--error", default=None, metavar="REASON", help="the next shot failed (counts against the "
-                                                                      "failure budget; it is asked again)")
+    tell.add_argument(
+        "--error",
+        default=None,
+        metavar="REASON",
+        help="the next shot failed (counts against the failure budget; it is asked again)",
+    )
     tell.add_argument("--json", action="store_true", help="print the next request as JSON")
     tell.set_defaults(handler=_tell)
 
-    rebuild = commands.add_parser("rebuild", help="write a campaign's .h5 file anew from its journal (a damaged, "
-                                                  "truncated or lost file)")
+    rebuild = commands.add_parser(
+        "rebuild", help="write a campaign's .h5 file anew from its journal (a damaged, truncated or lost file)"
+    )
     rebuild.add_argument("file", help="the campaign's .h5 file (its .journal beside it)")
-    rebuild.add_argument("--keep-intact", action="store_true",
-                         help="for a journal damaged before its end: move it aside and keep the records before the damage")
+    rebuild.add_argument(
+        "--keep-intact",
+        action="store_true",
+        help="for a journal damaged before its end: move it aside and keep the records before the damage",
+    )
     rebuild.set_defaults(handler=_rebuild)
 
     instruments = commands.add_parser("instruments", help="list the installed instrument drivers")
@@ -740,8 +841,10 @@ def main(argv: list[str] | None = None) -> int:
         print("noisebo: interrupted", file=sys.stderr)
         return EXIT_SIGNAL["SIGINT"]
     except FailureBudgetExceeded as error:
-        print(f"noisebo: stopped: {error}; the file records status failed{_runtime().failure_log().mention()}",
-              file=sys.stderr)
+        print(
+            f"noisebo: stopped: {error}; the file records status failed{_runtime().failure_log().mention()}",
+            file=sys.stderr,
+        )
         return EXIT_FAILED
     except InstrumentUnavailable as error:
         print(f"noisebo: error: {error}; nothing was measured{_runtime().failure_log().mention()}", file=sys.stderr)

@@ -25,7 +25,10 @@ def noise_measurements(path: Path) -> dict:
     points = record.points
     measured = points.noise_measured.astype(bool) & (points.n_shots >= 2)
     return {
-        "file": str(path), "config": record.config, "driver": record.driver, "seed": record.seed,
+        "file": str(path),
+        "config": record.config,
+        "driver": record.driver,
+        "seed": record.seed,
         "created_utc": str(record.attrs.get("created_utc", "")),
         "t": points.t.astype(np.float64)[measured],
         "shot_std": points.shot_std.astype(np.float64)[measured],
@@ -37,8 +40,10 @@ def _same(campaigns: list[dict], what: str, describe) -> None:
     first = campaigns[0]
     for other in campaigns[1:]:
         if describe(other) != describe(first):
-            raise CampaignFileError(f"{other['file']} was made with {what} {describe(other)}, {first['file']} with "
-                                    f"{describe(first)}: a profile describes one instrument with one setting")
+            raise CampaignFileError(
+                f"{other['file']} was made with {what} {describe(other)}, {first['file']} with "
+                f"{describe(first)}: a profile describes one instrument with one setting"
+            )
 
 
 def make_profile(files: list[Path]) -> NoiseProfile:
@@ -53,8 +58,9 @@ def make_profile(files: list[Path]) -> NoiseProfile:
     campaigns = [call_isolated(noise_measurements, check_present(f), what=str(f)) for f in files]
     _same(campaigns, "the driver", lambda c: (c["driver"]["name"], c["driver"]["version"], c["driver"]["settings"]))
     configs = [parse_config(c["config"], c["file"]) for c in campaigns]
-    _same([{**c, "law": cfg.noise_model.mean} for c, cfg in zip(campaigns, configs)], "the noise law",
-          lambda c: c["law"])
+    _same(
+        [{**c, "law": cfg.noise_model.mean} for c, cfg in zip(campaigns, configs)], "the noise law", lambda c: c["law"]
+    )
     pooled = {k: np.concatenate([c[k] for c in campaigns]) for k in ("t", "shot_std", "n_shots")}
     names = ", ".join(str(f) for f in files)
     try:
@@ -64,10 +70,20 @@ def make_profile(files: list[Path]) -> NoiseProfile:
     driver = campaigns[0]["driver"]
     return NoiseProfile(
         driver=ProfileDriver(name=driver["name"], version=driver["version"], settings=driver["settings"]),
-        law=configs[0].noise_model.mean, parameters=parameters,
-        t_range_s=(float(pooled["t"].min()), float(pooled["t"].max())), noise_points=int(pooled["t"].size),
-        campaigns=tuple(ProfileCampaign(file=c["file"], config=cfg.name, seed=c["seed"], created_utc=c["created_utc"],
-                                        noise_points=int(c["t"].size)) for c, cfg in zip(campaigns, configs)),
+        law=configs[0].noise_model.mean,
+        parameters=parameters,
+        t_range_s=(float(pooled["t"].min()), float(pooled["t"].max())),
+        noise_points=int(pooled["t"].size),
+        campaigns=tuple(
+            ProfileCampaign(
+                file=c["file"],
+                config=cfg.name,
+                seed=c["seed"],
+                created_utc=c["created_utc"],
+                noise_points=int(c["t"].size),
+            )
+            for c, cfg in zip(campaigns, configs)
+        ),
         made_utc=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     )
 
@@ -85,8 +101,10 @@ def run(args) -> int:
     partial.write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
     os.replace(partial, out)
     law = ", ".join(f"{name} = {p.mean:.4g} ± {p.sd:.2g}" for name, p in profile.parameters.items())
-    print(f"{out}: {profile.driver.name} {profile.driver.version}, law {profile.law}: {law} "
-          f"(from {profile.noise_points} noise measurements in {len(profile.campaigns)} campaigns)")
+    print(
+        f"{out}: {profile.driver.name} {profile.driver.version}, law {profile.law}: {law} "
+        f"(from {profile.noise_points} noise measurements in {len(profile.campaigns)} campaigns)"
+    )
     return 0
 
 

@@ -19,8 +19,12 @@ sys.path.insert(0, str(DOCS))
 from generate import bridge_reference, cli_reference, config_reference, hdf5_reference, package_layout  # noqa: E402
 from generate.outside_files import outside_links, pointed_into_site, repository_file  # noqa: E402
 
-GENERATORS = {"configuration": config_reference.page, "cli": cli_reference.page, "hdf5": hdf5_reference.page,
-              "bridge-api": bridge_reference.page}
+GENERATORS = {
+    "configuration": config_reference.page,
+    "cli": cli_reference.page,
+    "hdf5": hdf5_reference.page,
+    "bridge-api": bridge_reference.page,
+}
 MARKER = re.compile(r"<!-- generated: ([a-z0-9-]+) -->")
 
 
@@ -46,8 +50,11 @@ def on_files(files, config):
     from mkdocs.structure.files import File
 
     docs_dir = Path(config["docs_dir"])
-    wanted = {where for page in files.documentation_pages()
-              for where in outside_links(docs_dir, page.src_uri, page.content_string).values()}
+    wanted = {
+        where
+        for page in files.documentation_pages()
+        for where in outside_links(docs_dir, page.src_uri, page.content_string).values()
+    }
     for where in sorted(wanted):
         files.append(File.generated(config, where, abs_src_path=str(repository_file(docs_dir, where))))
     return files

@@ -44,8 +44,11 @@ class AbortFlag:
         if self.signal_name is not None:  # the second signal: stop now
             raise StoppedAtOnce(signal.Signals(signum).name)
         self.signal_name = signal.Signals(signum).name
-        print(f"noisebo: {self.signal_name} received: finishing the current point, then stopping "
-              "(send it again to stop at once)", flush=True)
+        print(
+            f"noisebo: {self.signal_name} received: finishing the current point, then stopping "
+            "(send it again to stop at once)",
+            flush=True,
+        )
 
     @contextmanager
     def installed(self):

@@ -48,8 +48,13 @@ def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> C
     return cfg.with_overrides(acquisition={"policy": policy}) if policy else cfg
 
 
-def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer = lambda state: None,
-        instrument=None, report: RunReport | None = None) -> Path:
+def run(
+    recorder: Recorder,
+    say: Progress = lambda line: None,
+    observe: Observer = lambda state: None,
+    instrument=None,
+    report: RunReport | None = None,
+) -> Path:
     """Drive a campaign from wherever its journal stands to the end, the method's loop with each
     stage a task: the seed design (once), then per point a ``measure`` task (its shots), for
     sweeps a ``fit SHO`` task, and per BO step ``fit noise model``, ``fit GP`` and ``acquire``;
@@ -77,8 +82,10 @@ def run(recorder: Recorder, say: Progress = lambda line: None, observe: Observer
 
     def decide(state):
         if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
-            line = (f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
-                    "(about 10 s, or 1-3 s with the compilation cache of an earlier run)")
+            line = (
+                f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
+                "(about 10 s, or 1-3 s with the compilation cache of an earlier run)"
+            )
             say(line)
             if report is not None:
                 report.log([(logging.INFO, line)])
@@ -116,8 +123,9 @@ def opened(instrument):
     except InstrumentUnavailable:
         raise
     except Exception as error:  # noqa: BLE001 - any driver's failure to connect
-        raise InstrumentUnavailable(f"instrument {getattr(instrument, 'name', '?')!r} could not be opened: "
-                                    f"{type(error).__name__}: {error}") from error
+        raise InstrumentUnavailable(
+            f"instrument {getattr(instrument, 'name', '?')!r} could not be opened: {type(error).__name__}: {error}"
+        ) from error
     try:
         yield instrument
     finally:
@@ -139,8 +147,9 @@ def driver_of(path: Path):
         return build(started.config.instrument)
     except registry.DriverNotInstalled as error:
         d = started.driver
-        raise registry.DriverNotInstalled(f"{path} was made with the instrument driver {d.name!r} {d.version}, which "
-                                          f"is not installed here: {error}") from None
+        raise registry.DriverNotInstalled(
+            f"{path} was made with the instrument driver {d.name!r} {d.version}, which is not installed here: {error}"
+        ) from None
 
 
 @contextmanager
@@ -203,8 +212,13 @@ def run_folder(name: str) -> str:
 
 
 @flow(name="resume", persist_result=True, result_serializer="json")
-def resume(path: str, show_progress: bool = True, record_rrd: bool = True, live: str | None = None,
-           budget_s: float | None = None) -> str:
+def resume(
+    path: str,
+    show_progress: bool = True,
+    record_rrd: bool = True,
+    live: str | None = None,
+    budget_s: float | None = None,
+) -> str:
     """Continue a campaign from its file (after a crash, a kill, an abort or a spent budget)
     with the driver it was made with; ``budget_s``: its new instrument-time budget in all (s;
     None: keep it). Its recording is rebuilt from the journal first, then continues. The flow run

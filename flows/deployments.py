@@ -23,8 +23,14 @@ from noisebo.flows.sweep import sweep
 from noisebo.config import load_config
 
 
-def deployments_for(config_path: str | Path, out_dir: str | Path, sweep_seeds: list[int], sweep_policies: list[str],
-                    cron: str | None = None, interval_s: float | None = None) -> list:
+def deployments_for(
+    config_path: str | Path,
+    out_dir: str | Path,
+    sweep_seeds: list[int],
+    sweep_policies: list[str],
+    cron: str | None = None,
+    interval_s: float | None = None,
+) -> list:
     """The campaign and sweep deployments of one config file (validated here, once)."""
     config_path = str(Path(config_path).resolve())
     name = load_config(config_path).name
@@ -32,15 +38,23 @@ def deployments_for(config_path: str | Path, out_dir: str | Path, sweep_seeds: l
     schedule = {"cron": cron} if cron else ({"interval": timedelta(seconds=interval_s)} if interval_s else {})
     return [
         campaign.to_deployment(
-            name=name, parameters={"config": config_path, "out_dir": out_dir, "show_progress": True, "per_run_dir": True},
-            description=f"one {name} campaign; pass seed (and policy) as parameters", tags=["noisebo", name],
+            name=name,
+            parameters={"config": config_path, "out_dir": out_dir, "show_progress": True, "per_run_dir": True},
+            description=f"one {name} campaign; pass seed (and policy) as parameters",
+            tags=["noisebo", name],
         ),
         sweep.to_deployment(
             name=name,
-            parameters={"config": config_path, "seeds": sweep_seeds, "policies": sweep_policies,
-                        "out_dir": str(Path(out_dir) / f"sweep-{name}"), "per_run_dir": True},
+            parameters={
+                "config": config_path,
+                "seeds": sweep_seeds,
+                "policies": sweep_policies,
+                "out_dir": str(Path(out_dir) / f"sweep-{name}"),
+                "per_run_dir": True,
+            },
             description=f"{name} campaigns over seeds x policies, then the sweep summary and figure",
-            tags=["noisebo", name, "sweep"], **schedule,
+            tags=["noisebo", name, "sweep"],
+            **schedule,
         ),
     ]
 

@@ -61,8 +61,14 @@ def local_server(folder: Path):
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     port = free_port()
-    env = dict(os.environ, PREFECT_HOME=str(folder / "home"), PREFECT_API_URL=f"http://127.0.0.1:{port}/api",
-               PREFECT_SERVER_ANALYTICS_ENABLED="false", DO_NOT_TRACK="1", TQDM_DISABLE="1")
+    env = dict(
+        os.environ,
+        PREFECT_HOME=str(folder / "home"),
+        PREFECT_API_URL=f"http://127.0.0.1:{port}/api",
+        PREFECT_SERVER_ANALYTICS_ENABLED="false",
+        DO_NOT_TRACK="1",
+        TQDM_DISABLE="1",
+    )
     log = folder / "server.log"
     process = start([str(BIN / "prefect"), "server", "start", "--host", "127.0.0.1", "--port", str(port)], env, log)
 
@@ -89,7 +95,7 @@ def started_ticks(pid: int) -> int | None:
         stat = (PROC / str(pid) / "stat").read_text()
     except (OSError, ValueError):
         return None
-    fields = stat[stat.rindex(")") + 2:].split()  # after "pid (command name) "
+    fields = stat[stat.rindex(")") + 2 :].split()  # after "pid (command name) "
     return None if fields[0] == "Z" else int(fields[19])
 
 
@@ -98,7 +104,7 @@ def parent_of(pid: int) -> int | None:
         stat = (PROC / str(pid) / "stat").read_text()
     except OSError:
         return None
-    return int(stat[stat.rindex(")") + 2:].split()[1])
+    return int(stat[stat.rindex(")") + 2 :].split()[1])
 
 
 def command_line(pid: int) -> list[str]:

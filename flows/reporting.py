@@ -38,6 +38,7 @@ LOGGER_NAME = "noisebo.campaign"
 
 # ---- pure helpers ---------------------------------------------------------------------------
 
+
 def run_name(config: str, policy: str, seed: int, resumed: bool = False) -> str:
     """The flow run's name: ``{config}-{policy}-s{seed}``, ``-resumed`` after it when resumed."""
     return f"{config}-{policy}-s{seed}" + ("-resumed" if resumed else "")
@@ -49,8 +50,13 @@ def run_name_of(state: EngineState, resumed: bool = False) -> str:
 
 def run_tags(state: EngineState, resumed: bool = False) -> list[str]:
     """The flow run's tags: noisebo, config:NAME, policy:P, seed:N, driver:D (and resumed)."""
-    tags = ["noisebo", f"config:{state.config.name}", f"policy:{state.config.acquisition.policy}",
-            f"seed:{state.seed}", f"driver:{state.driver.name}"]
+    tags = [
+        "noisebo",
+        f"config:{state.config.name}",
+        f"policy:{state.config.acquisition.policy}",
+        f"seed:{state.seed}",
+        f"driver:{state.driver.name}",
+    ]
     return tags + (["resumed"] if resumed else [])
 
 
@@ -104,8 +110,17 @@ def summary_markdown(state: EngineState, path: str | Path, resumed: bool = False
     ]
     lines = [f"# {run_name_of(state, resumed)}", "", "| | |", "|---|---|"]
     lines += [f"| {key} | {value} |" for key, value in rows]
-    lines += ["", "Look at it:", "", "```bash", f"noisebo inspect {path}", f"noisebo report {path}",
-              f"noisebo replay {path}", "```", ""]
+    lines += [
+        "",
+        "Look at it:",
+        "",
+        "```bash",
+        f"noisebo inspect {path}",
+        f"noisebo report {path}",
+        f"noisebo replay {path}",
+        "```",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -116,9 +131,18 @@ def points_table(state: EngineState) -> list[dict]:
     rows = []
     for entry in state.points:
         c, p = entry.committed, entry.committed.point
-        rows.append({"point": c.index, "step": shown_step(c.step), "x": format_position(p.x),
-                     "t_s": float(f"{p.t:.6g}"), "shots": p.n_shots, "value": float(f"{p.value:.6g}"),
-                     "noise": float(f"{p.noise:.6g}"), "noise_measured": bool(p.noise_measured)})
+        rows.append(
+            {
+                "point": c.index,
+                "step": shown_step(c.step),
+                "x": format_position(p.x),
+                "t_s": float(f"{p.t:.6g}"),
+                "shots": p.n_shots,
+                "value": float(f"{p.value:.6g}"),
+                "noise": float(f"{p.noise:.6g}"),
+                "noise_measured": bool(p.noise_measured),
+            }
+        )
     return rows
 
 
@@ -131,16 +155,32 @@ def status_event(state: EngineState, path: str | Path, flow_run: dict | None = N
     t_opt = predicted_t_opt(state)
     event: dict[str, Any] = {
         "event": f"{EVENT_PREFIX}.{state.status.value}",
-        "resource": {"prefect.resource.id": f"{EVENT_PREFIX}.{name}", "prefect.resource.name": name,
-                     "noisebo.config": state.config.name, "noisebo.policy": state.config.acquisition.policy,
-                     "noisebo.seed": str(state.seed), "noisebo.driver": state.driver.name,
-                     "noisebo.file": str(path)},
-        "payload": {"status": state.status.value, "reason": state.reason, "points": len(state.points),
-                    "shots": n_shots, "instrument_time_s": seconds, "t_opt_s": t_opt},
+        "resource": {
+            "prefect.resource.id": f"{EVENT_PREFIX}.{name}",
+            "prefect.resource.name": name,
+            "noisebo.config": state.config.name,
+            "noisebo.policy": state.config.acquisition.policy,
+            "noisebo.seed": str(state.seed),
+            "noisebo.driver": state.driver.name,
+            "noisebo.file": str(path),
+        },
+        "payload": {
+            "status": state.status.value,
+            "reason": state.reason,
+            "points": len(state.points),
+            "shots": n_shots,
+            "instrument_time_s": seconds,
+            "t_opt_s": t_opt,
+        },
     }
     if flow_run:
-        event["related"] = [{"prefect.resource.id": f"prefect.flow-run.{flow_run['id']}",
-                             "prefect.resource.role": "flow-run", "prefect.resource.name": flow_run["name"]}]
+        event["related"] = [
+            {
+                "prefect.resource.id": f"prefect.flow-run.{flow_run['id']}",
+                "prefect.resource.role": "flow-run",
+                "prefect.resource.name": flow_run["name"],
+            }
+        ]
     return event
 
 
@@ -151,8 +191,12 @@ def log_records(state: EngineState, events: Sequence[Event], lines: Sequence[str
     records = [(logging.INFO, line) for line in lines]
     for event in events:
         if isinstance(event, ShotFailed):
-            records.append((logging.WARNING, f"point {event.point} shot {event.shot} at t={event.t:.4g} s failed "
-                                             f"({event.kind}): {event.reason}"))
+            records.append(
+                (
+                    logging.WARNING,
+                    f"point {event.point} shot {event.shot} at t={event.t:.4g} s failed ({event.kind}): {event.reason}",
+                )
+            )
         elif isinstance(event, StatusChanged) and event.status is not Status.BUDGET_SPENT:
             level = {Status.FAILED: logging.ERROR, Status.ABORTED: logging.WARNING}.get(event.status, logging.INFO)
             records.append((level, f"campaign {event.status.value}" + (f": {event.reason}" if event.reason else "")))
@@ -160,6 +204,7 @@ def log_records(state: EngineState, events: Sequence[Event], lines: Sequence[str
 
 
 # ---- the sink -----------------------------------------------------------------------------
+
 
 def enabled() -> bool:
     """Whether reports go to Prefect: inside a flow run, unless NOISEBO_PREFECT_REPORTS=0."""
@@ -193,8 +238,14 @@ class RunReport:
     and tags the run and creates the progress artifact; ``committed`` logs, updates progress and
     emits status events; ``finish`` writes the summary and the table."""
 
-    def __init__(self, state: EngineState, path: str | Path, resumed: bool = False,
-                 warn: Callable[[str], None] = _warn, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        state: EngineState,
+        path: str | Path,
+        resumed: bool = False,
+        warn: Callable[[str], None] = _warn,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.path, self.resumed, self.warn, self.clock = str(path), resumed, warn, clock
         self.name = run_name_of(state, resumed)
         self.on = enabled()
@@ -211,8 +262,10 @@ class RunReport:
             return send()
         except Exception as error:  # noqa: BLE001 - a report never stops a campaign
             self.failed.add(what)
-            self.warn(f"the Prefect {what} of {self.name} could not be sent ({type(error).__name__}: {error}); "
-                      "the campaign goes on (its file is its record)")
+            self.warn(
+                f"the Prefect {what} of {self.name} could not be sent ({type(error).__name__}: {error}); "
+                "the campaign goes on (its file is its record)"
+            )
             return None
 
     def start(self, state: EngineState) -> None:
@@ -221,8 +274,15 @@ class RunReport:
         self._safely("run name and tags", lambda: self._name_and_tag(state))
         self._safely("log", self._logger)
         self._safely("progress artifact", lambda: self._create_progress(state))
-        self.log([(logging.INFO, f"{'resuming' if self.resumed else 'starting'} {self.name}: {len(state.points)} of "
-                                 f"{planned_points(state)} points measured; file {self.path}")])
+        self.log(
+            [
+                (
+                    logging.INFO,
+                    f"{'resuming' if self.resumed else 'starting'} {self.name}: {len(state.points)} of "
+                    f"{planned_points(state)} points measured; file {self.path}",
+                )
+            ]
+        )
 
     def _name_and_tag(self, state: EngineState) -> None:
         from prefect.client.orchestration import get_client
@@ -252,9 +312,14 @@ class RunReport:
         from prefect.artifacts import create_progress_artifact
 
         # called from sync code, Prefect's dispatcher returns the id itself rather than a coroutine
-        self.progress_id = cast("UUID", create_progress_artifact(progress_percent(state),
-                                                                 key=artifact_key(self.name, "progress"),
-                                                                 description=f"points of {self.name} measured"))
+        self.progress_id = cast(
+            "UUID",
+            create_progress_artifact(
+                progress_percent(state),
+                key=artifact_key(self.name, "progress"),
+                description=f"points of {self.name} measured",
+            ),
+        )
         self.last_progress = self.clock()
 
     def log(self, records: Sequence[tuple[int, str]]) -> None:
@@ -300,11 +365,20 @@ class RunReport:
         from prefect.artifacts import create_markdown_artifact, create_table_artifact
 
         self.update_progress(state)
-        self._safely("summary artifact", lambda: create_markdown_artifact(
-            summary_markdown(state, self.path, self.resumed), key=artifact_key(self.name, "summary"),
-            description=f"{self.name}: {state.status.value}"))
-        self._safely("points table", lambda: create_table_artifact(
-            points_table(state), key=artifact_key(self.name, "points"), description=f"the points of {self.name}"))
+        self._safely(
+            "summary artifact",
+            lambda: create_markdown_artifact(
+                summary_markdown(state, self.path, self.resumed),
+                key=artifact_key(self.name, "summary"),
+                description=f"{self.name}: {state.status.value}",
+            ),
+        )
+        self._safely(
+            "points table",
+            lambda: create_table_artifact(
+                points_table(state), key=artifact_key(self.name, "points"), description=f"the points of {self.name}"
+            ),
+        )
 
 
 def failed_campaign_trigger(config: str | None = None, within_s: float = 0):
@@ -315,16 +389,26 @@ def failed_campaign_trigger(config: str | None = None, within_s: float = 0):
     match = {"prefect.resource.id": f"{EVENT_PREFIX}.*"}
     if config:
         match["noisebo.config"] = config
-    return EventTrigger(expect={f"{EVENT_PREFIX}.{Status.FAILED.value}"}, match=match, posture=Posture.Reactive,
-                        threshold=1, within=within_s)
+    return EventTrigger(
+        expect={f"{EVENT_PREFIX}.{Status.FAILED.value}"},
+        match=match,
+        posture=Posture.Reactive,
+        threshold=1,
+        within=within_s,
+    )
 
 
-def sweep_markdown(name: str, table_md: str | None, out_dir: str | Path, n_campaigns: int,
-                   failures: Sequence[str] = ()) -> str:
+def sweep_markdown(
+    name: str, table_md: str | None, out_dir: str | Path, n_campaigns: int, failures: Sequence[str] = ()
+) -> str:
     """The sweep flow's summary: how many campaigns finished, the summary table (sweep_summary.md's
     text), where the files are, and the failures."""
-    lines = [f"# sweep {name}", "", f"{n_campaigns - len(failures)} of {n_campaigns} campaigns finished; "
-             f"files in `{out_dir}`", ""]
+    lines = [
+        f"# sweep {name}",
+        "",
+        f"{n_campaigns - len(failures)} of {n_campaigns} campaigns finished; files in `{out_dir}`",
+        "",
+    ]
     if table_md:
         lines += [table_md.rstrip("\n"), ""]
     if failures:
@@ -333,8 +417,14 @@ def sweep_markdown(name: str, table_md: str | None, out_dir: str | Path, n_campa
     return "\n".join(lines)
 
 
-def report_sweep(name: str, table: Path | None, out_dir: str | Path, n_campaigns: int,
-                 failures: Sequence[str] = (), warn: Callable[[str], None] = _warn) -> None:
+def report_sweep(
+    name: str,
+    table: Path | None,
+    out_dir: str | Path,
+    n_campaigns: int,
+    failures: Sequence[str] = (),
+    warn: Callable[[str], None] = _warn,
+) -> None:
     """The sweep's summary as a markdown artifact of the sweep's flow run (non-critical: a failure
     to send it is said and the sweep's result stands)."""
     if not enabled():
@@ -343,7 +433,10 @@ def report_sweep(name: str, table: Path | None, out_dir: str | Path, n_campaigns
         from prefect.artifacts import create_markdown_artifact
 
         text = Path(table).read_text() if table else None
-        create_markdown_artifact(sweep_markdown(name, text, out_dir, n_campaigns, failures),
-                                 key=artifact_key(f"sweep-{name}", "summary"), description=f"the sweep of {name}")
+        create_markdown_artifact(
+            sweep_markdown(name, text, out_dir, n_campaigns, failures),
+            key=artifact_key(f"sweep-{name}", "summary"),
+            description=f"the sweep of {name}",
+        )
     except Exception as error:  # noqa: BLE001 - a report never fails a sweep
         warn(f"the Prefect summary of the sweep {name} could not be sent ({type(error).__name__}: {error})")

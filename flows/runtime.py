@@ -103,7 +103,6 @@ def cpu_fingerprint() -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
-
 def log_dir() -> Path:
     return Path(os.environ.get("NOISEBO_LOG_DIR") or _state_dir() / "data" / "logs")
 
@@ -132,14 +131,23 @@ class FailureLog(logging.FileHandler):
 
     def report(self, error: BaseException) -> str:
         """Write ``error``'s traceback; one line that names the error and this log."""
-        self.handle(logging.LogRecord("noisebo", logging.ERROR, __file__, 0, "the command failed", None,
-                                      (type(error), error, error.__traceback__)))
+        self.handle(
+            logging.LogRecord(
+                "noisebo",
+                logging.ERROR,
+                __file__,
+                0,
+                "the command failed",
+                None,
+                (type(error), error, error.__traceback__),
+            )
+        )
         self.flush()
         lines = str(error).strip().splitlines()
         return f"{type(error).__name__}{': ' + lines[0] if lines else ''}; the traceback is in {self.path}"
 
     def mention(self) -> str:
-        """"; details in PATH" once something was written, else nothing."""
+        """ "; details in PATH" once something was written, else nothing."""
         return f"; details in {self.path}" if self.written else ""
 
 
@@ -173,8 +181,9 @@ def divert_failure_reports() -> None:
     about it. Call it once Prefect has set up its logging; the terminal handlers it finds then keep
     every other record."""
     failure_log()
-    loggers = [logging.getLogger()] + [logger for logger in logging.Logger.manager.loggerDict.values()
-                                       if isinstance(logger, logging.Logger)]
+    loggers = [logging.getLogger()] + [
+        logger for logger in logging.Logger.manager.loggerDict.values() if isinstance(logger, logging.Logger)
+    ]
     for logger in loggers:
         for handler in logger.handlers:
             if _is_terminal(handler) and is_not_failure_report not in handler.filters:
@@ -185,8 +194,11 @@ def _is_terminal(handler: logging.Handler) -> bool:
     """Prefect's console handler, or a plain handler writing to stdout or stderr."""
     if type(handler).__name__ == "PrefectConsoleHandler":
         return True
-    return isinstance(handler, logging.StreamHandler) and not isinstance(handler, logging.FileHandler) and \
-        handler.stream in (sys.stderr, sys.stdout, sys.__stderr__, sys.__stdout__)
+    return (
+        isinstance(handler, logging.StreamHandler)
+        and not isinstance(handler, logging.FileHandler)
+        and handler.stream in (sys.stderr, sys.stdout, sys.__stderr__, sys.__stdout__)
+    )
 
 
 PREFECT_QUEUE_SERVICES = ("EventsWorker", "APILogWorker")  # their loggers are named after the class

@@ -91,8 +91,9 @@ def serve(port: int) -> None:
             super().handle_exit(sig, frame)
 
     logging.getLogger("uvicorn.error").addFilter(QuietWhenTaken())
-    server = QuietServer(uvicorn.Config(SERVER_APP, factory=True, host="127.0.0.1", port=port, log_level="error",
-                                        lifespan="on"))
+    server = QuietServer(
+        uvicorn.Config(SERVER_APP, factory=True, host="127.0.0.1", port=port, log_level="error", lifespan="on")
+    )
     server.run()
     if not server.started:
         raise SystemExit(STARTUP_FAILURE)

@@ -121,8 +121,9 @@ def sweep(
     table = write_summary(paths, out_dir)[0] if paths else None
     report_sweep(base.name, table, out_dir, len(futures), failures)
     if failures:
-        raise SweepError(f"{len(failures)} of {len(futures)} campaigns failed (summary of the rest: {table}): "
-                         + "; ".join(failures))
+        raise SweepError(
+            f"{len(failures)} of {len(futures)} campaigns failed (summary of the rest: {table}): " + "; ".join(failures)
+        )
     return str(table)
 
 
@@ -138,8 +139,9 @@ def task_runner(kind: Literal["threads", "dask"] = "threads", workers: int = 2, 
 
     if address:
         return DaskTaskRunner(address=address)
-    return DaskTaskRunner(cluster_kwargs={"n_workers": workers, "threads_per_worker": 1, "processes": True,
-                                          "dashboard_address": None})
+    return DaskTaskRunner(
+        cluster_kwargs={"n_workers": workers, "threads_per_worker": 1, "processes": True, "dashboard_address": None}
+    )
 
 
 class SweepError(RuntimeError):

@@ -49,8 +49,9 @@ class GuardedServer(SubprocessASGIServer):
     def _run_uvicorn_command(self) -> subprocess.Popen:
         self._forget()  # a retry on another port: the process before it has exited
         mode = "pdeathsig" if threading.current_thread() is threading.main_thread() else "watch"
-        process = subprocess.Popen([sys.executable, "-P", str(GUARD), str(os.getpid()), mode, str(self.port)],
-                                   env=server_environment())
+        process = subprocess.Popen(
+            [sys.executable, "-P", str(GUARD), str(os.getpid()), mode, str(self.port)], env=server_environment()
+        )
         self._record: Path | None = record_server(prefect_home(), process.pid)
         return process
 
@@ -66,8 +67,13 @@ class GuardedServer(SubprocessASGIServer):
 
 
 def server_environment() -> dict[str, str]:
-    return {**os.environ, "PREFECT_UI_ENABLED": "0", "PREFECT__SERVER_EPHEMERAL": "1", "PREFECT__SERVER_FINAL": "1",
-            **ps.get_current_settings().to_environment_variables(exclude_unset=True)}
+    return {
+        **os.environ,
+        "PREFECT_UI_ENABLED": "0",
+        "PREFECT__SERVER_EPHEMERAL": "1",
+        "PREFECT__SERVER_FINAL": "1",
+        **ps.get_current_settings().to_environment_variables(exclude_unset=True),
+    }
 
 
 def prefect_home() -> Path:
@@ -83,8 +89,16 @@ def record_server(home: Path, pid: int) -> Path:
     folder = records(home)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{pid}.json"
-    path.write_text(json.dumps({"server": pid, "server_started": processes.started_ticks(pid),
-                                "parent": os.getpid(), "parent_started": processes.started_ticks(os.getpid())}))
+    path.write_text(
+        json.dumps(
+            {
+                "server": pid,
+                "server_started": processes.started_ticks(pid),
+                "parent": os.getpid(),
+                "parent_started": processes.started_ticks(os.getpid()),
+            }
+        )
+    )
     return path
 
 

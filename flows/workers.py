@@ -37,9 +37,18 @@ def deploy_campaign(config_path: str | Path, pool: str, out_dir: str | Path) -> 
     # called from sync code, Prefect's dispatcher returns the flow itself rather than a coroutine
     source = cast("Flow[..., Any]", flow.from_source(source=str(PROJECT_ROOT), entrypoint="flows/campaign.py:campaign"))
     source.deploy(
-        name=name, work_pool_name=pool, build=False, push=False, print_next_steps=False,
-        parameters={"config": config_path, "out_dir": str(Path(out_dir).resolve()), "show_progress": False,
-                    "per_run_dir": True},
-        description=f"one {name} campaign on the {pool} work pool; pass seed (and policy)", tags=["noisebo", name],
+        name=name,
+        work_pool_name=pool,
+        build=False,
+        push=False,
+        print_next_steps=False,
+        parameters={
+            "config": config_path,
+            "out_dir": str(Path(out_dir).resolve()),
+            "show_progress": False,
+            "per_run_dir": True,
+        },
+        description=f"one {name} campaign on the {pool} work pool; pass seed (and policy)",
+        tags=["noisebo", name],
     )
     return f"campaign/{name}"

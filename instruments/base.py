@@ -59,4 +59,3 @@ def is_simulator(instrument: object) -> TypeIs[Simulator]:
     from noisebo.campaign.driver import simulates  # the campaign loop, with the models: not for listing drivers
 
     return simulates(instrument)
-

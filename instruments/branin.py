@@ -40,8 +40,11 @@ class BraninSettings(FrozenModel):
 
     a0: NonNegativeFloat = Field(0.1, description="A0, the time-independent single-shot noise sd (units of f)")
     a1: NonNegativeFloat = Field(2.0, description="A1, the time-dependent noise amplitude (units of f at t = 1 s)")
-    seed: Count = Field(0, ge=0, description="random stream of shots measured outside a campaign (a campaign draws "
-                        "each shot from its own key)")
+    seed: Count = Field(
+        0,
+        ge=0,
+        description="random stream of shots measured outside a campaign (a campaign draws each shot from its own key)",
+    )
 
 
 class BraninInstrument:

@@ -29,14 +29,21 @@ class ForresterSettings(FrozenModel):
 
     a0: NonNegativeFloat = Field(0.1, description="A0, the time-independent single-shot noise sd (units of f)")
     a1: NonNegativeFloat = Field(2.0, description="A1, the time-dependent noise amplitude (units of f at t = 1 s)")
-    law: Literal["inv_sqrt", "quadrature"] = Field("inv_sqrt", description="inv_sqrt: A1/sqrt(t) + A0 (the paper's); "
-                                                   "quadrature: sqrt(A1^2/t + A0^2)")
-    patch_a0: NonNegativeFloat = Field(0.0, description="a noisy patch: adds patch_a0 exp(-(x - patch_x)^2 / "
-                                       "(2 patch_width^2)) to A0 (units of f; 0: the same noise at every x)")
+    law: Literal["inv_sqrt", "quadrature"] = Field(
+        "inv_sqrt", description="inv_sqrt: A1/sqrt(t) + A0 (the paper's); quadrature: sqrt(A1^2/t + A0^2)"
+    )
+    patch_a0: NonNegativeFloat = Field(
+        0.0,
+        description="a noisy patch: adds patch_a0 exp(-(x - patch_x)^2 / "
+        "(2 patch_width^2)) to A0 (units of f; 0: the same noise at every x)",
+    )
     patch_x: NonNegativeFloat = Field(0.5, le=1, description="the patch's centre, in x")
     patch_width: PositiveFloat = Field(0.05, description="the patch's width (sd), in x")
-    seed: Count = Field(0, ge=0, description="random stream of shots measured outside a campaign (a campaign draws "
-                        "each shot from its own key)")
+    seed: Count = Field(
+        0,
+        ge=0,
+        description="random stream of shots measured outside a campaign (a campaign draws each shot from its own key)",
+    )
 
 
 class ForresterInstrument:

@@ -56,8 +56,9 @@ LINE_AVERAGE_POINTS = 1001  # positions along a line over which noise_law averag
 AREA_AVERAGE_POINTS = 129  # per axis on an area (129 x 129 positions)
 LANDING = (0, 4)  # which of a sweep's standard normal draws move the tip along x and along y
 
-Source = Annotated[Union[ScanProfileConfig, SyntheticProfileConfig, ScanAreaConfig, SyntheticAreaConfig],
-                   Field(discriminator="source")]
+Source = Annotated[
+    Union[ScanProfileConfig, SyntheticProfileConfig, ScanAreaConfig, SyntheticAreaConfig], Field(discriminator="source")
+]
 
 
 def build_source(cfg):
@@ -88,24 +89,34 @@ class PFMSettings(FrozenModel):
     ``seed``: the random stream of sweeps measured outside a campaign (a campaign draws each
     shot from its own key)."""
 
-    profile: Source = Field(ScanProfileConfig(), description="the local response, chosen by `source`: scan (a line "
-                            "across a real scan), synthetic (a synthetic line), scan_area (a real scan's area) or "
-                            "synthetic_area")
+    profile: Source = Field(
+        ScanProfileConfig(),
+        description="the local response, chosen by `source`: scan (a line "
+        "across a real scan), synthetic (a synthetic line), scan_area (a real scan's area) or "
+        "synthetic_area",
+    )
     resonance_hz: PositiveFloat = Field(372_000.0, description="the contact resonance (Hz)")
     q: Number = Field(250.0, gt=1, description="the oscillator's quality factor")
     sweep_half_span_hz: PositiveFloat = Field(5_000.0, description="a sweep covers resonance_hz +- this (Hz)")
-    sample_rate_hz: PositiveFloat = Field(10_000.0, description="samples per second of sweep (Hz): a sweep of t s "
-                                          "has round(sample_rate_hz t) samples")
-    sample_noise_pm: NonNegativeFloat = Field(7_500.0, description="Gaussian noise per sample of the amplitude "
-                                              "spectrum (pm, sd)")
-    background_pm: NonNegativeFloat = Field(0.5, description="electrostatic background added to the local response, "
-                                            "per sweep (pm, sd)")
-    gain_jitter: NonNegativeFloat = Field(0.002, description="relative gain jitter (drive and contact) per sweep "
-                                          "(sd, a fraction)")
+    sample_rate_hz: PositiveFloat = Field(
+        10_000.0, description="samples per second of sweep (Hz): a sweep of t s has round(sample_rate_hz t) samples"
+    )
+    sample_noise_pm: NonNegativeFloat = Field(
+        7_500.0, description="Gaussian noise per sample of the amplitude spectrum (pm, sd)"
+    )
+    background_pm: NonNegativeFloat = Field(
+        0.5, description="electrostatic background added to the local response, per sweep (pm, sd)"
+    )
+    gain_jitter: NonNegativeFloat = Field(
+        0.002, description="relative gain jitter (drive and contact) per sweep (sd, a fraction)"
+    )
     position_jitter_um: NonNegativeFloat = Field(0.0001, description="tip landing error per sweep (um, sd per axis)")
     resonance_jitter_hz: NonNegativeFloat = Field(50.0, description="resonance drift per sweep (Hz, sd)")
-    seed: Count = Field(0, ge=0, description="random stream of sweeps measured outside a campaign (a campaign draws "
-                        "each shot from its own key)")
+    seed: Count = Field(
+        0,
+        ge=0,
+        description="random stream of sweeps measured outside a campaign (a campaign draws each shot from its own key)",
+    )
 
     @model_validator(mode="after")
     def _consistent(self) -> PFMSettings:
@@ -280,8 +291,9 @@ class PFMInstrument:
         if self.dimensions == 1:
             return np.linspace(0.0, self.length_um, LINE_AVERAGE_POINTS)[:, None]
         (x0, x1), (y0, y1) = self.bounds_um
-        gx, gy = np.meshgrid(np.linspace(x0, x1, AREA_AVERAGE_POINTS), np.linspace(y0, y1, AREA_AVERAGE_POINTS),
-                             indexing="ij")
+        gx, gy = np.meshgrid(
+            np.linspace(x0, x1, AREA_AVERAGE_POINTS), np.linspace(y0, y1, AREA_AVERAGE_POINTS), indexing="ij"
+        )
         return np.stack([gx.ravel(), gy.ravel()], axis=-1)
 
     @lru_cache(maxsize=1)  # noqa: B019 - one instrument per campaign: the cache lives as long as it

@@ -35,17 +35,22 @@ class ScanAreaConfig(FrozenModel):
     sub-rectangle's extent starts at its first column and row. ``file``, ``amplitude_channel``,
     ``phase_channel``: as for a line (``ScanProfileConfig``)."""
 
-    source: Literal["scan_area"] = Field("scan_area", description="the area of a real PFM scan; x = (x, y) in um "
-                                         "from its first pixel")
+    source: Literal["scan_area"] = Field(
+        "scan_area", description="the area of a real PFM scan; x = (x, y) in um from its first pixel"
+    )
     file: str = Field(DEFAULT_SCAN, description="the scan (pyNSID HDF5): a path, or the name of a shipped scan")
-    amplitude_channel: ChannelIndex | None = Field(None, description="the amplitude channel's index; null: the "
-                                                   "channel whose recorded quantity is the amplitude")
-    phase_channel: ChannelIndex | None = Field(None, description="the phase channel's index; null: the channel "
-                                               "whose recorded quantity is the phase")
-    rows_px: tuple[PixelIndex, PixelIndex] | None = Field(None, description="first and last row (pixels, "
-                                                          "inclusive); null: all")
-    columns_px: tuple[PixelIndex, PixelIndex] | None = Field(None, description="first and last column (pixels, "
-                                                             "inclusive); null: all")
+    amplitude_channel: ChannelIndex | None = Field(
+        None, description="the amplitude channel's index; null: the channel whose recorded quantity is the amplitude"
+    )
+    phase_channel: ChannelIndex | None = Field(
+        None, description="the phase channel's index; null: the channel whose recorded quantity is the phase"
+    )
+    rows_px: tuple[PixelIndex, PixelIndex] | None = Field(
+        None, description="first and last row (pixels, inclusive); null: all"
+    )
+    columns_px: tuple[PixelIndex, PixelIndex] | None = Field(
+        None, description="first and last column (pixels, inclusive); null: all"
+    )
     smooth_px: NonNegativeFloat = Field(1.0, description="Gaussian smoothing of the scan (pixels, sd)")
 
     @model_validator(mode="after")
@@ -65,12 +70,11 @@ class SyntheticAreaConfig(FrozenModel):
     tanh profile of width ``wall_um``; each domain's amplitude is ``amplitude_pm`` times a factor
     drawn from U(0.6, 1.4) with ``seed`` (as for the synthetic line)."""
 
-    source: Literal["synthetic_area"] = Field("synthetic_area", description="a synthetic domain pattern over an "
-                                              "area")
-    pattern: Literal["stripes", "checker"] = Field("stripes", description="stripes: bands of alternating sign; "
-                                                   "checker: n_domains x n_domains cells")
-    size_um: tuple[PositiveFloat, PositiveFloat] = Field((1.0, 1.0), description="(width along x, height along y) "
-                                                         "(um)")
+    source: Literal["synthetic_area"] = Field("synthetic_area", description="a synthetic domain pattern over an area")
+    pattern: Literal["stripes", "checker"] = Field(
+        "stripes", description="stripes: bands of alternating sign; checker: n_domains x n_domains cells"
+    )
+    size_um: tuple[PositiveFloat, PositiveFloat] = Field((1.0, 1.0), description="(width along x, height along y) (um)")
     n_domains: Count = Field(4, ge=1, le=1000, description="bands (stripes) or cells per side (checker)")
     angle_deg: Number = Field(0.0, description="the stripes' direction from the x axis (deg; 0: walls along y)")
     amplitude_pm: PositiveFloat = Field(100.0, description="typical domain response (pm)")

@@ -16,8 +16,18 @@ from scipy import ndimage
 from noisebo.instruments.pfm_scan import DEFAULT_SCAN, ProfileError, dominant_phase, read_scan, signed_response
 from noisebo.config import Count, FrozenModel, NonNegativeFloat, Number, PositiveFloat
 
-__all__ = ["ProfileError", "dominant_phase", "ScanProfileConfig", "SyntheticProfileConfig",
-           "ProfileConfig", "Profile", "scan_profile", "synthetic_profile", "build_profile", "ChannelIndex"]
+__all__ = [
+    "ProfileError",
+    "dominant_phase",
+    "ScanProfileConfig",
+    "SyntheticProfileConfig",
+    "ProfileConfig",
+    "Profile",
+    "scan_profile",
+    "synthetic_profile",
+    "build_profile",
+    "ChannelIndex",
+]
 
 ChannelIndex = Annotated[Count, Field(ge=0)]
 
@@ -32,10 +42,12 @@ class ScanProfileConfig(FrozenModel):
 
     source: Literal["scan"] = Field("scan", description="a line across a real PFM scan")
     file: str = Field(DEFAULT_SCAN, description="the scan (pyNSID HDF5): a path, or the name of a shipped scan")
-    amplitude_channel: ChannelIndex | None = Field(None, description="the amplitude channel's index; null: the "
-                                                   "channel whose recorded quantity is the amplitude")
-    phase_channel: ChannelIndex | None = Field(None, description="the phase channel's index; null: the channel "
-                                               "whose recorded quantity is the phase")
+    amplitude_channel: ChannelIndex | None = Field(
+        None, description="the amplitude channel's index; null: the channel whose recorded quantity is the amplitude"
+    )
+    phase_channel: ChannelIndex | None = Field(
+        None, description="the phase channel's index; null: the channel whose recorded quantity is the phase"
+    )
     start_px: tuple[Number, Number] = Field((20.0, 120.0), description="the line's first pixel (row, column)")
     end_px: tuple[Number, Number] = Field((200.0, 255.0), description="the line's last pixel (row, column)")
     smooth_px: NonNegativeFloat = Field(1.0, description="Gaussian smoothing of the scan (pixels, sd)")

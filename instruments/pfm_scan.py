@@ -120,14 +120,18 @@ def find_channel(found: list[Channel], sought: str, path: Path) -> Channel:
     if len(matches) > 1:
         retrace = [c for c in matches if _word(c.quantity).endswith("retrace")]
         if len(retrace) != 1:
-            raise ChannelError(f"{path}: {len(matches)} channels could be the {sought} "
-                               f"({_listing(matches)}) and not exactly one is a Retrace; set "
-                               f"{sought}_channel to the index of the one to use (channels: {_listing(found)})")
+            raise ChannelError(
+                f"{path}: {len(matches)} channels could be the {sought} "
+                f"({_listing(matches)}) and not exactly one is a Retrace; set "
+                f"{sought}_channel to the index of the one to use (channels: {_listing(found)})"
+            )
         matches = retrace
     if not matches:
-        raise ChannelError(f"{path}: no channel whose quantity is {sought.capitalize()} (or "
-                           f"{sought.capitalize()}Retrace/Trace); channels: {_listing(found)}; set "
-                           f"{sought}_channel to the index of the channel to use")
+        raise ChannelError(
+            f"{path}: no channel whose quantity is {sought.capitalize()} (or "
+            f"{sought.capitalize()}Retrace/Trace); channels: {_listing(found)}; set "
+            f"{sought}_channel to the index of the channel to use"
+        )
     return matches[0]
 
 
@@ -140,11 +144,14 @@ def _chosen(found: list[Channel], index: int | None, sought: str, path: Path) ->
         channel = next((c for c in found if c.index == index), None)
         if channel is None:
             base = f"{MEASUREMENT}/Channel_{index}/Channel_{index}"
-            raise ProfileError(f"{path}: no channel {index} in the pyNSID layout ({base}/Channel_{index}); "
-                               f"channels: {_listing(found)}")
+            raise ProfileError(
+                f"{path}: no channel {index} in the pyNSID layout ({base}/Channel_{index}); channels: {_listing(found)}"
+            )
     if channel.units.strip().lower() not in EXPECTED_UNITS[sought]:
-        raise ChannelError(f"{path}: the {sought} channel Channel_{channel.index} ({channel.quantity}) is in "
-                           f"{channel.units!r}; expected {EXPECTED_UNITS[sought][0]!r}")
+        raise ChannelError(
+            f"{path}: the {sought} channel Channel_{channel.index} ({channel.quantity}) is in "
+            f"{channel.units!r}; expected {EXPECTED_UNITS[sought][0]!r}"
+        )
     return channel
 
 
@@ -186,8 +193,10 @@ def read_scan(file: str, amplitude_channel: int | None = None, phase_channel: in
         phase = _chosen(found, phase_channel, "phase", path)
         amplitude, phase_deg = _image(f, amp.index, path), _image(f, phase.index, path)
         if amplitude.shape != phase_deg.shape:
-            raise ProfileError(f"{path}: the amplitude (Channel_{amp.index}, {amplitude.shape}) and phase "
-                               f"(Channel_{phase.index}, {phase_deg.shape}) images differ in shape")
+            raise ProfileError(
+                f"{path}: the amplitude (Channel_{amp.index}, {amplitude.shape}) and phase "
+                f"(Channel_{phase.index}, {phase_deg.shape}) images differ in shape"
+            )
         dataset = f[f"{MEASUREMENT}/Channel_{amp.index}/Channel_{amp.index}/Channel_{amp.index}"]
         pitch = (_pitch_um(dataset, 0, path), _pitch_um(dataset, 1, path))
     if not min(pitch) > 0:

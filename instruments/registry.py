@@ -63,9 +63,11 @@ def _entry_point(kind: str) -> EntryPoint:
     found = [ep for ep in entry_points(group=GROUP) if ep.name == kind]
     if not found:
         names = ", ".join(installed()) or "none"
-        raise DriverNotInstalled(f"instrument.kind: no installed instrument driver {kind!r}; installed: {names} "
-                                 "(`noisebo instruments` lists them; a driver package registers itself in the "
-                                 f"entry-point group {GROUP!r})")
+        raise DriverNotInstalled(
+            f"instrument.kind: no installed instrument driver {kind!r}; installed: {names} "
+            "(`noisebo instruments` lists them; a driver package registers itself in the "
+            f"entry-point group {GROUP!r})"
+        )
     return found[0]
 
 
@@ -75,11 +77,14 @@ def driver_class(kind: str) -> Driver:
     try:
         cls = ep.load()
     except Exception as error:  # noqa: BLE001 - any import failure of a third-party package
-        raise DriverBroken(f"instrument driver {kind!r} ({ep.value}) could not be loaded: "
-                           f"{type(error).__name__}: {error}") from None
+        raise DriverBroken(
+            f"instrument driver {kind!r} ({ep.value}) could not be loaded: {type(error).__name__}: {error}"
+        ) from None
     missing = [a for a in ("Settings", "name", "version", "measure") if not hasattr(cls, a)]
     if missing or not (isinstance(cls.Settings, type) and issubclass(cls.Settings, BaseModel)):
-        raise DriverBroken(f"instrument driver {kind!r} ({ep.value}) lacks {', '.join(missing) or 'a pydantic Settings model'}")
+        raise DriverBroken(
+            f"instrument driver {kind!r} ({ep.value}) lacks {', '.join(missing) or 'a pydantic Settings model'}"
+        )
     for name, reduce in dict(getattr(cls, "reductions", {})).items():
         try:
             register_reduction(name, reduce)
@@ -127,14 +132,18 @@ def profile_problem(config: CampaignConfig, settings: dict) -> str | None:
         return None
     made = noise.profile.driver
     if made.name != config.instrument.kind:
-        return (f"noise_model.profile: it was made with the driver {made.name!r}, the campaign uses "
-                f"{config.instrument.kind!r} (set noise_model.profile_check: false to use it anyway)")
+        return (
+            f"noise_model.profile: it was made with the driver {made.name!r}, the campaign uses "
+            f"{config.instrument.kind!r} (set noise_model.profile_check: false to use it anyway)"
+        )
     differ = sorted(k for k in set(made.settings) | set(settings) if made.settings.get(k) != settings.get(k))
     if differ:
         shown = "; ".join(f"{k}: {made.settings.get(k)!r} in the profile, {settings.get(k)!r} here" for k in differ[:3])
         more = f" and {len(differ) - 3} more" if len(differ) > 3 else ""
-        return (f"noise_model.profile: it was made with other instrument settings ({shown}{more}; set "
-                "noise_model.profile_check: false to use it anyway)")
+        return (
+            f"noise_model.profile: it was made with other instrument settings ({shown}{more}; set "
+            "noise_model.profile_check: false to use it anyway)"
+        )
     return None
 
 
@@ -151,12 +160,16 @@ def space_problem(config: CampaignConfig, cls: Driver, settings: BaseModel) -> s
         return None
     axes = config.space.axes
     if len(bounds) != len(axes):
-        return (f"space.axes: the {config.instrument.kind} instrument measures over {len(bounds)} axis(es), "
-                f"the space has {len(axes)}")
+        return (
+            f"space.axes: the {config.instrument.kind} instrument measures over {len(bounds)} axis(es), "
+            f"the space has {len(axes)}"
+        )
     for k, (axis, (lo, hi)) in enumerate(zip(axes, bounds)):
         if axis.low < lo - 1e-9 * max(1.0, abs(lo)) or axis.high > hi + 1e-9 * max(1.0, abs(hi)):
-            return (f"space.axes.{k} ({axis.name}): [{axis.low:g}, {axis.high:g}] leaves the instrument's extent "
-                    f"[{lo:.6g}, {hi:.6g}]")
+            return (
+                f"space.axes.{k} ({axis.name}): [{axis.low:g}, {axis.high:g}] leaves the instrument's extent "
+                f"[{lo:.6g}, {hi:.6g}]"
+            )
     return None
 
 

@@ -16,8 +16,16 @@ from typing import Annotated, Any, Final, Literal, Union, get_args, get_origin
 
 import numpy as np
 import yaml
-from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, ValidationInfo, field_validator,
-                      model_validator)
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from noisebo import registry
@@ -34,7 +42,6 @@ class FrozenModel(BaseModel):
     """Base of every settings model: frozen, unknown keys refused (drivers' settings too)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
-
 
 
 def given(value: Any) -> str:
@@ -62,6 +69,7 @@ def _strict(expected: str):
         if problem is not None:
             raise PydanticCustomError("strict_number", problem)
         return value
+
     return check
 
 
@@ -74,6 +82,7 @@ def _installed(group: str):
             return registry.checked(group, value, load_it=(info.context or {}).get(LOAD_PLUGINS, True))
         except ValueError as error:  # not installed, or broken: one line naming what is installed
             raise PydanticCustomError("not_installed", "{reason}", {"reason": str(error)}) from None
+
     return check
 
 
@@ -140,7 +149,8 @@ def _refuses(model: type[BaseModel], name: str, value: Any, where: set[tuple]) -
     except ValidationError as error:
         mine = [e for e in error.errors() if e["loc"][:1] == (name,)]
         return {tuple(e["loc"]) for e in mine} == where and all(
-            e["type"] in ("strict_number", "strict_flag") for e in mine)
+            e["type"] in ("strict_number", "strict_flag") for e in mine
+        )
     return False
 
 
@@ -169,17 +179,23 @@ class FaultsConfig(FrozenModel):
     single-shot noise sd) or, for spectra, a corrupted spectrum; otherwise the real reading."""
 
     seed: Count = Field(0, ge=0, description="seed of the injector's own random stream (independent of the campaign's)")
-    timeout: Rate = Field(0.0, description="probability that a call hangs for `hang_s` (cut off by "
-                                           "`instrument.timeout_s`); the rates add up to at most 1")
+    timeout: Rate = Field(
+        0.0,
+        description="probability that a call hangs for `hang_s` (cut off by "
+        "`instrument.timeout_s`); the rates add up to at most 1",
+    )
     exception: Rate = Field(0.0, description="probability that a call raises an instrument error")
     nan: Rate = Field(0.0, description="probability that a call returns a NaN reading")
     inf: Rate = Field(0.0, description="probability that a call returns an infinite reading")
-    outlier: Rate = Field(0.0, description="probability that a reading is moved by `outlier_sd` true single-shot "
-                                           "noise sd")
-    corrupt_spectrum: Rate = Field(0.0, description="probability that a spectrum reading comes back corrupted "
-                                                    "(spectra only)")
-    outlier_sd: PositiveFloat = Field(50.0, description="how far an injected outlier lies from the true reading, in "
-                                                        "single-shot noise sd")
+    outlier: Rate = Field(
+        0.0, description="probability that a reading is moved by `outlier_sd` true single-shot noise sd"
+    )
+    corrupt_spectrum: Rate = Field(
+        0.0, description="probability that a spectrum reading comes back corrupted (spectra only)"
+    )
+    outlier_sd: PositiveFloat = Field(
+        50.0, description="how far an injected outlier lies from the true reading, in single-shot noise sd"
+    )
     hang_s: PositiveFloat = Field(2.0, description="length of an injected hang (s); above `instrument.timeout_s`")
 
     @model_validator(mode="after")
@@ -197,14 +213,23 @@ class InstrumentConfig(FrozenModel):
     ``timeout_s`` (the instrument layer gives up on a shot after this long; None: no limit) and
     ``faults`` (injected faults, for resilience tests) wrap any driver."""
 
-    kind: str = Field(min_length=1, description="the name of an installed instrument driver (`noisebo instruments` "
-                                                "lists them), e.g. forrester, pfm, remote, manual")
-    settings: dict[str, Any] = Field(default_factory=dict, description="the driver's own settings, validated by its "
-                                     "`Settings` model when the config is loaded (see the drivers' settings below)")
-    timeout_s: PositiveFloat | None = Field(None, description="the instrument layer gives up on a shot after this "
-                                            "long (s) and records a timeout; null: no limit")
-    faults: FaultsConfig | None = Field(None, description="injected instrument faults, for resilience tests; "
-                                                          "null: none")
+    kind: str = Field(
+        min_length=1,
+        description="the name of an installed instrument driver (`noisebo instruments` "
+        "lists them), e.g. forrester, pfm, remote, manual",
+    )
+    settings: dict[str, Any] = Field(
+        default_factory=dict,
+        description="the driver's own settings, validated by its "
+        "`Settings` model when the config is loaded (see the drivers' settings below)",
+    )
+    timeout_s: PositiveFloat | None = Field(
+        None,
+        description="the instrument layer gives up on a shot after this long (s) and records a timeout; null: no limit",
+    )
+    faults: FaultsConfig | None = Field(
+        None, description="injected instrument faults, for resilience tests; null: none"
+    )
 
     def __hash__(self) -> int:  # settings is a mapping: hash its canonical JSON
         return hash((self.kind, json.dumps(self.settings, sort_keys=True, default=str), self.timeout_s, self.faults))
@@ -222,12 +247,18 @@ class SHOReductionConfig(FrozenModel):
     ``q_bounds``. ``nominal_resonance_hz`` and ``nominal_q`` (the instrument's tune), when both
     are given, rescue a sweep whose free fit fails (see ``noisebo.sho.fit_sho``)."""
 
-    q_bounds: tuple[PositiveFloat, PositiveFloat] = Field((5.0, 5000.0), description="the range of the quality "
-                                                          "factor Q the fit may take (increasing)")
-    nominal_resonance_hz: PositiveFloat | None = Field(None, description="the instrument's nominal resonance (Hz); "
-                                                       "with `nominal_q` it rescues a sweep whose free fit fails")
-    nominal_q: PositiveFloat | None = Field(None, description="the instrument's nominal quality factor, inside "
-                                            "`q_bounds`; given with `nominal_resonance_hz` or not at all")
+    q_bounds: tuple[PositiveFloat, PositiveFloat] = Field(
+        (5.0, 5000.0), description="the range of the quality factor Q the fit may take (increasing)"
+    )
+    nominal_resonance_hz: PositiveFloat | None = Field(
+        None,
+        description="the instrument's nominal resonance (Hz); with `nominal_q` it rescues a sweep whose free fit fails",
+    )
+    nominal_q: PositiveFloat | None = Field(
+        None,
+        description="the instrument's nominal quality factor, inside "
+        "`q_bounds`; given with `nominal_resonance_hz` or not at all",
+    )
 
     @model_validator(mode="after")
     def _consistent(self) -> SHOReductionConfig:
@@ -243,8 +274,9 @@ class SHOReductionConfig(FrozenModel):
 class ReductionConfig(FrozenModel):
     """How a raw spectrum becomes a shot's value, per named reduction (a reading names its own)."""
 
-    sho: SHOReductionConfig = Field(SHOReductionConfig(), description="the SHO fit of a resonance sweep (a "
-                                    "reading whose reduction is \"sho\")")
+    sho: SHOReductionConfig = Field(
+        SHOReductionConfig(), description='the SHO fit of a resonance sweep (a reading whose reduction is "sho")'
+    )
 
 
 AXIS_NAME = r"^[A-Za-z_][A-Za-z0-9_]*$"
@@ -259,11 +291,20 @@ class AxisConfig(FrozenModel):
     name: str = Field(pattern=AXIS_NAME, max_length=32, description="the axis's name, an identifier (x, y, ...)")
     low: FiniteFloat = Field(description="lower bound, in the axis's `units`")
     high: FiniteFloat = Field(description="upper bound, in the axis's `units`; above `low`")
-    units: str = Field("", max_length=32, description="the units of positions along the axis (um, V, ...); x "
-                                                      "travels in these units everywhere: requests, files, figures")
-    n: Count | None = Field(None, ge=2, le=20_000, description="grid points along the axis (null: 200 for one "
-                            "axis, 64 for two, 12 for more): the candidate grid for one axis, the display grid "
-                            "for two")
+    units: str = Field(
+        "",
+        max_length=32,
+        description="the units of positions along the axis (um, V, ...); x "
+        "travels in these units everywhere: requests, files, figures",
+    )
+    n: Count | None = Field(
+        None,
+        ge=2,
+        le=20_000,
+        description="grid points along the axis (null: 200 for one "
+        "axis, 64 for two, 12 for more): the candidate grid for one axis, the display grid "
+        "for two",
+    )
 
     @model_validator(mode="after")
     def _ordered(self) -> AxisConfig:
@@ -284,13 +325,19 @@ class SpaceConfig(FrozenModel):
     With one axis, proposals lie on its grid; with more, on ``n_candidates`` reference points
     (the display grid for two axes, a Halton set for more) refined locally, off the grid."""
 
-    axes: tuple[AxisConfig, ...] = Field((AxisConfig(name="x", low=0.0, high=1.0, n=200),), description="the axes "
-                                         "of x, 1 to 4 (or, for one axis named x, the keys `x_min`, `x_max`, `n_x`)")
+    axes: tuple[AxisConfig, ...] = Field(
+        (AxisConfig(name="x", low=0.0, high=1.0, n=200),),
+        description="the axes of x, 1 to 4 (or, for one axis named x, the keys `x_min`, `x_max`, `n_x`)",
+    )
     t_min: PositiveFloat = Field(0.2, description="shortest exposure or sweep time (s)")
     t_max: PositiveFloat = Field(10.0, description="longest exposure or sweep time (s); above `t_min`")
     n_t: Count = Field(100, ge=2, le=20_000, description="points of the t grid, evenly spaced over [t_min, t_max]")
-    n_candidates: Count = Field(1024, ge=16, le=20_000, description="reference points (a Halton set) that a "
-                                "decision searches from with three or four axes")
+    n_candidates: Count = Field(
+        1024,
+        ge=16,
+        le=20_000,
+        description="reference points (a Halton set) that a decision searches from with three or four axes",
+    )
 
     @model_validator(mode="before")
     @classmethod
@@ -303,8 +350,14 @@ class SpaceConfig(FrozenModel):
         for name, expected in (("x_min", "a number"), ("x_max", "a number"), ("n_x", "a whole number")):
             problem = refusal(data.get(name), expected)
             if problem is not None:  # named as given, not as the axis it becomes
-                raise ValidationError.from_exception_data(cls.__name__, [InitErrorDetails(
-                    type=PydanticCustomError("strict_number", problem), loc=(name,), input=data[name])])
+                raise ValidationError.from_exception_data(
+                    cls.__name__,
+                    [
+                        InitErrorDetails(
+                            type=PydanticCustomError("strict_number", problem), loc=(name,), input=data[name]
+                        )
+                    ],
+                )
         if isinstance(low, (int, float)) and isinstance(high, (int, float)) and not low < high:
             raise ValueError(f"x_min ({low}) must be below x_max ({high})")
         rest = {k: v for k, v in data.items() if k not in ONE_AXIS_KEYS}
@@ -321,8 +374,9 @@ class SpaceConfig(FrozenModel):
         if not self.t_min < self.t_max:
             raise ValueError(f"t_min ({self.t_min}) must be below t_max ({self.t_max})")
         if self.dimensions == 2 and math.prod(self.points_per_axis) > MAX_GRID_POINTS:
-            raise ValueError(f"axes: a {' x '.join(map(str, self.points_per_axis))} grid has more than "
-                             f"{MAX_GRID_POINTS} points")
+            raise ValueError(
+                f"axes: a {' x '.join(map(str, self.points_per_axis))} grid has more than {MAX_GRID_POINTS} points"
+            )
         return self
 
     @property
@@ -371,8 +425,9 @@ class RewardConfig(FrozenModel):
 
     alpha: PositiveFloat = Field(0.1, description="weight of the time cost t^2 in R (1/s^2)")
     beta: PositiveFloat = Field(2.0, description="weight of the single-shot noise sd in R (1/units of f)")
-    gamma: NonNegativeFloat = Field(5.0, description="exponent of the normalised reward in the reward-driven "
-                                                     "policy (Eq. 6)")
+    gamma: NonNegativeFloat = Field(
+        5.0, description="exponent of the normalised reward in the reward-driven policy (Eq. 6)"
+    )
 
 
 class AcquisitionConfig(FrozenModel):
@@ -387,18 +442,25 @@ class AcquisitionConfig(FrozenModel):
     ``f_acquisition``: UE, EI or UCB on f; ``maximize`` sets EI/UCB's direction.
     """
 
-    policy: PolicyName = Field("reward", description="an installed policy (`noisebo policies`): reward, double, "
-                               "info_rate or a plug-in's")
-    f_acquisition: Literal["ue", "ei", "ucb"] = Field("ue", description="acquisition on f: uncertainty (ue), "
-                                                      "expected improvement (ei) or upper confidence bound (ucb)")
-    t_acquisition: Literal["ei"] = Field("ei", description="acquisition on the normalised reward over t (the double "
-                                         "policy's acq_t)")
+    policy: PolicyName = Field(
+        "reward", description="an installed policy (`noisebo policies`): reward, double, info_rate or a plug-in's"
+    )
+    f_acquisition: Literal["ue", "ei", "ucb"] = Field(
+        "ue",
+        description="acquisition on f: uncertainty (ue), expected improvement (ei) or upper confidence bound (ucb)",
+    )
+    t_acquisition: Literal["ei"] = Field(
+        "ei", description="acquisition on the normalised reward over t (the double policy's acq_t)"
+    )
     maximize: Flag = Field(True, description="whether EI and UCB look for the maximum of f (false: the minimum)")
     ucb_kappa: PositiveFloat = Field(2.0, description="UCB's multiple of the posterior sd of f")
     ei_xi: NonNegativeFloat = Field(0.01, description="EI's exploration margin, in standardised units of f")
-    fixed_t: PositiveFloat | None = Field(None, description="a baseline without time optimisation: every proposal "
-                                          "uses the t-grid value nearest this (s), chosen by the policy's acquisition "
-                                          "over x alone; null optimises t")
+    fixed_t: PositiveFloat | None = Field(
+        None,
+        description="a baseline without time optimisation: every proposal "
+        "uses the t-grid value nearest this (s), chosen by the policy's acquisition "
+        "over x alone; null optimises t",
+    )
 
 
 class PrimaryModelConfig(FrozenModel):
@@ -406,11 +468,13 @@ class PrimaryModelConfig(FrozenModel):
     [0, 1]. The default length prior puts 95 % of its mass between 0.075 and 0.53 of the x range:
     features much shorter cannot be resolved by a few dozen points, much longer ones are flat."""
 
-    amplitude_loc: FiniteFloat = Field(0.0, description="log-median of the kernel amplitude's LogNormal prior "
-                                       "(standardised f)")
+    amplitude_loc: FiniteFloat = Field(
+        0.0, description="log-median of the kernel amplitude's LogNormal prior (standardised f)"
+    )
     amplitude_scale: PositiveFloat = Field(1.0, description="log-sd of the kernel amplitude's LogNormal prior")
-    length_loc: FiniteFloat = Field(math.log(0.2), description="log-median of each length scale's LogNormal prior "
-                                    "(x scaled to [0, 1] per axis)")
+    length_loc: FiniteFloat = Field(
+        math.log(0.2), description="log-median of each length scale's LogNormal prior (x scaled to [0, 1] per axis)"
+    )
     length_scale: PositiveFloat = Field(0.5, description="log-sd of each length scale's LogNormal prior")
 
 
@@ -435,18 +499,28 @@ class NoiseFieldConfig(FrozenModel):
     out with less variance near the cube's faces; a larger factor needs more functions).
     """
 
-    varies: Literal["a0", "a0_a1"] = Field("a0", description="a0: A0(x) varies, A1 and p shared; a0_a1: A1(x) "
-                                           "varies too, an independent field with the same priors")
-    amplitude_loc: FiniteFloat = Field(math.log(0.5), description="log-median of the LogNormal prior of the field's "
-                                       "sd (itself in log units of A0)")
+    varies: Literal["a0", "a0_a1"] = Field(
+        "a0",
+        description="a0: A0(x) varies, A1 and p shared; a0_a1: A1(x) "
+        "varies too, an independent field with the same priors",
+    )
+    amplitude_loc: FiniteFloat = Field(
+        math.log(0.5), description="log-median of the LogNormal prior of the field's sd (itself in log units of A0)"
+    )
     amplitude_scale: PositiveFloat = Field(1.0, description="log-sd of the field sd's LogNormal prior")
-    length_loc: FiniteFloat = Field(math.log(0.2), description="log-median of each axis length's LogNormal prior "
-                                    "(x scaled to [0, 1] per axis)")
+    length_loc: FiniteFloat = Field(
+        math.log(0.2), description="log-median of each axis length's LogNormal prior (x scaled to [0, 1] per axis)"
+    )
     length_scale: PositiveFloat = Field(0.75, description="log-sd of each axis length's LogNormal prior")
-    basis_per_axis: Count | None = Field(None, ge=2, le=256, description="basis functions per axis of the "
-                                         "approximate GP (null: 96, 24, 10, 7 for 1-4 axes)")
-    boundary_factor: Number = Field(2.0, ge=1.1, le=4.0, description="the basis lives on a box this many times the "
-                                    "unit cube's width, centred on it")
+    basis_per_axis: Count | None = Field(
+        None,
+        ge=2,
+        le=256,
+        description="basis functions per axis of the approximate GP (null: 96, 24, 10, 7 for 1-4 axes)",
+    )
+    boundary_factor: Number = Field(
+        2.0, ge=1.1, le=4.0, description="the basis lives on a box this many times the unit cube's width, centred on it"
+    )
 
 
 class ParameterPosterior(FrozenModel):
@@ -487,8 +561,9 @@ class NoiseProfile(FrozenModel):
     schema_version: Literal[1] = Field(1, description="the profile format's version")
     driver: ProfileDriver = Field(description="the instrument driver the campaigns ran on")
     law: str = Field(description="the noise law (`noise_model.mean`) the profile describes")
-    parameters: dict[str, ParameterPosterior] = Field(description="each law parameter's posterior (a0, a1, and p "
-                                                      "for a law that infers its exponent)")
+    parameters: dict[str, ParameterPosterior] = Field(
+        description="each law parameter's posterior (a0, a1, and p for a law that infers its exponent)"
+    )
     t_range_s: tuple[FiniteFloat, FiniteFloat] = Field(description="the shortest and longest t measured (s)")
     noise_points: Count = Field(description="the noise measurements the law was fitted on")
     campaigns: tuple[ProfileCampaign, ...] = Field(description="the campaigns it came from")
@@ -522,30 +597,50 @@ class NoiseModelConfig(FrozenModel):
     settings known not to touch the noise).
     """
 
-    mean: NoiseLawName = Field("inv_sqrt", description="an installed noise law (`noisebo policies`): inv_sqrt "
-                               "(A1/sqrt(t) + A0), power (A1/t^p + A0), quadrature (sqrt(A1^2/t + A0^2)) or a "
-                               "plug-in's")
-    a0_prior: UniformPrior = Field(UniformPrior(), description="Uniform prior of A0, the time-independent noise sd "
-                                   "(units of f)")
-    a1_prior: UniformPrior = Field(UniformPrior(), description="Uniform prior of A1, the time-dependent noise "
-                                   "amplitude (units of f at t = 1 s)")
-    p_prior: UniformPrior = Field(UniformPrior(low=0.1, high=1.5), description="Uniform prior of the exponent p "
-                                  "(the power law only)")
-    residual_amplitude_loc: FiniteFloat = Field(math.log(0.05), description="log-median of the LogNormal prior of "
-                                                "the residual GP's amplitude over t")
+    mean: NoiseLawName = Field(
+        "inv_sqrt",
+        description="an installed noise law (`noisebo policies`): inv_sqrt "
+        "(A1/sqrt(t) + A0), power (A1/t^p + A0), quadrature (sqrt(A1^2/t + A0^2)) or a "
+        "plug-in's",
+    )
+    a0_prior: UniformPrior = Field(
+        UniformPrior(), description="Uniform prior of A0, the time-independent noise sd (units of f)"
+    )
+    a1_prior: UniformPrior = Field(
+        UniformPrior(), description="Uniform prior of A1, the time-dependent noise amplitude (units of f at t = 1 s)"
+    )
+    p_prior: UniformPrior = Field(
+        UniformPrior(low=0.1, high=1.5), description="Uniform prior of the exponent p (the power law only)"
+    )
+    residual_amplitude_loc: FiniteFloat = Field(
+        math.log(0.05), description="log-median of the LogNormal prior of the residual GP's amplitude over t"
+    )
     residual_amplitude_scale: PositiveFloat = Field(1.0, description="log-sd of that prior")
-    learn_after_convergence: Flag = Field(True, description="keep training on the few-shot noise estimates taken "
-                                          "after convergence, weighted by their sampling error")
-    field: NoiseFieldConfig | None = Field(None, description="noise that depends on x: how the law's parameters "
-                                           "vary over x; null: the same noise everywhere, as the paper assumes")
-    profile: NoiseProfile | None = Field(None, description="an instrument's noise profile (`noisebo noise-profile`): "
-                                         "in YAML its path, relative to the config's folder, read when the config is "
-                                         "loaded; its posterior becomes the law's prior")
-    profile_check: Flag = Field(True, description="refuse a profile made with another driver or other driver "
-                                "settings (false: use it anyway)")
-    profile_alpha: Annotated[Number, Field(gt=0, lt=0.5)] = Field(0.01, description="the profile is dropped for good "
-                                                                  "once its posterior predictive p-value on the "
-                                                                  "replicate scatter falls below this")
+    learn_after_convergence: Flag = Field(
+        True,
+        description="keep training on the few-shot noise estimates taken "
+        "after convergence, weighted by their sampling error",
+    )
+    field: NoiseFieldConfig | None = Field(
+        None,
+        description="noise that depends on x: how the law's parameters "
+        "vary over x; null: the same noise everywhere, as the paper assumes",
+    )
+    profile: NoiseProfile | None = Field(
+        None,
+        description="an instrument's noise profile (`noisebo noise-profile`): "
+        "in YAML its path, relative to the config's folder, read when the config is "
+        "loaded; its posterior becomes the law's prior",
+    )
+    profile_check: Flag = Field(
+        True, description="refuse a profile made with another driver or other driver settings (false: use it anyway)"
+    )
+    profile_alpha: Annotated[Number, Field(gt=0, lt=0.5)] = Field(
+        0.01,
+        description="the profile is dropped for good "
+        "once its posterior predictive p-value on the "
+        "replicate scatter falls below this",
+    )
 
     @model_validator(mode="after")
     def _profile_fits(self) -> NoiseModelConfig:
@@ -555,8 +650,9 @@ class NoiseModelConfig(FrozenModel):
         if self.field is not None:
             raise ValueError("profile: a profile holds a noise law over t; it cannot be the prior of a noise field")
         if profile.law != self.mean:
-            raise ValueError(f"profile: it describes the law {profile.law!r}, the config's noise_model.mean is "
-                             f"{self.mean!r}")
+            raise ValueError(
+                f"profile: it describes the law {profile.law!r}, the config's noise_model.mean is {self.mean!r}"
+            )
         needed = ("a0", "a1", "p") if registry.noise_law(self.mean).infers_exponent else ("a0", "a1")
         missing = [name for name in needed if name not in profile.parameters]
         if missing:
@@ -564,8 +660,10 @@ class NoiseModelConfig(FrozenModel):
         for name, prior in zip(needed, (self.a0_prior, self.a1_prior, self.p_prior)):
             mean = profile.parameters[name].mean
             if not prior.low <= mean <= prior.high:
-                raise ValueError(f"profile: its {name} = {mean:.4g} lies outside noise_model.{name}_prior "
-                                 f"[{prior.low:g}, {prior.high:g}]")
+                raise ValueError(
+                    f"profile: its {name} = {mean:.4g} lies outside noise_model.{name}_prior "
+                    f"[{prior.low:g}, {prior.high:g}]"
+                )
         return self
 
 
@@ -586,22 +684,45 @@ class InferenceConfig(FrozenModel):
     range instead, this many bins (an approximation, recorded with each decision).
     """
 
-    mode: Literal["map", "nuts"] = Field("map", description="map: L-BFGS to the posterior mode (with a Laplace "
-                                         "approximation for the noise model); nuts: numpyro NUTS")
-    restarts: Count = Field(6, ge=1, le=64, description="prior draws a multi-start fit starts from, besides a "
-                            "data-driven guess and the previous step's fit")
-    laplace_samples: Count = Field(32, ge=0, le=1024, description="Gaussian draws of the noise model's Laplace "
-                                   "approximation (map mode)")
+    mode: Literal["map", "nuts"] = Field(
+        "map",
+        description="map: L-BFGS to the posterior mode (with a Laplace "
+        "approximation for the noise model); nuts: numpyro NUTS",
+    )
+    restarts: Count = Field(
+        6,
+        ge=1,
+        le=64,
+        description="prior draws a multi-start fit starts from, besides a "
+        "data-driven guess and the previous step's fit",
+    )
+    laplace_samples: Count = Field(
+        32, ge=0, le=1024, description="Gaussian draws of the noise model's Laplace approximation (map mode)"
+    )
     nuts_warmup: Count = Field(500, ge=10, description="NUTS warm-up iterations per fit")
     nuts_samples: Count = Field(500, ge=10, description="NUTS samples per fit")
     predict_samples: Count = Field(100, ge=1, description="thinned NUTS draws that predictions average over")
-    primary_quadrature: Count = Field(0, ge=0, le=15, description="nodes per dimension of the Gauss-Hermite "
-                                      "quadrature over the f GP's hyperparameter posterior (map mode); 0: off, the "
-                                      "mode alone")
-    max_inputs: Count = Field(256, ge=8, le=8192, description="distinct inputs a GP takes exactly; beyond, it merges "
-                              "points into this many equal-width bins (an approximation, recorded per step)")
-    restart_every: Count = Field(8, ge=1, description="after convergence every this-many-th step multi-starts, the "
-                                 "others start from the previous fit (1: every step multi-starts)")
+    primary_quadrature: Count = Field(
+        0,
+        ge=0,
+        le=15,
+        description="nodes per dimension of the Gauss-Hermite "
+        "quadrature over the f GP's hyperparameter posterior (map mode); 0: off, the "
+        "mode alone",
+    )
+    max_inputs: Count = Field(
+        256,
+        ge=8,
+        le=8192,
+        description="distinct inputs a GP takes exactly; beyond, it merges "
+        "points into this many equal-width bins (an approximation, recorded per step)",
+    )
+    restart_every: Count = Field(
+        8,
+        ge=1,
+        description="after convergence every this-many-th step multi-starts, the "
+        "others start from the previous fit (1: every step multi-starts)",
+    )
 
 
 class ScheduleConfig(FrozenModel):
@@ -657,43 +778,75 @@ class ScheduleConfig(FrozenModel):
     """
 
     n_seed: Count = Field(3, ge=1, description="random seed points before the first BO step")
-    seed_design: Literal["latin_hypercube", "uniform"] = Field("latin_hypercube", description="how the seed points "
-                                                               "are drawn over x and t")
-    seed_t_scale: Literal["log", "linear", "log_span"] = Field("log", description="the scale of the seeds' t: log, "
-                                                               "linear, or log_span (t_min, the geometric middle and "
-                                                               "t_max exactly)")
+    seed_design: Literal["latin_hypercube", "uniform"] = Field(
+        "latin_hypercube", description="how the seed points are drawn over x and t"
+    )
+    seed_t_scale: Literal["log", "linear", "log_span"] = Field(
+        "log",
+        description="the scale of the seeds' t: log, "
+        "linear, or log_span (t_min, the geometric middle and "
+        "t_max exactly)",
+    )
     n_steps: Count = Field(15, ge=0, description="BO steps after the seed points")
-    adaptive_shots: Flag = Field(False, description="a noise-measuring point takes the shots that make its noise "
-                                 "estimate as precise as the noise model at its t, between max(2, shots_after) and "
-                                 "shots_before")
-    convergence: Literal["variance", "posterior"] = Field("variance", description="variance: the paper's rule (the "
-                                                          "predicted optimal t stopped moving); posterior: its 95 % "
-                                                          "interval is narrow enough")
-    t_interval_rel: PositiveFloat = Field(0.1, description="posterior rule: converged once the 95 % interval of t* "
-                                          "lies within this fraction of its median either side")
-    noise_t: Literal["policy", "informative"] = Field("policy", description="where a noise-measuring point measures: "
-                                                      "at the policy's t, or (posterior rule) at the t that narrows "
-                                                      "t*'s interval most per second")
-    shots_before: Count = Field(30, ge=2, description="shots per point until the noise model converges (and per seed "
-                                "point, paper mode)")
+    adaptive_shots: Flag = Field(
+        False,
+        description="a noise-measuring point takes the shots that make its noise "
+        "estimate as precise as the noise model at its t, between max(2, shots_after) and "
+        "shots_before",
+    )
+    convergence: Literal["variance", "posterior"] = Field(
+        "variance",
+        description="variance: the paper's rule (the "
+        "predicted optimal t stopped moving); posterior: its 95 % "
+        "interval is narrow enough",
+    )
+    t_interval_rel: PositiveFloat = Field(
+        0.1,
+        description="posterior rule: converged once the 95 % interval of t* "
+        "lies within this fraction of its median either side",
+    )
+    noise_t: Literal["policy", "informative"] = Field(
+        "policy",
+        description="where a noise-measuring point measures: "
+        "at the policy's t, or (posterior rule) at the t that narrows "
+        "t*'s interval most per second",
+    )
+    shots_before: Count = Field(
+        30, ge=2, description="shots per point until the noise model converges (and per seed point, paper mode)"
+    )
     shots_after: Count = Field(3, ge=1, description="shots per point after convergence (every point in budget mode)")
-    window: Count = Field(3, ge=2, description="variance rule: BO steps over which the predicted optimal t's "
-                          "variance is taken")
-    threshold: PositiveFloat = Field(5e-4, description="variance rule: converged when that variance is below this "
-                                     "(s^2)")
-    clip_sd: PositiveFloat | None = Field(None, description="reject shots farther than this many robust sd (1.4826 "
-                                          "x MAD) from the median of the point's shots; null: no clipping")
-    min_failed: Count = Field(5, ge=1, description="failure budget: failed attempts before the failed fraction is "
-                              "judged")
-    tolerated_rate: Rate = Field(0.5, description="failure budget: the campaign stops as failed once the failed "
-                                 "fraction of attempts exceeds this")
-    budget_s: PositiveFloat | None = Field(None, description="the instrument time the campaign may spend (s): every "
-                                           "shot's t plus point_overhead_s per point; null: no budget")
-    point_overhead_s: NonNegativeFloat = Field(0.0, description="instrument time per point besides its shots (s): "
-                                               "moving the tip or stage, settling")
-    mode: Literal["paper", "budget"] = Field("paper", description="paper: noise points of shots_before shots until "
-                                             "convergence; budget: every point takes shots_after shots and the noise "
-                                             "model learns from every point's replicate scatter")
+    window: Count = Field(
+        3, ge=2, description="variance rule: BO steps over which the predicted optimal t's variance is taken"
+    )
+    threshold: PositiveFloat = Field(
+        5e-4, description="variance rule: converged when that variance is below this (s^2)"
+    )
+    clip_sd: PositiveFloat | None = Field(
+        None,
+        description="reject shots farther than this many robust sd (1.4826 "
+        "x MAD) from the median of the point's shots; null: no clipping",
+    )
+    min_failed: Count = Field(
+        5, ge=1, description="failure budget: failed attempts before the failed fraction is judged"
+    )
+    tolerated_rate: Rate = Field(
+        0.5,
+        description="failure budget: the campaign stops as failed once the failed fraction of attempts exceeds this",
+    )
+    budget_s: PositiveFloat | None = Field(
+        None,
+        description="the instrument time the campaign may spend (s): every "
+        "shot's t plus point_overhead_s per point; null: no budget",
+    )
+    point_overhead_s: NonNegativeFloat = Field(
+        0.0, description="instrument time per point besides its shots (s): moving the tip or stage, settling"
+    )
+    mode: Literal["paper", "budget"] = Field(
+        "paper",
+        description="paper: noise points of shots_before shots until "
+        "convergence; budget: every point takes shots_after shots and the noise "
+        "model learns from every point's replicate scatter",
+    )
 
     @property
     def seed_shots(self) -> int:
@@ -703,33 +856,41 @@ class ScheduleConfig(FrozenModel):
     @model_validator(mode="after")
     def _budget_mode_measures_scatter(self) -> ScheduleConfig:
         if self.mode == "budget" and self.shots_after < 2:
-            raise ValueError("mode: budget learns the noise from each point's replicate scatter; set shots_after to "
-                             "at least 2")
+            raise ValueError(
+                "mode: budget learns the noise from each point's replicate scatter; set shots_after to at least 2"
+            )
         if self.mode == "budget" and self.adaptive_shots:
-            raise ValueError("mode: budget gives every point shots_after shots; adaptive_shots belongs to the paper "
-                             "mode's noise-measuring points")
+            raise ValueError(
+                "mode: budget gives every point shots_after shots; adaptive_shots belongs to the paper "
+                "mode's noise-measuring points"
+            )
         return self
 
 
 class CampaignConfig(FrozenModel):
     """One campaign: instrument, space, reward, policy, models, inference and schedule."""
 
-    schema_version: Count = Field(SCHEMA_VERSION, description="the configuration format's version; a version-1 "
-                                  "config (instrument settings beside kind) is migrated when loaded")
+    schema_version: Count = Field(
+        SCHEMA_VERSION,
+        description="the configuration format's version; a version-1 "
+        "config (instrument settings beside kind) is migrated when loaded",
+    )
     name: str = Field("campaign", description="the campaign's name, used in its file names and flow-run names")
-    instrument: InstrumentConfig = Field(InstrumentConfig(kind="forrester"), description="the instrument driver and "
-                                         "its settings")
+    instrument: InstrumentConfig = Field(
+        InstrumentConfig(kind="forrester"), description="the instrument driver and its settings"
+    )
     reduction: ReductionConfig = Field(ReductionConfig(), description="how a raw spectrum becomes a shot's value")
     space: SpaceConfig = Field(SpaceConfig(), description="where (x) and how long (t) the campaign may measure")
     reward: RewardConfig = Field(RewardConfig(), description="the cost/noise reward R(t) = -alpha t^2 - beta Noise")
-    acquisition: AcquisitionConfig = Field(AcquisitionConfig(), description="the policy and its acquisition "
-                                           "functions")
+    acquisition: AcquisitionConfig = Field(AcquisitionConfig(), description="the policy and its acquisition functions")
     primary_model: PrimaryModelConfig = Field(PrimaryModelConfig(), description="priors of the GP for f")
-    noise_model: NoiseModelConfig = Field(NoiseModelConfig(), description="the noise law, its priors, a noise field "
-                                          "and a noise profile")
+    noise_model: NoiseModelConfig = Field(
+        NoiseModelConfig(), description="the noise law, its priors, a noise field and a noise profile"
+    )
     inference: InferenceConfig = Field(InferenceConfig(), description="how the models' hyperparameters are inferred")
-    schedule: ScheduleConfig = Field(ScheduleConfig(), description="seeds, steps, shots, convergence, failure and "
-                                     "instrument-time budgets")
+    schedule: ScheduleConfig = Field(
+        ScheduleConfig(), description="seeds, steps, shots, convergence, failure and instrument-time budgets"
+    )
 
     @model_validator(mode="after")
     def _fixed_t_in_range(self) -> CampaignConfig:
@@ -742,8 +903,10 @@ class CampaignConfig(FrozenModel):
     def _posterior_rule_has_draws(self) -> CampaignConfig:
         inf = self.inference
         if self.schedule.convergence == "posterior" and inf.mode == "map" and inf.laplace_samples < MIN_T_DRAWS:
-            raise ValueError(f"schedule.convergence: the posterior rule needs the noise model's draws; set "
-                             f"inference.laplace_samples to at least {MIN_T_DRAWS}")
+            raise ValueError(
+                f"schedule.convergence: the posterior rule needs the noise model's draws; set "
+                f"inference.laplace_samples to at least {MIN_T_DRAWS}"
+            )
         return self
 
     @model_validator(mode="after")
@@ -751,26 +914,34 @@ class CampaignConfig(FrozenModel):
         if self.schedule.noise_t != "informative":
             return self
         if self.schedule.convergence != "posterior":
-            raise ValueError("schedule.noise_t: informative narrows the posterior of the optimal t, which only the "
-                             "posterior rule tests; set schedule.convergence: posterior")
+            raise ValueError(
+                "schedule.noise_t: informative narrows the posterior of the optimal t, which only the "
+                "posterior rule tests; set schedule.convergence: posterior"
+            )
         if self.noise_model.field is not None:
             raise ValueError("schedule.noise_t: informative needs a noise model without noise_model.field")
         if self.acquisition.fixed_t is not None:
-            raise ValueError("schedule.noise_t: informative chooses t, which acquisition.fixed_t fixes; use one of them")
+            raise ValueError(
+                "schedule.noise_t: informative chooses t, which acquisition.fixed_t fixes; use one of them"
+            )
         return self
 
     @model_validator(mode="after")
     def _budget_mode_learns(self) -> CampaignConfig:
         if self.schedule.mode == "budget" and not self.noise_model.learn_after_convergence:
-            raise ValueError("schedule.mode: budget learns the noise from every point's replicate scatter; set "
-                             "noise_model.learn_after_convergence: true")
+            raise ValueError(
+                "schedule.mode: budget learns the noise from every point's replicate scatter; set "
+                "noise_model.learn_after_convergence: true"
+            )
         return self
 
     @model_validator(mode="after")
     def _field_by_map(self) -> CampaignConfig:
         if self.noise_model.field is not None and self.inference.mode != "map":
-            raise ValueError("noise_model.field: the noise field is fitted by MAP with a Laplace approximation; "
-                             "set inference.mode: map")
+            raise ValueError(
+                "noise_model.field: the noise field is fitted by MAP with a Laplace approximation; "
+                "set inference.mode: map"
+            )
         return self
 
     @field_validator("schema_version")
@@ -787,11 +958,18 @@ class CampaignConfig(FrozenModel):
         data = self.model_dump()
         for key, value in sections.items():
             old = data.get(key)
-            if isinstance(value, dict) and isinstance(old, dict) and value.get("kind", old.get("kind")) == old.get("kind"):
+            if (
+                isinstance(value, dict)
+                and isinstance(old, dict)
+                and value.get("kind", old.get("kind")) == old.get("kind")
+            ):
                 if key == "space" and any(k in value for k in ONE_AXIS_KEYS) and len(old.get("axes", ())) == 1:
                     axis = old["axes"][0]
                     old = {k: v for k, v in old.items() if k != "axes"} | {
-                        "x_min": axis["low"], "x_max": axis["high"], "n_x": axis["n"] or DEFAULT_POINTS_PER_AXIS[1]}
+                        "x_min": axis["low"],
+                        "x_max": axis["high"],
+                        "n_x": axis["n"] or DEFAULT_POINTS_PER_AXIS[1],
+                    }
                 merged = {**old, **value}
                 if key == "instrument" and isinstance(value.get("settings"), dict):
                     merged["settings"] = {**old.get("settings", {}), **value["settings"]}
@@ -843,8 +1021,10 @@ def _read_yaml(path: Path, what: str) -> Any:
     except OSError as error:
         raise ConfigError(f"{path}: cannot read {what} ({error.strerror or error})") from None
     except UnicodeDecodeError as error:
-        raise ConfigError(f"{path}: not a text (UTF-8) file: byte {error.start} cannot be decoded; "
-                          f"a {'campaign config' if what == 'config' else what} is YAML text") from None
+        raise ConfigError(
+            f"{path}: not a text (UTF-8) file: byte {error.start} cannot be decoded; "
+            f"a {'campaign config' if what == 'config' else what} is YAML text"
+        ) from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as error:
@@ -884,8 +1064,9 @@ def _inline_profile(data: dict, base: Path | None, source: str) -> dict:
     return {**data, "noise_model": {**noise, "profile": read_profile(path, source)}}
 
 
-def parse_config(data: Any, source: str = "config", base: Path | None = None,
-                 load_plugins: bool = True) -> CampaignConfig:
+def parse_config(
+    data: Any, source: str = "config", base: Path | None = None, load_plugins: bool = True
+) -> CampaignConfig:
     """Validate a mapping into a ``CampaignConfig`` (a schema-1 mapping is migrated first); raise
     ``ConfigError`` naming the field. The instrument's settings are checked by its driver (see
     ``instruments.registry.validated``). A ``noise_model.profile`` given as a path is read

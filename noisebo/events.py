@@ -143,8 +143,9 @@ class BudgetChanged:
     budget_s: float | None
 
 
-Event = Union[Started, ShotTaken, ShotFailed, MoreShots, PointCommitted, Decided, Summarised, StatusChanged,
-              BudgetChanged]
+Event = Union[
+    Started, ShotTaken, ShotFailed, MoreShots, PointCommitted, Decided, Summarised, StatusChanged, BudgetChanged
+]
 
 
 @dataclass(frozen=True)

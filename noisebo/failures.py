@@ -29,8 +29,10 @@ def budget_message(n_failed: int, n_attempts: int, min_failed: int, tolerated_ra
     """Why the budget is exceeded once at least ``min_failed`` of ``n_attempts`` shot attempts
     failed and their fraction exceeds ``tolerated_rate``; None while it holds."""
     if n_failed >= min_failed and n_attempts > 0 and n_failed / n_attempts > tolerated_rate:
-        return (f"failure budget exceeded: {n_failed} of {n_attempts} shot attempts failed "
-                f"({100 * n_failed / n_attempts:.0f} % > {100 * tolerated_rate:.0f} % tolerated, after at least {min_failed})")
+        return (
+            f"failure budget exceeded: {n_failed} of {n_attempts} shot attempts failed "
+            f"({100 * n_failed / n_attempts:.0f} % > {100 * tolerated_rate:.0f} % tolerated, after at least {min_failed})"
+        )
     return None
 
 

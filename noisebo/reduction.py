@@ -27,10 +27,13 @@ class Reading:
         if not isinstance(other, Reading):
             return NotImplemented
         same_spectrum = (self.spectrum is None and other.spectrum is None) or (
-            self.spectrum is not None and other.spectrum is not None
-            and np.array_equal(self.spectrum, other.spectrum, equal_nan=True))
+            self.spectrum is not None
+            and other.spectrum is not None
+            and np.array_equal(self.spectrum, other.spectrum, equal_nan=True)
+        )
         same_value = self.value == other.value or (
-            self.value is not None and other.value is not None and np.isnan(self.value) and np.isnan(other.value))
+            self.value is not None and other.value is not None and np.isnan(self.value) and np.isnan(other.value)
+        )
         return same_value and self.reduction == other.reduction and same_spectrum
 
     __hash__ = None  # type: ignore[assignment]  # compared by value, with arrays: not hashable
@@ -101,7 +104,9 @@ def shot_value(reading: Reading, config: ReductionConfig) -> ShotValue:
         return ShotValue(value if ok else float("nan"), ok, "" if ok else "non-finite reading", None)
     name = reading.reduction or DEFAULT_REDUCTION
     if name not in REDUCTIONS:
-        return ShotValue(float("nan"), False, f"unknown reduction {name!r} (known: {', '.join(sorted(REDUCTIONS))})", None)
+        return ShotValue(
+            float("nan"), False, f"unknown reduction {name!r} (known: {', '.join(sorted(REDUCTIONS))})", None
+        )
     return REDUCTIONS[name](np.asarray(reading.spectrum), config)
 
 
@@ -127,7 +132,8 @@ def clip_outliers(values: Sequence[ShotValue], clip_sd: float | None) -> list[Sh
     limit = clip_sd * spread
     return [
         v._replace(ok=False, reason=f"outlier: {abs(v.value - centre):.4g} from the median, limit {limit:.4g}")
-        if v.ok and abs(v.value - centre) > limit else v
+        if v.ok and abs(v.value - centre) > limit
+        else v
         for v in values
     ]
 
@@ -137,8 +143,11 @@ def usable(values: Sequence[ShotValue], needed: int) -> np.ndarray:
     good = np.asarray([v.value for v in values if v.ok], dtype=np.float64)
     if good.size < needed:
         reasons = sorted({v.reason for v in values if not v.ok})
-        raise NoUsableShots(f"{good.size} of {len(values)} shots usable, {needed} needed ({'; '.join(reasons)})",
-                            needed - good.size, len(values) - good.size)
+        raise NoUsableShots(
+            f"{good.size} of {len(values)} shots usable, {needed} needed ({'; '.join(reasons)})",
+            needed - good.size,
+            len(values) - good.size,
+        )
     return good
 
 

@@ -73,8 +73,10 @@ def names(group: str) -> tuple[str, ...]:
 
 def not_installed(group: str, name: object) -> str:
     """The one line that says ``name`` is not installed in ``group`` and what is."""
-    return (f"no installed {KINDS[group]} {name!r}; installed: {', '.join(installed(group)) or 'none'} "
-            f"(`{COMMANDS[group]}` lists them; a package registers one in the entry-point group {group!r})")
+    return (
+        f"no installed {KINDS[group]} {name!r}; installed: {', '.join(installed(group)) or 'none'} "
+        f"(`{COMMANDS[group]}` lists them; a package registers one in the entry-point group {group!r})"
+    )
 
 
 @lru_cache(maxsize=None)
@@ -84,16 +86,18 @@ def _load(group: str, name: str, target: str):
     try:
         cls = EntryPoint(name, target, group).load()
     except Exception as error:  # noqa: BLE001 - any import failure of a third-party package
-        raise PluginBroken(f"{KINDS[group]} {name!r} ({target}) could not be loaded: "
-                           f"{type(error).__name__}: {error}") from None
+        raise PluginBroken(
+            f"{KINDS[group]} {name!r} ({target}) could not be loaded: {type(error).__name__}: {error}"
+        ) from None
     missing = [member for member in REQUIRED[group] if not hasattr(cls, member)]
     if missing:
         raise PluginBroken(f"{KINDS[group]} {name!r} ({target}) lacks {', '.join(missing)}")
     try:
         return cls() if isinstance(cls, type) else cls
     except Exception as error:  # noqa: BLE001
-        raise PluginBroken(f"{KINDS[group]} {name!r} ({target}) could not be made: "
-                           f"{type(error).__name__}: {error}") from None
+        raise PluginBroken(
+            f"{KINDS[group]} {name!r} ({target}) could not be made: {type(error).__name__}: {error}"
+        ) from None
 
 
 _FOUND: dict[tuple[str, str], object] = {}  # what a name loaded to: the entry points are read once per name

@@ -194,8 +194,9 @@ def _nominal_fit(freq_hz, amplitude, phase_deg, nominal, reference_phase_deg, wh
     centre = 0.5 * (freq[0] + freq[-1])
     phase, sign = float("nan"), 1.0
     if phase_deg is not None:
-        phase, sign = _response_phase(freq / centre, np.asarray(phase_deg, dtype=np.float64), 1.0, f0 / centre, q,
-                                      reference_phase_deg)
+        phase, sign = _response_phase(
+            freq / centre, np.asarray(phase_deg, dtype=np.float64), 1.0, f0 / centre, q, reference_phase_deg
+        )
         if not np.isfinite(phase):
             return _failed("non-finite phase samples")
     value = sign * a
@@ -238,9 +239,17 @@ def _free_fit(freq_hz, amplitude, phase_deg, q_bounds, reference_phase_deg) -> S
         if not np.isfinite(phase):
             return _failed("non-finite phase samples", params)
     return SHOFit(
-        value=float(sign * a), amplitude=float(a), amplitude_se=float(se[0]),
-        resonance_hz=float(u0 * centre), resonance_se=float(se[1] * centre), q=float(q), q_se=float(se[2]),
-        phase_deg=phase, sign=sign, ok=True, reason="",
+        value=float(sign * a),
+        amplitude=float(a),
+        amplitude_se=float(se[0]),
+        resonance_hz=float(u0 * centre),
+        resonance_se=float(se[1] * centre),
+        q=float(q),
+        q_se=float(se[2]),
+        phase_deg=phase,
+        sign=sign,
+        ok=True,
+        reason="",
     )
 
 

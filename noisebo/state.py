@@ -65,8 +65,9 @@ class CampaignState:
         if converged_step is None and is_converged:
             converged_step = step
         maps = self.t_opt_maps if t_opt_map is None else self.t_opt_maps + (t_opt_map,)
-        return replace(self, t_opt_history=self.t_opt_history + (float(t_opt),), converged_step=converged_step,
-                       t_opt_maps=maps)
+        return replace(
+            self, t_opt_history=self.t_opt_history + (float(t_opt),), converged_step=converged_step, t_opt_maps=maps
+        )
 
     @property
     def is_converged(self) -> bool:

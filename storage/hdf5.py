@@ -122,8 +122,14 @@ def _fill_shots(f: h5py.File, state: EngineState, columns: dict) -> None:
         group.attrs["rows"] = SPECTRA_ROWS
         for i, shots_of in sorted(spectra.items()):
             data = np.stack([s.reading.spectrum for s in shots_of])
-            ds = group.create_dataset(f"point_{i:04d}", data=data, chunks=(1, *data.shape[1:]), compression="gzip",
-                                      compression_opts=1, fletcher32=True)
+            ds = group.create_dataset(
+                f"point_{i:04d}",
+                data=data,
+                chunks=(1, *data.shape[1:]),
+                compression="gzip",
+                compression_opts=1,
+                fletcher32=True,
+            )
             ds.attrs["units"] = "Hz, pm, deg"
 
 
@@ -195,8 +201,9 @@ def _hdf5_library() -> ctypes.CDLL | None:
     """The HDF5 library h5py runs on (h5py has no call for the read attempts), None where it is
     not found: then an SWMR read of a damaged file is stopped by the isolated reader's timeout."""
     here = Path(h5py.__file__).resolve().parent
-    found = [p for p in (*here.parent.glob("h5py.libs/libhdf5-*"), *here.glob(".dylibs/libhdf5.*"))
-             if "_hl" not in p.name]
+    found = [
+        p for p in (*here.parent.glob("h5py.libs/libhdf5-*"), *here.glob(".dylibs/libhdf5.*")) if "_hl" not in p.name
+    ]
     system = ctypes.util.find_library("hdf5")
     for candidate in [*map(str, found), *([system] if system else [])]:
         try:
@@ -242,8 +249,9 @@ def _opened_campaign(path: Path) -> tuple[h5py.File, dict]:
     version = int(attrs.get("schema_version", -1))
     if version not in READABLE_VERSIONS:
         f.close()
-        raise CampaignFileError(f"{path}: campaign schema version {version}; this noisebo reads "
-                                f"{', '.join(map(str, READABLE_VERSIONS))}")
+        raise CampaignFileError(
+            f"{path}: campaign schema version {version}; this noisebo reads {', '.join(map(str, READABLE_VERSIONS))}"
+        )
     if version >= CHECKSUMMED_FROM:
         try:
             with reading(path):
@@ -302,8 +310,11 @@ def read_campaign(path: Path) -> dict:
         out["summary"] = read_summary(f)
         out["attrs"] = {k: (v.item() if hasattr(v, "item") else v) for k, v in attrs.items()}
         out["attrs"]["config"] = json.loads(out["attrs"]["config_json"])
-        out["attrs"]["driver"] = json.loads(out["attrs"]["driver_json"]) if "driver_json" in attrs else {
-            "name": out["attrs"]["instrument"], "version": "not recorded (schema 1)", "settings": {}}
+        out["attrs"]["driver"] = (
+            json.loads(out["attrs"]["driver_json"])
+            if "driver_json" in attrs
+            else {"name": out["attrs"]["instrument"], "version": "not recorded (schema 1)", "settings": {}}
+        )
         numbering.from_schema(int(out["attrs"]["schema_version"]), out, out["attrs"])
     return out
 
@@ -313,7 +324,10 @@ def read_summary(f: h5py.File) -> dict | None:
     if "summary" not in f:
         return None
     s = f["summary"]
-    return _datasets(s) | {"t_opt": float(s.attrs["t_opt"]), "hyperparameters": json.loads(s.attrs["hyperparameters_json"])}
+    return _datasets(s) | {
+        "t_opt": float(s.attrs["t_opt"]),
+        "hyperparameters": json.loads(s.attrs["hyperparameters_json"]),
+    }
 
 
 def read_spectra(path: Path, point: int) -> np.ndarray:

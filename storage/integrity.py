@@ -54,12 +54,18 @@ def _rot(x: int, k: int) -> int:
 
 
 def _mix(a: int, b: int, c: int) -> tuple[int, int, int]:
-    a = ((a - c) & _MASK) ^ _rot(c, 4); c = (c + b) & _MASK  # noqa: E702 - lookup3's mix, line for line
-    b = ((b - a) & _MASK) ^ _rot(a, 6); a = (a + c) & _MASK  # noqa: E702
-    c = ((c - b) & _MASK) ^ _rot(b, 8); b = (b + a) & _MASK  # noqa: E702
-    a = ((a - c) & _MASK) ^ _rot(c, 16); c = (c + b) & _MASK  # noqa: E702
-    b = ((b - a) & _MASK) ^ _rot(a, 19); a = (a + c) & _MASK  # noqa: E702
-    c = ((c - b) & _MASK) ^ _rot(b, 4); b = (b + a) & _MASK  # noqa: E702
+    a = ((a - c) & _MASK) ^ _rot(c, 4)
+    c = (c + b) & _MASK  # noqa: E702 - lookup3's mix, line for line
+    b = ((b - a) & _MASK) ^ _rot(a, 6)
+    a = (a + c) & _MASK  # noqa: E702
+    c = ((c - b) & _MASK) ^ _rot(b, 8)
+    b = (b + a) & _MASK  # noqa: E702
+    a = ((a - c) & _MASK) ^ _rot(c, 16)
+    c = (c + b) & _MASK  # noqa: E702
+    b = ((b - a) & _MASK) ^ _rot(a, 19)
+    a = (a + c) & _MASK  # noqa: E702
+    c = ((c - b) & _MASK) ^ _rot(b, 4)
+    b = (b + a) & _MASK  # noqa: E702
     return a, b, c
 
 
@@ -126,14 +132,18 @@ def examine(path: Path, advice: str | None) -> Opening:
             time.sleep(SHORT_WAIT_S)
     advice = advice or NO_JOURNAL
     if block is not None and size < block.base + block.end_of_file:
-        raise CampaignFileError(f"{path}: truncated: {size} of its {block.base + block.end_of_file} bytes "
-                                f"(a copy cut short, or a full disk); {advice}")
+        raise CampaignFileError(
+            f"{path}: truncated: {size} of its {block.base + block.end_of_file} bytes "
+            f"(a copy cut short, or a full disk); {advice}"
+        )
     if block is None or not block.flags & (FLAG_WRITE | FLAG_SWMR_WRITE):
         return Opening.PLAIN
     if block.flags & FLAG_SWMR_WRITE:
         return Opening.SWMR
-    raise CampaignFileError(f"{path}: its writer stopped with the file open and not in SWMR mode, so it may be "
-                            f"inconsistent (not a file noisebo leaves); {advice}")
+    raise CampaignFileError(
+        f"{path}: its writer stopped with the file open and not in SWMR mode, so it may be "
+        f"inconsistent (not a file noisebo leaves); {advice}"
+    )
 
 
 def _read_head(path: Path, advice: str | None) -> tuple[int, Superblock | None]:
@@ -142,8 +152,9 @@ def _read_head(path: Path, advice: str | None) -> tuple[int, Superblock | None]:
         head = f.read(64)
         size = f.seek(0, 2)
     if size == 0:
-        raise CampaignFileError(f"{path}: empty file (0 bytes), not a campaign"
-                                + (f"; if it was one, {advice}" if advice else ""))
+        raise CampaignFileError(
+            f"{path}: empty file (0 bytes), not a campaign" + (f"; if it was one, {advice}" if advice else "")
+        )
     try:
         return size, superblock(head)
     except ValueError as error:
@@ -151,5 +162,6 @@ def _read_head(path: Path, advice: str | None) -> tuple[int, Superblock | None]:
             raise CampaignFileError(f"{path}: damaged: {error}; {advice or NO_JOURNAL}") from None
         if advice is None:
             raise CampaignFileError(f"{path}: not an HDF5 file, so not a noisebo campaign") from None
-        raise CampaignFileError(f"{path}: not an HDF5 file, though a campaign journal is beside it: the file is "
-                                f"damaged; {advice}") from None
+        raise CampaignFileError(
+            f"{path}: not an HDF5 file, though a campaign journal is beside it: the file is damaged; {advice}"
+        ) from None

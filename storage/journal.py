@@ -81,13 +81,20 @@ class Damage:
         return self.intact_after == 0
 
     def describe(self, path: Path) -> str:
-        kept = "no record is intact before it" if self.record == 0 else \
-            f"records 0-{self.record - 1} (bytes 0-{self.offset - 1}) are intact"
+        kept = (
+            "no record is intact before it"
+            if self.record == 0
+            else f"records 0-{self.record - 1} (bytes 0-{self.offset - 1}) are intact"
+        )
         if self.torn:
-            return (f"{path}: its last record ({self.record}, bytes {self.offset}-{self.length - 1}) is incomplete "
-                    f"or fails its checksum, as a crash while writing it leaves it: it is dropped; {kept}")
-        return (f"{path}: record {self.record} (at byte {self.offset}) is damaged and {self.intact_after} intact "
-                f"records follow it; {kept}")
+            return (
+                f"{path}: its last record ({self.record}, bytes {self.offset}-{self.length - 1}) is incomplete "
+                f"or fails its checksum, as a crash while writing it leaves it: it is dropped; {kept}"
+            )
+        return (
+            f"{path}: record {self.record} (at byte {self.offset}) is damaged and {self.intact_after} intact "
+            f"records follow it; {kept}"
+        )
 
 
 class JournalDamaged(JournalError):

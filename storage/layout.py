@@ -41,13 +41,25 @@ STEP_COLUMNS = {
     "noise_at_t": ("f units", "noise model's single-shot sd at the proposed t"),
     "t_opt": ("s", "predicted optimal t at this step"),
     "converged": ("bool", "noise model converged at or before this step"),
-    "t_opt_interval": ("1", "posterior convergence rule: half the 95 % interval of the optimal t over the noise model's draws, over its median (NaN: the variance rule)"),
+    "t_opt_interval": (
+        "1",
+        "posterior convergence rule: half the 95 % interval of the optimal t over the noise model's draws, over its median (NaN: the variance rule)",
+    ),
     "latency_s": ("s", "decision time: fits, prediction and acquisition"),
     "primary_inputs": ("1", "distinct x (or bins, if binned) the GP for f was fitted on"),
     "noise_inputs": ("1", "distinct t (or bins, if binned) the noise model was fitted on"),
-    "binned": ("bool", "True: beyond inference.max_inputs distinct inputs, the GPs merged points by bins (an approximation)"),
-    "profile_p": ("1", "noise profile's posterior predictive p-value on the campaign's replicate scatter (NaN: no profile, or no point to check)"),
-    "profile_in_use": ("bool", "True: the noise profile was this step's prior; False: none, or dropped (contradicted at this or an earlier step)"),
+    "binned": (
+        "bool",
+        "True: beyond inference.max_inputs distinct inputs, the GPs merged points by bins (an approximation)",
+    ),
+    "profile_p": (
+        "1",
+        "noise profile's posterior predictive p-value on the campaign's replicate scatter (NaN: no profile, or no point to check)",
+    ),
+    "profile_in_use": (
+        "bool",
+        "True: the noise profile was this step's prior; False: none, or dropped (contradicted at this or an earlier step)",
+    ),
 }
 POINT_COLUMNS = {
     "x": ("x units", "position"),
@@ -116,8 +128,13 @@ def array_shapes(state: EngineState) -> dict[str, tuple[int, ...]]:
     s = state.config.space
     m, n_t = grids(state.config).x.shape[0], s.n_t
     acq: tuple[int, ...] = (m, n_t) if s.dimensions == 1 else (m,)
-    shapes: dict[str, tuple[int, ...]] = {"acq_map": acq, "f_mean": (m,), "f_var": (m,), "noise_mean": (n_t,),
-                                          "noise_var": (n_t,)}
+    shapes: dict[str, tuple[int, ...]] = {
+        "acq_map": acq,
+        "f_mean": (m,),
+        "f_var": (m,),
+        "noise_mean": (n_t,),
+        "noise_var": (n_t,),
+    }
     return shapes | ({} if state.config.noise_model.field is None else {"t_opt_map": (m,)})
 
 
@@ -139,8 +156,11 @@ def point_rows(entries: Sequence[PointEntry], dimensions: int) -> dict[str, np.n
     """/points columns (POINT_COLUMNS and "step") of these committed points, (len(entries),)
     each; x (len(entries), d) for d > 1 axes."""
     points = [e.committed.point for e in entries]
-    rows = {name: np.asarray([getattr(p, name) for p in points], dtype=column_dtype(name, units))
-            for name, (units, _) in POINT_COLUMNS.items() if name != "x"}
+    rows = {
+        name: np.asarray([getattr(p, name) for p in points], dtype=column_dtype(name, units))
+        for name, (units, _) in POINT_COLUMNS.items()
+        if name != "x"
+    }
     rows["x"] = positions([p.x for p in points], dimensions)
     rows["step"] = np.asarray([numbering.shown(e.committed.step) for e in entries], dtype=np.int32)
     return rows
@@ -157,11 +177,14 @@ def step_rows(decisions: Sequence[Decision], names: Sequence[str], shapes: dict,
     lacks one of ``names``)."""
     rows: dict[str, np.ndarray | dict[str, np.ndarray]] = {
         name: np.asarray([getattr(d, name) for d in decisions], dtype=column_dtype(name, units))
-        for name, (units, _) in STEP_COLUMNS.items() if name not in ("x", "step")}
+        for name, (units, _) in STEP_COLUMNS.items()
+        if name not in ("x", "step")
+    }
     rows["step"] = np.asarray([numbering.shown(d.step) for d in decisions], dtype=column_dtype("step", "1"))
     rows["x"] = positions([d.x for d in decisions], dimensions)
     rows["hyperparameters"] = {
-        name: np.asarray([d.hyperparameters.get(name, np.nan) for d in decisions], dtype=np.float64) for name in names}
+        name: np.asarray([d.hyperparameters.get(name, np.nan) for d in decisions], dtype=np.float64) for name in names
+    }
     for name, shape in shapes.items():
         stacked = np.stack([getattr(d, name) for d in decisions]) if decisions else np.zeros((0, *shape))
         rows[name] = stacked.astype(np.float32) if name == "acq_map" else stacked
@@ -178,8 +201,9 @@ def root_attrs(state: EngineState) -> dict:
         seed=state.seed,
         policy=config.acquisition.policy,
         instrument=config.instrument.kind,
-        driver_json=json.dumps({"name": state.driver.name, "version": state.driver.version,
-                                "settings": state.driver.settings}),
+        driver_json=json.dumps(
+            {"name": state.driver.name, "version": state.driver.version, "settings": state.driver.settings}
+        ),
         status=state.status.value,
         status_reason=state.reason,
         created_utc=state.created_utc,
@@ -207,11 +231,21 @@ def state_tables(state: EngineState) -> dict:
     summary = None
     if state.summary is not None:
         s = state.summary
-        summary = {"f_mean": s.f_mean, "f_var": s.f_var, "noise_fine": s.noise_fine, "t_opt": float(s.t_opt),
-                   "hyperparameters": dict(s.hyperparameters)}
+        summary = {
+            "f_mean": s.f_mean,
+            "f_var": s.f_var,
+            "noise_fine": s.noise_fine,
+            "t_opt": float(s.t_opt),
+            "hyperparameters": dict(s.hyperparameters),
+        }
         summary |= {name: getattr(s, name) for name in SUMMARY_MAPS if getattr(s, name).size}
-    return {"grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine}, "points": point_rows(state.points, d), "steps": steps,
-            "shots": shot_columns(state), "summary": summary}
+    return {
+        "grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine},
+        "points": point_rows(state.points, d),
+        "steps": steps,
+        "shots": shot_columns(state),
+        "summary": summary,
+    }
 
 
 def fill_grid(f: h5py.File, state: EngineState) -> None:
@@ -240,7 +274,13 @@ def fill_summary(f: h5py.File, state: EngineState) -> None:
     summary.attrs["hyperparameters_json"] = json.dumps(dict(s.hyperparameters))
     put_dataset(summary, "f_mean", s.f_mean, "f units", "final predicted f on grid/x")
     put_dataset(summary, "f_var", s.f_var, "f units^2", "its variance")
-    put_dataset(summary, "noise_fine", s.noise_fine, "f units", "final noise sd on grid/t_fine (averaged over grid/x for a noise field)")
+    put_dataset(
+        summary,
+        "noise_fine",
+        s.noise_fine,
+        "f units",
+        "final noise sd on grid/t_fine (averaged over grid/x for a noise field)",
+    )
     for name, (units, description) in SUMMARY_MAPS.items():
         if getattr(s, name).size:
             put_dataset(summary, name, getattr(s, name), units, description)
@@ -251,7 +291,12 @@ SHOT_COLUMNS = (
     ("shot", np.int32, "1", "shot index within its point"),
     ("x", np.float64, "x units", "position"),
     ("t", np.float64, "s", "exposure (sweep) time"),
-    ("value", np.float64, "f units", "the shot's value (for a sweep: the signed SHO amplitude); NaN if rejected or not reduced yet"),
+    (
+        "value",
+        np.float64,
+        "f units",
+        "the shot's value (for a sweep: the signed SHO amplitude); NaN if rejected or not reduced yet",
+    ),
     ("committed", bool, "bool", "its point has been reduced and committed"),
     ("ok", bool, "bool", "the value is usable (False: rejected, see reason)"),
 )
@@ -289,7 +334,8 @@ def shot_rows(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = (), di
     for shot in taken:
         _add_shot(cols, shot, None)
     out: dict[str, np.ndarray | list[str] | dict[str, np.ndarray]] = {
-        name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS if name != "x"}
+        name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS if name != "x"
+    }
     out["x"] = positions(cols["x"], dimensions)
     out["reason"], out["note"] = cols["reason"], cols["note"]
     out["fit"] = {name: np.asarray(cols[name], dtype=np.float64) for name in FIT_UNITS}
@@ -334,8 +380,11 @@ FAILURES_DESCRIPTION = "failed attempts at shots (instrument errors, timeouts); 
 def failure_rows(rows: Sequence[ShotFailed], dimensions: int) -> dict:
     """/failures columns of these failed attempts: FAILURE_COLUMNS (n,) (x (n, d) for d > 1
     axes), "kind" and "reason" (lists of str)."""
-    out = {name: np.asarray([getattr(r, name) for r in rows], dtype=dtype)
-           for name, dtype, _, _ in FAILURE_COLUMNS if name != "x"}
+    out = {
+        name: np.asarray([getattr(r, name) for r in rows], dtype=dtype)
+        for name, dtype, _, _ in FAILURE_COLUMNS
+        if name != "x"
+    }
     out["x"] = positions([r.x for r in rows], dimensions)
     return out | {name: [getattr(r, name) for r in rows] for name in FAILURE_TEXT}
 
@@ -344,4 +393,3 @@ def temporary_path(path: Path) -> Path:
     """Where a whole new file for ``path`` is built before it is renamed over it."""
     path = Path(path)
     return path.with_name(f".{path.name}.tmp-{os.getpid()}")
-

@@ -120,12 +120,14 @@ class _Column:
             self.ds.id.write(h5s.create_simple(values.shape), space, values)
 
 
-def _column(group: h5py.Group, name: str, dtype, units: str, description: str, tail: tuple = (),
-            chunk: int = ROWS_PER_CHUNK) -> _Column:
+def _column(
+    group: h5py.Group, name: str, dtype, units: str, description: str, tail: tuple = (), chunk: int = ROWS_PER_CHUNK
+) -> _Column:
     """An empty resizable column of rows shaped ``tail``, ``chunk`` rows to a chunk (1 for rows
     that are arrays of their own, such as acquisition maps)."""
-    ds = group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), chunks=(chunk, *tail), dtype=dtype,
-                              fletcher32=CHECKSUMS)
+    ds = group.create_dataset(
+        name, shape=(0, *tail), maxshape=(None, *tail), chunks=(chunk, *tail), dtype=dtype, fletcher32=CHECKSUMS
+    )
     ds.attrs["units"] = units
     ds.attrs["description"] = description
     return _Column(ds)
@@ -136,10 +138,16 @@ class _Blobs:
     Remembers where each row it wrote ends, so rows can be written again from any row on."""
 
     def __init__(self, group: h5py.Group, data: str = "utf8", chunk: int = TEXT_CHUNK):
-        self.data = _Column(group.create_dataset(data, shape=(0,), maxshape=(None,), chunks=(chunk,), dtype=np.uint8,
-                                                 fletcher32=CHECKSUMS))
-        self.end = _Column(group.create_dataset("end", shape=(0,), maxshape=(None,), chunks=(ROWS_PER_CHUNK,),
-                                                dtype=np.int64, fletcher32=CHECKSUMS))
+        self.data = _Column(
+            group.create_dataset(
+                data, shape=(0,), maxshape=(None,), chunks=(chunk,), dtype=np.uint8, fletcher32=CHECKSUMS
+            )
+        )
+        self.end = _Column(
+            group.create_dataset(
+                "end", shape=(0,), maxshape=(None,), chunks=(ROWS_PER_CHUNK,), dtype=np.int64, fletcher32=CHECKSUMS
+            )
+        )
         self.ends: list[int] = []
 
     @classmethod
@@ -162,12 +170,12 @@ class _Blobs:
 def _read_blobs(group: h5py.Group, start: int, stop: int, data: str, path) -> list[bytes]:
     """Rows ``start``..``stop - 1`` of a byte-string column (``stop`` at most its committed rows)."""
     _check_rows(group["end"], stop, path)
-    ends = group["end"][max(start - 1, 0):stop].tolist()
+    ends = group["end"][max(start - 1, 0) : stop].tolist()
     begin = ends.pop(0) if start else 0
     last = ends[-1] if ends else begin
     _check_rows(group[data], last, path)
     raw = group[data][begin:last].tobytes()
-    return [raw[s - begin:e - begin] for s, e in zip([begin, *ends[:-1]], ends)]
+    return [raw[s - begin : e - begin] for s, e in zip([begin, *ends[:-1]], ends)]
 
 
 def start_swmr(f: h5py.File) -> None:
@@ -191,8 +199,7 @@ def _check_rows(ds: h5py.Dataset, n: int, path) -> None:
     if ds.shape[0] < n and ds.file.swmr_mode:
         ds.refresh()
     if ds.shape[0] < n:
-        raise CampaignFileError(f"{path}: damaged campaign file ({ds.name} holds {ds.shape[0]} rows, "
-                                f"{n} committed)")
+        raise CampaignFileError(f"{path}: damaged campaign file ({ds.name} holds {ds.shape[0]} rows, {n} committed)")
 
 
 def _trimmed(ds: h5py.Dataset, n: int, path) -> np.ndarray:
@@ -224,8 +231,9 @@ class LiveFile:
         """The whole of ``state`` in a new file renamed over ``path``, left open for appending."""
         path = Path(path)
         tmp = temporary_path(path)
-        f = h5py.File(tmp, "w", libver=LIBVER, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=CHUNK_CACHE_SLOTS,
-                      rdcc_w0=1.0)
+        f = h5py.File(
+            tmp, "w", libver=LIBVER, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=CHUNK_CACHE_SLOTS, rdcc_w0=1.0
+        )
         try:
             live = cls(path, f, state)
             live._layout(state)
@@ -247,11 +255,14 @@ class LiveFile:
         rows = self._rows
         if (state.status, state.reason) != self._status or state.summary is not self._summary:
             return False
-        grown = (len(state.points) >= rows["points"] and len(state.decisions) >= rows["steps"]
-                 and len(state.failures) >= rows["failures"])
+        grown = (
+            len(state.points) >= rows["points"]
+            and len(state.decisions) >= rows["steps"]
+            and len(state.failures) >= rows["failures"]
+        )
         if not grown:
             return False
-        return set(hyperparameter_names(state.decisions[rows["steps"]:])) <= set(self._names)
+        return set(hyperparameter_names(state.decisions[rows["steps"] :])) <= set(self._names)
 
     def append(self, state: EngineState) -> None:
         """Write what ``state`` adds to the file (``holds(state)`` must be true): rows, a flush,
@@ -269,12 +280,13 @@ class LiveFile:
         f = self._f
         f.attrs.update({k: v for k, v in root_attrs(state).items() if k not in MUTABLE_ATTRS})
         f.attrs["layout"] = LAYOUT
-        counters = f.create_dataset("committed", data=np.zeros(len(COUNTERS), dtype=np.int64),
-                                       fletcher32=CHECKSUMS)
+        counters = f.create_dataset("committed", data=np.zeros(len(COUNTERS), dtype=np.int64), fletcher32=CHECKSUMS)
         self._add(_Column(counters))
         counters.attrs["names"] = " ".join(COUNTERS)
-        counters.attrs["description"] = ("rows of each table to trust (points, steps, shots, failures, spectra) "
-                                         "and the root attributes n_shots, converged_step")
+        counters.attrs["description"] = (
+            "rows of each table to trust (points, steps, shots, failures, spectra) "
+            "and the root attributes n_shots, converged_step"
+        )
         fill_grid(f, state)
         self._layout_points_and_steps()
         self._layout_shots_and_failures()
@@ -291,8 +303,9 @@ class LiveFile:
             self._add(_column(steps, name, column_dtype(name, units), units, description, self._tail(name)))
         hyper = steps.create_group("hyperparameters")
         for name in self._names:
-            self._add(_column(hyper, name, np.float64, "model units",
-                              f"fitted {name} per step (MAP or posterior mean)"))
+            self._add(
+                _column(hyper, name, np.float64, "model units", f"fitted {name} per step (MAP or posterior mean)")
+            )
         for name, (units, description) in ARRAY_COLUMNS.items():
             if name in self._shapes:
                 self._add(_column(steps, name, array_dtype(name), units, description, self._shapes[name], chunk=1))
@@ -319,8 +332,11 @@ class LiveFile:
         spectra.attrs["rows"] = SPECTRA_ROWS
         self._add(_column(spectra, "point", np.int32, "1", "point the shot belongs to"))
         self._add(_column(spectra, "dtype", "S8", "text", "numpy dtype of the shot's array (e.g. <f4)"))
-        self._add(_column(spectra, "shape", np.int64, "1", f"shape of the shot's array, padded with -1 to {MAX_DIMS}",
-                          (MAX_DIMS,)))
+        self._add(
+            _column(
+                spectra, "shape", np.int64, "1", f"shape of the shot's array, padded with -1 to {MAX_DIMS}", (MAX_DIMS,)
+            )
+        )
         self._spectra = _Blobs(spectra, "bytes", SPECTRA_CHUNK)
         self._spectra.data.ds.attrs["units"] = "Hz, pm, deg"
         self._spectra.data.ds.attrs["description"] = "every shot's raw array, C order, end to end"
@@ -329,14 +345,14 @@ class LiveFile:
         """The rows ``state`` has past those committed in the file (a point under way's shots
         last, to be written again), a flush, then the counters that make them count, a flush."""
         rows, f = self._rows, self._f
-        new_points = state.points[rows["points"]:]
+        new_points = state.points[rows["points"] :]
         self._write_table("points", rows["points"], point_rows(new_points, self._dimensions))
         crash()
-        steps = step_rows(state.decisions[rows["steps"]:], self._names, self._shapes, self._dimensions)
+        steps = step_rows(state.decisions[rows["steps"] :], self._names, self._shapes, self._dimensions)
         self._write_table("steps", rows["steps"], steps)
         self._write_table("steps/hyperparameters", rows["steps"], steps["hyperparameters"])
         crash()
-        self._write_failures(state.failures[rows["failures"]:])
+        self._write_failures(state.failures[rows["failures"] :])
         crash()
         shots = shot_rows(new_points, state.taken, self._dimensions)
         self._write_shots(shots)
@@ -344,16 +360,25 @@ class LiveFile:
         spectra = self._write_spectra(new_points, state.taken, len(state.points) - len(new_points))
         f.flush()
         crash()  # the rows are in the file, the counters do not count them yet
-        counts = {"points": len(state.points), "steps": len(state.decisions), "failures": len(state.failures),
-                  "shots": rows["shots"] + len(shots["point"]),
-                  "spectra": rows["spectra"] + sum(len(v) for v in spectra.values()), "n_shots": state.n_shots,
-                  "converged_step": numbering.converged_attr(state.data.converged_step)}
+        counts = {
+            "points": len(state.points),
+            "steps": len(state.decisions),
+            "failures": len(state.failures),
+            "shots": rows["shots"] + len(shots["point"]),
+            "spectra": rows["spectra"] + sum(len(v) for v in spectra.values()),
+            "n_shots": state.n_shots,
+            "converged_step": numbering.converged_attr(state.data.converged_step),
+        }
         self._columns["committed"].write(0, [counts[k] for k in COUNTERS])
         f.flush()
         committed_spectra = sum(len(v) for k, v in spectra.items() if k < len(state.points))
-        rows.update(points=len(state.points), steps=len(state.decisions), failures=len(state.failures),
-                    shots=rows["shots"] + sum(len(e.shots) for e in new_points),
-                    spectra=rows["spectra"] + committed_spectra)
+        rows.update(
+            points=len(state.points),
+            steps=len(state.decisions),
+            failures=len(state.failures),
+            shots=rows["shots"] + sum(len(e.shots) for e in new_points),
+            spectra=rows["spectra"] + committed_spectra,
+        )
 
     def _tail(self, name: str) -> tuple[int, ...]:
         """Row shape of a points/steps/shots/failures column: x has one entry per axis for d > 1."""
@@ -387,12 +412,14 @@ class LiveFile:
     def _write_spectra(self, entries, taken, first: int) -> dict:
         """The raw arrays of the new points' shots and the point under way's, one row per shot."""
         spectra = spectra_of(entries, taken, first)
-        arrays = [(point, np.ascontiguousarray(s.reading.spectrum)) for point, shots in sorted(spectra.items())
-                  for s in shots]
+        arrays = [
+            (point, np.ascontiguousarray(s.reading.spectrum)) for point, shots in sorted(spectra.items()) for s in shots
+        ]
         for _, a in arrays:
             if a.ndim > MAX_DIMS:
-                raise CampaignFileError(f"{self.path}: a shot's raw array has {a.ndim} dimensions; the file keeps "
-                                        f"at most {MAX_DIMS}")
+                raise CampaignFileError(
+                    f"{self.path}: a shot's raw array has {a.ndim} dimensions; the file keeps at most {MAX_DIMS}"
+                )
         start, columns = self._rows["spectra"], self._columns
         columns["spectra/point"].write(start, np.asarray([p for p, _ in arrays], dtype=np.int32))
         columns["spectra/dtype"].write(start, np.asarray([a.dtype.str.encode() for _, a in arrays], dtype="S8"))
@@ -438,8 +465,13 @@ def read_tables(f: h5py.File, path) -> dict:
         "points": _columns(f["points"], c["points"], path),
         "shots": _columns(f["shots"], c["shots"], path),
         "steps": steps,
-        "counts": {"converged_step": c["converged_step"], "n_points": c["points"], "n_steps": c["steps"],
-                   "n_shots": c["n_shots"], "n_failed_attempts": c["failures"]},
+        "counts": {
+            "converged_step": c["converged_step"],
+            "n_points": c["points"],
+            "n_steps": c["steps"],
+            "n_shots": c["n_shots"],
+            "n_failed_attempts": c["failures"],
+        },
     }
 
 
@@ -452,8 +484,12 @@ def read_spectra(f: h5py.File, path, point: int) -> np.ndarray | None:
     first, stop = int(rows[0]), int(rows[-1]) + 1  # a point's shots are consecutive rows
     blobs = _read_blobs(group, first, stop, "bytes", path)
     dtypes, shapes = group["dtype"][first:stop], group["shape"][first:stop]
-    return np.stack([np.frombuffer(blob, dtype=np.dtype(dtype.decode())).reshape([d for d in shape if d >= 0])
-                     for blob, dtype, shape in zip(blobs, dtypes, shapes)])
+    return np.stack(
+        [
+            np.frombuffer(blob, dtype=np.dtype(dtype.decode())).reshape([d for d in shape if d >= 0])
+            for blob, dtype, shape in zip(blobs, dtypes, shapes)
+        ]
+    )
 
 
 def read_shot_fits(f: h5py.File, path) -> dict | None:

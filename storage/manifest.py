@@ -17,8 +17,10 @@ import h5py
 import numpy as np
 
 MANIFEST = "integrity"
-DESCRIPTION = ("CRC-32 of every object's path and kind and every attribute's name and value "
-               "(storage.manifest); the readers compare it")
+DESCRIPTION = (
+    "CRC-32 of every object's path and kind and every attribute's name and value "
+    "(storage.manifest); the readers compare it"
+)
 
 
 def _canonical(value) -> bytes:

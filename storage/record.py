@@ -178,8 +178,12 @@ def from_state(state: EngineState, path: Path | str | None = None) -> CampaignRe
     attrs |= {"config": json.loads(attrs["config_json"]), "driver": json.loads(attrs["driver_json"])}
     fits = tables["shots"]["fit"]
     failures = failure_rows(state.failures, state.config.space.dimensions)
-    return from_tables(Path(path or f"<{state.config.name}: in memory>"), tables | {"attrs": attrs}, failures,
-                       fits if np.any(np.isfinite(fits["amplitude"])) else None)
+    return from_tables(
+        Path(path or f"<{state.config.name}: in memory>"),
+        tables | {"attrs": attrs},
+        failures,
+        fits if np.any(np.isfinite(fits["amplitude"])) else None,
+    )
 
 
 def from_tables(path: Path, data: dict, failures: dict, fits: dict | None = None) -> CampaignRecord:
@@ -189,14 +193,26 @@ def from_tables(path: Path, data: dict, failures: dict, fits: dict | None = None
     converged = int(attrs["converged_step"])
     budget = float(attrs.get("budget_s", -1.0))
     return CampaignRecord(
-        path=path, schema_version=int(attrs["schema_version"]), config=attrs["config"], driver=attrs["driver"],
-        status=str(attrs["status"]), status_reason=str(attrs["status_reason"]), seed=int(attrs["seed"]),
-        policy=str(attrs["policy"]), converged_step=None if converged < 1 else converged,
-        n_shots=int(attrs["n_shots"]), budget_s=None if budget < 0 else budget,
+        path=path,
+        schema_version=int(attrs["schema_version"]),
+        config=attrs["config"],
+        driver=attrs["driver"],
+        status=str(attrs["status"]),
+        status_reason=str(attrs["status_reason"]),
+        seed=int(attrs["seed"]),
+        policy=str(attrs["policy"]),
+        converged_step=None if converged < 1 else converged,
+        n_shots=int(attrs["n_shots"]),
+        budget_s=None if budget < 0 else budget,
         grid={name: np.asarray(v) for name, v in data["grid"].items()},
-        points=_points(data["points"]), steps=_steps(data["steps"]), shots=_shots(data["shots"], fits),
-        failures=_failures(failures), summary=_summary(data["summary"]),
-        versions=json.loads(attrs.get("versions_json", "{}")), attrs=attrs)
+        points=_points(data["points"]),
+        steps=_steps(data["steps"]),
+        shots=_shots(data["shots"], fits),
+        failures=_failures(failures),
+        summary=_summary(data["summary"]),
+        versions=json.loads(attrs.get("versions_json", "{}")),
+        attrs=attrs,
+    )
 
 
 def _column(table: dict, name: str, units: str, n: int) -> np.ndarray:
@@ -224,9 +240,14 @@ def _steps(table: dict) -> Steps:
 
 def _shots(table: dict, fits: dict | None) -> Shots:
     n = len(table["t"])
-    return Shots(point=np.asarray(table["point"]), shot=np.asarray(table["shot"]), t=np.asarray(table["t"]),
-                 value=np.asarray(table["value"]), ok=_column(table, "ok", "bool", n),
-                 fits={name: np.asarray(v) for name, v in (fits or {}).items()})
+    return Shots(
+        point=np.asarray(table["point"]),
+        shot=np.asarray(table["shot"]),
+        t=np.asarray(table["t"]),
+        value=np.asarray(table["value"]),
+        ok=_column(table, "ok", "bool", n),
+        fits={name: np.asarray(v) for name, v in (fits or {}).items()},
+    )
 
 
 def _text(values) -> tuple[str, ...]:
@@ -235,16 +256,24 @@ def _text(values) -> tuple[str, ...]:
 
 def _failures(table: dict) -> Failures:
     n = len(table.get("t", ()))
-    return Failures(point=_column(table, "point", "1", n).astype(int), shot=_column(table, "shot", "1", n).astype(int),
-                    t=_column(table, "t", "s", n), kind=_text(table.get("kind", ())),
-                    reason=_text(table.get("reason", ())))
+    return Failures(
+        point=_column(table, "point", "1", n).astype(int),
+        shot=_column(table, "shot", "1", n).astype(int),
+        t=_column(table, "t", "s", n),
+        kind=_text(table.get("kind", ())),
+        reason=_text(table.get("reason", ())),
+    )
 
 
 def _summary(summary: dict | None) -> Summary | None:
     if summary is None:
         return None
-    return Summary(f_mean=np.asarray(summary["f_mean"]), f_var=np.asarray(summary["f_var"]),
-                   noise_fine=np.asarray(summary["noise_fine"]), t_opt=float(summary["t_opt"]),
-                   hyperparameters=dict(summary["hyperparameters"]),
-                   t_opt_map=np.asarray(summary.get("t_opt_map", np.zeros(0))),
-                   noise_map=np.asarray(summary.get("noise_map", np.zeros(0))))
+    return Summary(
+        f_mean=np.asarray(summary["f_mean"]),
+        f_var=np.asarray(summary["f_var"]),
+        noise_fine=np.asarray(summary["noise_fine"]),
+        t_opt=float(summary["t_opt"]),
+        hyperparameters=dict(summary["hyperparameters"]),
+        t_opt_map=np.asarray(summary.get("t_opt_map", np.zeros(0))),
+        noise_map=np.asarray(summary.get("noise_map", np.zeros(0))),
+    )

@@ -77,8 +77,10 @@ def read_started(h5_path: Path) -> Started:
 
 
 SNAPSHOT_AFTER = (Started, PointCommitted, Summarised, StatusChanged)
-DAMAGED_JOURNAL_ADVICE = ("nothing was changed; `noisebo rebuild {path} --keep-intact` moves the journal aside "
-                          "(as .journal.damaged) and continues the campaign from its intact records before the damage")
+DAMAGED_JOURNAL_ADVICE = (
+    "nothing was changed; `noisebo rebuild {path} --keep-intact` moves the journal aside "
+    "(as .journal.damaged) and continues the campaign from its intact records before the damage"
+)
 
 
 class Recorder:
@@ -198,8 +200,10 @@ def rebuild_file(h5_path: Path, keep_intact: bool = False) -> list[str]:
         state = recorder.state
         if recorder.dropped:
             said.append(recorder.dropped)
-    said.append(f"wrote {h5_path} anew from its journal: {len(state.points)} points, {state.n_shots} shots, "
-                f"status {state.status.value}")
+    said.append(
+        f"wrote {h5_path} anew from its journal: {len(state.points)} points, {state.n_shots} shots, "
+        f"status {state.status.value}"
+    )
     return said
 
 
@@ -215,8 +219,9 @@ def _keep_intact(jpath: Path) -> list[str]:
         if damage is None or damage.torn:
             return []
         if not found:
-            raise CampaignFileError(f"{damage.describe(jpath)}: not even its first record is intact, so there is "
-                                    "no campaign to keep")
+            raise CampaignFileError(
+                f"{damage.describe(jpath)}: not even its first record is intact, so there is no campaign to keep"
+            )
         aside = jpath.with_name(jpath.name + ".damaged")
         if aside.exists():
             raise CampaignFileError(f"cannot keep the intact records of {jpath}: {aside} exists (move it away first)")
@@ -233,5 +238,8 @@ def _keep_intact(jpath: Path) -> list[str]:
         journal.fsync_path(jpath.parent)
     finally:
         writer.close()
-    return [damage.describe(jpath), f"moved it to {aside} and kept records 0-{damage.record - 1} in {jpath}; "
-            f"`noisebo resume` measures again what followed them"]
+    return [
+        damage.describe(jpath),
+        f"moved it to {aside} and kept records 0-{damage.record - 1} in {jpath}; "
+        f"`noisebo resume` measures again what followed them",
+    ]

@@ -49,9 +49,16 @@ class CorruptJournal(ValueError):
 def encode(event: Event) -> Record:
     """The journal record of one event."""
     if isinstance(event, Started):
-        return Record("campaign", {"config": event.config.model_dump(mode="json"), "seed": event.seed,
-                                   "driver": asdict(event.driver), "versions": event.versions,
-                                   "created_utc": event.created_utc})
+        return Record(
+            "campaign",
+            {
+                "config": event.config.model_dump(mode="json"),
+                "seed": event.seed,
+                "driver": asdict(event.driver),
+                "versions": event.versions,
+                "created_utc": event.created_utc,
+            },
+        )
     if isinstance(event, ShotTaken):
         r = event.reading
         value = None if r.value is None else float(r.value)
@@ -60,8 +67,17 @@ def encode(event: Event) -> Record:
             fields_["reduction"] = r.reduction
         return Record("shot", fields_, {} if r.spectrum is None else {"spectrum": np.asarray(r.spectrum)})
     if isinstance(event, ShotFailed):
-        return Record("failure", {"point": event.point, "shot": event.shot, "x": list(event.x), "t": event.t,
-                                  "kind": event.kind, "reason": event.reason})
+        return Record(
+            "failure",
+            {
+                "point": event.point,
+                "shot": event.shot,
+                "x": list(event.x),
+                "t": event.t,
+                "kind": event.kind,
+                "reason": event.reason,
+            },
+        )
     if isinstance(event, MoreShots):
         return Record("more_shots", asdict(event))
     if isinstance(event, PointCommitted):
@@ -72,8 +88,11 @@ def encode(event: Event) -> Record:
         return Record("decision", scalars, {k: np.asarray(getattr(d, k)) for k in DECISION_ARRAYS})
     if isinstance(event, Summarised):
         s = event.summary
-        return Record("summary", {"t_opt": s.t_opt, "hyperparameters": s.hyperparameters},
-                      {k: np.asarray(getattr(s, k)) for k in SUMMARY_ARRAYS})
+        return Record(
+            "summary",
+            {"t_opt": s.t_opt, "hyperparameters": s.hyperparameters},
+            {k: np.asarray(getattr(s, k)) for k in SUMMARY_ARRAYS},
+        )
     if isinstance(event, StatusChanged):
         return Record("status", {"status": event.status.value, "reason": event.reason})
     if isinstance(event, BudgetChanged):
@@ -83,14 +102,21 @@ def encode(event: Event) -> Record:
 
 def _encode_point(event: PointCommitted) -> Record:
     values = event.values
-    fields_ = {"index": event.index, "step": event.step, **asdict(event.point),
-               "shot_ok": [bool(v.ok) for v in values], "shot_reason": [v.reason for v in values],
-               "fit_reason": [v.fit.reason if v.fit is not None else "" for v in values],
-               "fit_ok": [bool(v.fit.ok) if v.fit is not None else False for v in values]}
+    fields_ = {
+        "index": event.index,
+        "step": event.step,
+        **asdict(event.point),
+        "shot_ok": [bool(v.ok) for v in values],
+        "shot_reason": [v.reason for v in values],
+        "fit_reason": [v.fit.reason if v.fit is not None else "" for v in values],
+        "fit_ok": [bool(v.fit.ok) if v.fit is not None else False for v in values],
+    }
     arrays = {"shot_value": np.asarray([v.value for v in values], dtype=np.float64)}
     if any(v.fit is not None for v in values):
-        fits = [[np.nan] * len(FIT_NUMBERS) if v.fit is None else [float(getattr(v.fit, k)) for k in FIT_NUMBERS]
-                for v in values]
+        fits = [
+            [np.nan] * len(FIT_NUMBERS) if v.fit is None else [float(getattr(v.fit, k)) for k in FIT_NUMBERS]
+            for v in values
+        ]
         arrays["shot_fit"] = np.asarray(fits, dtype=np.float64).reshape(-1, len(FIT_NUMBERS))
         arrays["shot_has_fit"] = np.asarray([v.fit is not None for v in values])
     return Record("point", fields_, arrays)
@@ -104,8 +130,9 @@ def _decode_point(f: dict, arrays: dict) -> PointCommitted:
         fit = None
         if bool(has_fit[k]):
             numbers = dict(zip(FIT_NUMBERS, (float(v) for v in arrays["shot_fit"][k])))
-            fit = SHOFit(value=numbers["sign"] * numbers["amplitude"], ok=f["fit_ok"][k], reason=f["fit_reason"][k],
-                         **numbers)
+            fit = SHOFit(
+                value=numbers["sign"] * numbers["amplitude"], ok=f["fit_ok"][k], reason=f["fit_reason"][k], **numbers
+            )
         values.append(ShotValue(float(arrays["shot_value"][k]), f["shot_ok"][k], f["shot_reason"][k], fit))
     point = Point(**{k: f[k] for k in POINT_FIELDS})
     return PointCommitted(f["index"], f["step"], point, tuple(values))
@@ -122,7 +149,13 @@ def decode(record: Record) -> Event:
     try:
         if record.type == "campaign":
             driver = DriverInfo(**f["driver"])
-            return Started(parse_config(f["config"], "journal", load_plugins=False), f["seed"], driver, f["versions"], f["created_utc"])
+            return Started(
+                parse_config(f["config"], "journal", load_plugins=False),
+                f["seed"],
+                driver,
+                f["versions"],
+                f["created_utc"],
+            )
         if record.type == "shot":
             reading = Reading(f["value"], a.get("spectrum"), f.get("reduction"))
             return ShotTaken(f["point"], f["shot"], tuple(f["x"]), f["t"], reading)
@@ -135,8 +168,9 @@ def decode(record: Record) -> Event:
         if record.type == "decision":
             return Decided(Decision(**f, **_arrays(a, DECISION_ARRAYS)))
         if record.type == "summary":
-            return Summarised(Summary(t_opt=f["t_opt"], hyperparameters=f["hyperparameters"],
-                                      **_arrays(a, SUMMARY_ARRAYS)))
+            return Summarised(
+                Summary(t_opt=f["t_opt"], hyperparameters=f["hyperparameters"], **_arrays(a, SUMMARY_ARRAYS))
+            )
         if record.type == "status":
             return StatusChanged(Status(f["status"]), f["reason"])
         if record.type == "budget":

@@ -133,8 +133,11 @@ def reduce_point(x, t, readings, model_noise, reduction, clip_sd):
     return steps.make_point(x, t, readings, model_noise, reduction, clip_sd)
 
 
-@task(name="fit noise model",
-      task_run_name=_run_name(lambda parameters: f"fit noise model n={len(parameters['step'].points.points)}"), **STAGE)
+@task(
+    name="fit noise model",
+    task_run_name=_run_name(lambda parameters: f"fit noise model n={len(parameters['step'].points.points)}"),
+    **STAGE,
+)
 def fit_noise_model(step: StepInputs) -> NoiseFit:
     """The noise law (or field) on its training points (``noisebo.models.fitting.fit_noise_model``)."""
     noise = decision.noise_stage(step)
@@ -143,8 +146,11 @@ def fit_noise_model(step: StepInputs) -> NoiseFit:
     return noise
 
 
-@task(name="fit GP", task_run_name=_run_name(lambda parameters: f"fit GP n={len(parameters['step'].points.points)}"),
-      **STAGE)
+@task(
+    name="fit GP",
+    task_run_name=_run_name(lambda parameters: f"fit GP n={len(parameters['step'].points.points)}"),
+    **STAGE,
+)
 def fit_gp(step: StepInputs, noise: NoiseFit) -> PrimaryFit:
     """The primary GP of f on every point (``noisebo.models.fitting.fit_gp``)."""
     return decision.gp_stage(step, noise)
@@ -157,13 +163,18 @@ def acquire(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision:
     made = decision.acquire_stage(step, gp, noise)
     _renamed(f"acquire {_step_label(step)} -> x={format_position(made.x)} t={made.t:.4g} s {made.shots} shots")
     state = "converged" if made.converged else "not converged"
-    _log(f"{_step_label(step)}: predicted optimal t {made.t_opt:.4g} s, noise model {state}; next x="
-         f"{format_position(made.x)} t={made.t:.4g} s, {made.shots} shots, acquisition {made.acq_value:.4g}")
+    _log(
+        f"{_step_label(step)}: predicted optimal t {made.t_opt:.4g} s, noise model {state}; next x="
+        f"{format_position(made.x)} t={made.t:.4g} s, {made.shots} shots, acquisition {made.acq_value:.4g}"
+    )
     return made
 
 
-@task(name="summarise", task_run_name=_run_name(lambda parameters: f"summarise n={len(parameters['state'].points)}"),
-      **STAGE)
+@task(
+    name="summarise",
+    task_run_name=_run_name(lambda parameters: f"summarise n={len(parameters['state'].points)}"),
+    **STAGE,
+)
 def summarise(config: CampaignConfig, state, seed: int) -> Summary:
     """Both models on every point, summarised (``noisebo.campaign.steps.summarize``)."""
     summary = steps.summarize(config, state, seed)

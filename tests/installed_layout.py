@@ -20,8 +20,9 @@ def package_dirs() -> dict[str, str]:
 def adapters() -> list[str]:
     """The code subpackages mapped in from folders beside noisebo/ (noisebo.flows, ...); the
     package data under data/ (noisebo.configs, noisebo.scans) is not among them."""
-    return sorted(name for name, folder in package_dirs().items()
-                  if name != "noisebo" and not folder.startswith("data/"))
+    return sorted(
+        name for name, folder in package_dirs().items() if name != "noisebo" and not folder.startswith("data/")
+    )
 
 
 def assemble(dest: Path, core: Path | None = None) -> Path:
@@ -42,16 +43,40 @@ def build_wheel(out: Path) -> Path:
     import subprocess
     import sys
 
-    listed = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
-                            check=True, capture_output=True).stdout.decode().split("\0")
+    listed = (
+        subprocess.run(
+            ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+            cwd=ROOT,
+            check=True,
+            capture_output=True,
+        )
+        .stdout.decode()
+        .split("\0")
+    )
     source = out / "source"
     for name in filter(None, listed):
         if (ROOT / name).is_file():
             (source / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, source / name)
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
-                    "--disable-pip-version-check", str(source), "-w", str(out)], check=True, capture_output=True,
-                   timeout=600, cwd=out)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "--disable-pip-version-check",
+            str(source),
+            "-w",
+            str(out),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=600,
+        cwd=out,
+    )
     shutil.rmtree(source)
     (wheel,) = out.glob("noisebo-*.whl")
     return wheel

@@ -31,12 +31,33 @@ def generate():
 def test_the_site_builds_strictly_outside_the_checkout(tmp_path):
     site = tmp_path / "site"
     env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
-    out = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(ROOT / "mkdocs.yml"),
-                          "--site-dir", str(site)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600,
-                         check=False)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "--config-file",
+            str(ROOT / "mkdocs.yml"),
+            "--site-dir",
+            str(site),
+        ],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert out.returncode == 0, out.stdout + out.stderr
-    for page in ("reference/configuration", "reference/cli", "reference/hdf5", "reference/bridge-protocol",
-                 "reference/api/client"):
+    for page in (
+        "reference/configuration",
+        "reference/cli",
+        "reference/hdf5",
+        "reference/bridge-protocol",
+        "reference/api/client",
+    ):
         html = (site / page / "index.html").read_text()
         assert "generated:" not in html, f"{page}: a marker was left unfilled"
     assert "serve_instrument" in (site / "reference/api/client/index.html").read_text()

@@ -26,8 +26,15 @@ FIND_CYCLES = textwrap.dedent("""
 def cycles(package: str, where: Path) -> set[tuple[str, str]]:
     """The pairs of modules of ``package`` (found in the folder ``where``) that import each other
     through some chain, in a fresh interpreter."""
-    out = subprocess.run([sys.executable, "-c", FIND_CYCLES, package], cwd=where, capture_output=True, text=True,
-                         timeout=300, check=True, env={"PYTHONPATH": str(where), "PATH": ""})
+    out = subprocess.run(
+        [sys.executable, "-c", FIND_CYCLES, package],
+        cwd=where,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+        env={"PYTHONPATH": str(where), "PATH": ""},
+    )
     return {tuple(pair) for pair in json.loads(out.stdout)}
 
 
@@ -39,10 +46,12 @@ def test_a_cycle_is_found(tmp_path):
     root = tmp_path / "circular"
     root.mkdir()
     (root / "__init__.py").write_text("")
-    (root / "base.py").write_text(textwrap.dedent("""
+    (root / "base.py").write_text(
+        textwrap.dedent("""
         def build():
             from circular.registry import make
             return make()
-    """))
+    """)
+    )
     (root / "registry.py").write_text("from circular.base import build\n\ndef make():\n    return build\n")
     assert cycles("circular", tmp_path) == {("circular.base", "circular.registry")}

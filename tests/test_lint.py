@@ -1,4 +1,4 @@
-"""The lint rules of pyproject.toml ([tool.ruff.lint]) hold for the whole repository, the core
+"""The lint rules of pyproject.toml ([tool.ruff.lint]) and its format ([tool.ruff]) hold for the whole repository, the core
 package type-checks ([tool.mypy]) and so does the whole installed package (the adapters mapped into
 the namespace with it), and a breach of each is caught: CI runs them through this test."""
 
@@ -14,13 +14,45 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def ruff(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "ruff", "check", "--no-cache", *args], cwd=cwd, capture_output=True,
-                          text=True, timeout=300, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "ruff", "check", "--no-cache", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
 
 
 def test_the_repository_keeps_its_lint_rules():
     out = ruff()
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_the_repository_keeps_its_format():
+    out = subprocess.run(
+        [sys.executable, "-m", "ruff", "format", "--check", "--no-cache"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert out.returncode == 0, "run `ruff format` to format:\n" + out.stdout + out.stderr
+
+
+def test_a_format_breach_is_caught(tmp_path):
+    (tmp_path / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text())
+    (tmp_path / "module.py").write_text("x = {  'a':1 }\n")
+    out = subprocess.run(
+        [sys.executable, "-m", "ruff", "format", "--check", "--no-cache"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert out.returncode == 1 and "module.py" in out.stdout
 
 
 def test_a_breach_is_caught(tmp_path):
@@ -32,8 +64,14 @@ def test_a_breach_is_caught(tmp_path):
 
 
 def mypy(*args: str, cwd: Path = ROOT, cache: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "mypy", "--cache-dir", str(cache), *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=600, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "mypy", "--cache-dir", str(cache), *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
 
 
 def test_the_core_type_checks(tmp_path):

@@ -21,11 +21,22 @@ def test_one_top_level_package(wheel):
     assert {t for t in tops if not t.endswith(".dist-info")} == {"noisebo"}
 
 
-@pytest.mark.parametrize("member", [
-    "noisebo/flows/campaign.py", "noisebo/tasks/campaign.py", "noisebo/instruments/pfm.py", "noisebo/storage/hdf5.py",
-    "noisebo/view/recording.py", "noisebo/cli/main.py", "noisebo/bridge/client.py", "noisebo/campaign/engine.py",
-    "noisebo/configs/forrester.yaml", "noisebo/configs/pfm.yaml", "noisebo/scans/PTO_Funakubo0003.h5",
-])
+@pytest.mark.parametrize(
+    "member",
+    [
+        "noisebo/flows/campaign.py",
+        "noisebo/tasks/campaign.py",
+        "noisebo/instruments/pfm.py",
+        "noisebo/storage/hdf5.py",
+        "noisebo/view/recording.py",
+        "noisebo/cli/main.py",
+        "noisebo/bridge/client.py",
+        "noisebo/campaign/engine.py",
+        "noisebo/configs/forrester.yaml",
+        "noisebo/configs/pfm.yaml",
+        "noisebo/scans/PTO_Funakubo0003.h5",
+    ],
+)
 def test_the_wheel_holds(wheel, member):
     assert member in wheel.namelist()
 

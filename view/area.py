@@ -25,15 +25,29 @@ def extent(config: CampaignConfig) -> tuple[float, float, float, float]:
 
 
 def axis_labels(config: CampaignConfig) -> list[str]:
-    """"name (units)" per axis."""
+    """ "name (units)" per axis."""
     return [f"{a.name} ({a.units})" if a.units else a.name for a in config.space.axes]
 
 
-def draw_image(ax, values, config: CampaignConfig, title: str, label: str, cmap: str = "viridis",
-               points: np.ndarray | None = None, point_colours=None):
+def draw_image(
+    ax,
+    values,
+    config: CampaignConfig,
+    title: str,
+    label: str,
+    cmap: str = "viridis",
+    points: np.ndarray | None = None,
+    point_colours=None,
+):
     """One area image on ``ax`` with its colour bar, and measured points (n, 2) on top."""
-    image = ax.imshow(as_image(values, config), origin="lower", extent=extent(config), aspect="equal", cmap=cmap,
-                      interpolation="nearest")
+    image = ax.imshow(
+        as_image(values, config),
+        origin="lower",
+        extent=extent(config),
+        aspect="equal",
+        cmap=cmap,
+        interpolation="nearest",
+    )
     ax.figure.colorbar(image, ax=ax, label=label, fraction=0.046, pad=0.02)
     if points is not None and len(points):
         ax.scatter(points[:, 0], points[:, 1], c=point_colours, s=16, edgecolor="w", linewidth=0.5, zorder=3)

@@ -34,8 +34,10 @@ def blueprint(config: CampaignConfig):
     traces = rrb.Vertical(
         rrb.TimeSeriesView(origin="traces/t_opt_s", name="predicted optimal t (s)"),
         rrb.TimeSeriesView(contents=["traces/a0", "traces/a1"], name="noise model A0, A1"),
-        rrb.TimeSeriesView(contents=["traces/latency_s", "traces/measurement_time_s"],
-                           name="decision latency, cumulative measurement time (s)"),
+        rrb.TimeSeriesView(
+            contents=["traces/latency_s", "traces/measurement_time_s"],
+            name="decision latency, cumulative measurement time (s)",
+        ),
     )
     return rrb.Blueprint(
         rrb.Vertical(

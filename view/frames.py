@@ -102,8 +102,9 @@ def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
         return _final_frame(tables, config, k, points, scalars)
     if bo < 0:
         n = len(points["x"])
-        return Frame(0, points, None, None, None, None, None, None, scalars,
-                     f"{n} seed points measured", n - 1 if n else None)
+        return Frame(
+            0, points, None, None, None, None, None, None, scalars, f"{n} seed points measured", n - 1 if n else None
+        )
     arrays, grid = steps.arrays, tables.grid
     f = Curve(grid["x"], arrays["f_mean"][bo], np.sqrt(np.maximum(arrays["f_var"][bo], 0.0)))
     noise = Curve(grid["t"], arrays["noise_mean"][bo], np.sqrt(np.maximum(arrays["noise_var"][bo], 0.0)))
@@ -113,12 +114,23 @@ def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
     scalars |= {name: hyper[f"noise.{name}"] for name in ("a0", "a1") if f"noise.{name}" in hyper}
     x, t = steps.x[bo], float(steps.t[bo])
     x = float(x) if np.ndim(x) == 0 else tuple(float(v) for v in x)
-    text = (f"step {bo + 1}: measure x={format_position(x)} at t={t:.4g} s with {int(steps.shots[bo])} shots; "
-            f"predicted optimal t {t_opt:.4g} s{' (noise model converged)' if steps.converged[bo] else ''}; "
-            f"decision {latency:.3f} s")
+    text = (
+        f"step {bo + 1}: measure x={format_position(x)} at t={t:.4g} s with {int(steps.shots[bo])} shots; "
+        f"predicted optimal t {t_opt:.4g} s{' (noise model converged)' if steps.converged[bo] else ''}; "
+        f"decision {latency:.3f} s"
+    )
     return Frame(
-        bo + 1, points, f, noise, _reward(noise, config), np.asarray(arrays["acq_map"][bo]), t_opt, (x, t),
-        scalars, text, len(points["x"]) - 1,
+        bo + 1,
+        points,
+        f,
+        noise,
+        _reward(noise, config),
+        np.asarray(arrays["acq_map"][bo]),
+        t_opt,
+        (x, t),
+        scalars,
+        text,
+        len(points["x"]) - 1,
     )
 
 
@@ -150,8 +162,11 @@ def _final_frame(tables: CampaignTables, config: CampaignConfig, k: int, points:
     f = Curve(grid["x"], s.f_mean, np.sqrt(np.maximum(s.f_var, 0.0)))
     noise = Curve(grid["t_fine"], s.noise_fine, np.zeros_like(s.noise_fine))
     scalars = scalars | {"t_opt_s": s.t_opt}
-    scalars |= {name: float(s.hyperparameters[f"noise.{name}"]) for name in ("a0", "a1")
-                if f"noise.{name}" in s.hyperparameters}
-    text = (f"final models on all {len(points['x'])} points: predicted optimal t {s.t_opt:.4g} s, "
-            f"{scalars['measurement_time_s']:.1f} s of measurement")
+    scalars |= {
+        name: float(s.hyperparameters[f"noise.{name}"]) for name in ("a0", "a1") if f"noise.{name}" in s.hyperparameters
+    }
+    text = (
+        f"final models on all {len(points['x'])} points: predicted optimal t {s.t_opt:.4g} s, "
+        f"{scalars['measurement_time_s']:.1f} s of measurement"
+    )
     return Frame(k, points, f, noise, _reward(noise, config), None, s.t_opt, None, scalars, text, None)

@@ -28,8 +28,12 @@ def rrd_path_for(h5_path: Path) -> Path:
     return Path(h5_path).with_suffix(".rrd")
 
 
-def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[str], None] | None = None,
-                      source: tuple[Path, dict] | None = None) -> tuple[np.ndarray | None, Callable | None]:
+def instrument_curves(
+    config: CampaignConfig,
+    instrument=None,
+    warn: Callable[[str], None] | None = None,
+    source: tuple[Path, dict] | None = None,
+) -> tuple[np.ndarray | None, Callable | None]:
     """The instrument's truth on the x grid and its noise law where it is a simulator (else
     None): a device, a driver that is not installed here or a scan that is not on this machine
     gives None."""
@@ -45,8 +49,10 @@ def instrument_curves(config: CampaignConfig, instrument=None, warn: Callable[[s
                     what = str(error)
                     if source is not None:
                         path, driver = source
-                        what = (f"{path} was made with the instrument driver {driver['name']!r} {driver['version']}, "
-                                "which is not installed here")
+                        what = (
+                            f"{path} was made with the instrument driver {driver['name']!r} {driver['version']}, "
+                            "which is not installed here"
+                        )
                     warn(f"{what}: drawn without the instrument's ground truth and noise law")
                 return None, None
         from noisebo.instruments.base import is_simulator
@@ -125,7 +131,7 @@ class CampaignRecording:
 
         if state.summary is not None:
             return from_state(state)
-        for entry in state.points[self._shots_of:]:
+        for entry in state.points[self._shots_of :]:
             self._shot_point += [s.point for s in entry.shots]
             self._shot_t += [s.t for s in entry.shots]
         self._shots_of = len(state.points)
@@ -138,8 +144,9 @@ class CampaignRecording:
         steps = Steps(**{name: rows[name] for name in STEP_COLUMNS}, hyperparameters=hyper, arrays=arrays)
         g = grids(self.config)
         point, t = np.asarray(self._shot_point, dtype=np.int32), np.asarray(self._shot_t)
-        shots = Shots(point=point, shot=np.zeros_like(point), t=t, value=np.full(len(t), np.nan),
-                      ok=np.ones(len(t), dtype=bool))  # frames read a shot's point and t only
+        shots = Shots(
+            point=point, shot=np.zeros_like(point), t=t, value=np.full(len(t), np.nan), ok=np.ones(len(t), dtype=bool)
+        )  # frames read a shot's point and t only
         return _Running({"x": g.x, "t": g.t, "t_fine": g.t_fine}, Points(**point_rows(state.points, d)), steps, shots)
 
     def update(self, state) -> None:
@@ -166,11 +173,17 @@ def _latest_sweep(frame: Frame, state) -> tuple[np.ndarray | None, dict | None]:
     if not entry.shots or entry.shots[-1].reading.spectrum is None:
         return None, None
     fit = entry.committed.values[-1].fit
-    return np.asarray(entry.shots[-1].reading.spectrum), None if fit is None else {k: float(getattr(fit, k)) for k in FIT_KEYS}
+    return np.asarray(entry.shots[-1].reading.spectrum), None if fit is None else {
+        k: float(getattr(fit, k)) for k in FIT_KEYS
+    }
 
 
-def last_sweep(spectra: Callable[[int], np.ndarray], shot_points: np.ndarray, fits: dict, point: int,
-               ) -> tuple[np.ndarray, dict | None]:
+def last_sweep(
+    spectra: Callable[[int], np.ndarray],
+    shot_points: np.ndarray,
+    fits: dict,
+    point: int,
+) -> tuple[np.ndarray, dict | None]:
     """The last raw sweep (3, N) of ``point`` (``spectra``: point -> its sweeps, from
     ``storage.hdf5.spectra_reader``; ``shot_points``: the point of every shot row) and its fit
     (every column of ``/shots/fit`` at that shot; None if the point has no shot rows)."""

@@ -47,7 +47,9 @@ def report(target: Path, out_dir: Path | None = None) -> list[Path]:
 
 def _units(config: CampaignConfig) -> tuple[str, str]:
     axis = config.space.axes[0]
-    x_label = f"{axis.name} ({axis.units})" if axis.units else ("x (um)" if config.instrument.kind == "pfm" else axis.name)
+    x_label = (
+        f"{axis.name} ({axis.units})" if axis.units else ("x (um)" if config.instrument.kind == "pfm" else axis.name)
+    )
     return x_label, "PFM response (pm)" if config.instrument.kind == "pfm" else "f(x)"
 
 
@@ -78,8 +80,10 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
             _t_map_image(axes[1, 2], data, config)
         else:
             _points_by_value(axes[1, 2], data, config)
-    fig.suptitle(f"{data.config['name']}: seed {data.seed}, {data.policy} policy, {len(data.points)} points "
-                 f"({data.status})", fontsize=13)
+    fig.suptitle(
+        f"{data.config['name']}: seed {data.seed}, {data.policy} policy, {len(data.points)} points ({data.status})",
+        fontsize=13,
+    )
     written = [out_dir / f"{path.stem}_report.png"]
     fig.savefig(written[0], dpi=DPI)
     fits = read_shot_fits(path)
@@ -106,18 +110,40 @@ def _area_panels(axes, data: CampaignRecord, config: CampaignConfig, truth) -> N
     if config.space.dimensions != 2 or final is None:
         for ax in axes:
             ax.set_axis_off()
-        axes[0].text(0.5, 0.5, "no model yet" if final is None else
-                     f"{config.space.dimensions} axes: see the projection below", ha="center", va="center")
+        axes[0].text(
+            0.5,
+            0.5,
+            "no model yet" if final is None else f"{config.space.dimensions} axes: see the projection below",
+            ha="center",
+            va="center",
+        )
         return
-    draw_image(axes[0], final[0], config, "f: GP mean, points coloured by t", f_label, points=xy,
-               point_colours=np.log(p.t))
-    draw_image(axes[1], np.sqrt(np.maximum(final[1], 0.0)), config, "f: GP sd", f"sd ({f_label})",
-               cmap="magma", points=xy, point_colours="w")
+    draw_image(
+        axes[0], final[0], config, "f: GP mean, points coloured by t", f_label, points=xy, point_colours=np.log(p.t)
+    )
+    draw_image(
+        axes[1],
+        np.sqrt(np.maximum(final[1], 0.0)),
+        config,
+        "f: GP sd",
+        f"sd ({f_label})",
+        cmap="magma",
+        points=xy,
+        point_colours="w",
+    )
     if truth is not None:
         draw_image(axes[2], truth, config, "truth (the simulator's)", f_label, points=xy, point_colours="w")
     elif len(data.steps):
-        draw_image(axes[2], data.steps.arrays["acq_map"][-1], config, "last acquisition (best over t)", "1",
-                   cmap="Greys", points=xy, point_colours="tab:red")
+        draw_image(
+            axes[2],
+            data.steps.arrays["acq_map"][-1],
+            config,
+            "last acquisition (best over t)",
+            "1",
+            cmap="Greys",
+            points=xy,
+            point_colours="tab:red",
+        )
 
 
 def _t_map(data: CampaignRecord) -> np.ndarray | None:
@@ -147,18 +173,31 @@ def _field_lines(axes, data: CampaignRecord, config: CampaignConfig, truth) -> N
     if truth is not None:
         axes[1].plot(x, truth[1], color="k", lw=1.2, ls="--", label="the simulator's, at its t*(x)")
     measured = p.noise_measured.astype(bool) & np.isfinite(p.shot_std)
-    axes[1].scatter(p.x[measured], p.shot_std[measured], s=16, color="0.3", zorder=3,
-                    label="measured single-shot sd (at the point's t)")
-    axes[1].set(xlabel=x_label, ylabel=f"single-shot noise sd ({f_label})", title="noise per position",
-                ylim=(0, None))
+    axes[1].scatter(
+        p.x[measured],
+        p.shot_std[measured],
+        s=16,
+        color="0.3",
+        zorder=3,
+        label="measured single-shot sd (at the point's t)",
+    )
+    axes[1].set(xlabel=x_label, ylabel=f"single-shot noise sd ({f_label})", title="noise per position", ylim=(0, None))
     axes[1].legend(fontsize=8)
 
 
 def _t_map_image(ax, data: CampaignRecord, config: CampaignConfig) -> None:
     p = data.points
     xy = np.asarray(p.x, dtype=np.float64).reshape(len(p), -1)
-    draw_image(ax, _t_map(data), config, "optimal t per position (noise field); points", "t*(x) (s)",
-               cmap="cividis", points=xy, point_colours="w")
+    draw_image(
+        ax,
+        _t_map(data),
+        config,
+        "optimal t per position (noise field); points",
+        "t*(x) (s)",
+        cmap="cividis",
+        points=xy,
+        point_colours="w",
+    )
 
 
 def _points_by_value(ax, data: CampaignRecord, config: CampaignConfig) -> None:
@@ -171,8 +210,13 @@ def _points_by_value(ax, data: CampaignRecord, config: CampaignConfig) -> None:
     dots = ax.scatter(xy[:, 0], xy[:, 1], c=p.value, s=size, cmap="viridis", edgecolor="k", linewidth=0.4)
     ax.figure.colorbar(dots, ax=ax, label=f_label, fraction=0.046, pad=0.02)
     labels = axis_labels(config)
-    ax.set(xlabel=labels[0], ylabel=labels[1], xlim=(config.space.lows[0], config.space.highs[0]),
-           ylim=(config.space.lows[1], config.space.highs[1]), title="measured values (marker size: t)")
+    ax.set(
+        xlabel=labels[0],
+        ylabel=labels[1],
+        xlim=(config.space.lows[0], config.space.highs[0]),
+        ylim=(config.space.lows[1], config.space.highs[1]),
+        title="measured values (marker size: t)",
+    )
 
 
 def _step_colourbar(fig_ax, n_steps: int) -> None:
@@ -192,13 +236,19 @@ def _trajectory(ax, data: CampaignRecord, config: CampaignConfig, colours) -> No
     if len(steps):
         acq = np.asarray(steps.arrays["acq_map"][-1], dtype=np.float64).T
         shown = np.where(np.isfinite(acq), acq, np.nan)
-        image = ax.imshow(shown, origin="lower", aspect="auto", cmap="Greys",
-                          extent=(s.x_min, s.x_max, s.t_min, s.t_max), alpha=0.8)
+        image = ax.imshow(
+            shown, origin="lower", aspect="auto", cmap="Greys", extent=(s.x_min, s.x_max, s.t_min, s.t_max), alpha=0.8
+        )
         ax.figure.colorbar(image, ax=ax, label=f"acquisition at step {len(steps)}", fraction=0.05)
     ax.plot(p.x, p.t, color="0.3", lw=0.7, zorder=2)
     ax.scatter(p.x, p.t, c=colours, s=36, edgecolor="k", linewidth=0.5, zorder=3)
-    ax.set(xlabel=x_label, ylabel="exposure / sweep time t (s)", title="measured points over the acquisition map",
-           xlim=(s.x_min, s.x_max), ylim=(s.t_min, s.t_max))
+    ax.set(
+        xlabel=x_label,
+        ylabel="exposure / sweep time t (s)",
+        title="measured points over the acquisition map",
+        xlim=(s.x_min, s.x_max),
+        ylim=(s.t_min, s.t_max),
+    )
     _step_colourbar(ax, config.schedule.n_steps)
 
 
@@ -246,14 +296,27 @@ def _noise(ax, data: CampaignRecord, config: CampaignConfig, law, colours) -> No
         ax.plot(grid["t"], mean, color="tab:red", label=f"noise model (step {len(steps)})")
         ax.fill_between(grid["t"], mean - 2 * sd, mean + 2 * sd, color="tab:red", alpha=0.2, label="+-2 sd")
     measured = p.noise_measured.astype(bool) & np.isfinite(p.shot_std)
-    ax.scatter(p.t[measured], p.shot_std[measured], c=colours[measured], s=30, edgecolor="k", linewidth=0.5,
-               zorder=3, label="measured single-shot sd")
+    ax.scatter(
+        p.t[measured],
+        p.shot_std[measured],
+        c=colours[measured],
+        s=30,
+        edgecolor="k",
+        linewidth=0.5,
+        zorder=3,
+        label="measured single-shot sd",
+    )
     few = ~p.noise_measured.astype(bool) & np.isfinite(p.shot_std)
     if few.any():
-        ax.scatter(p.t[few], p.shot_std[few], facecolor="none", edgecolor="0.5", s=22, zorder=2,
-                   label="sd of few-shot points")
-    ax.set(xlabel="exposure / sweep time t (s)", ylabel=f"single-shot noise sd ({f_label})",
-           title="noise model with its data", ylim=(0, None))
+        ax.scatter(
+            p.t[few], p.shot_std[few], facecolor="none", edgecolor="0.5", s=22, zorder=2, label="sd of few-shot points"
+        )
+    ax.set(
+        xlabel="exposure / sweep time t (s)",
+        ylabel=f"single-shot noise sd ({f_label})",
+        title="noise model with its data",
+        ylim=(0, None),
+    )
     ax.legend(fontsize=8)
 
 
@@ -267,12 +330,19 @@ def _sweep_figure(path: Path, data: CampaignRecord, fits: dict, out_dir: Path) -
     ax = fig.subplots()
     ax.plot(freq / 1e3, amp / 1e3, ".", ms=1.5, color="0.5", label=f"sweep ({freq.size} samples)")
     if fit is not None and np.isfinite(fit["amplitude"]):
-        ax.plot(freq / 1e3, sho_amplitude(freq, fit["amplitude"], fit["resonance_hz"], fit["q"]) / 1e3, color="tab:red",
-                label=f"SHO fit: r = {fit['amplitude']:.3g} +- {fit['amplitude_se']:.2g} pm, "
-                      f"f0 = {fit['resonance_hz'] / 1e3:.2f} kHz, Q = {fit['q']:.0f}")
+        ax.plot(
+            freq / 1e3,
+            sho_amplitude(freq, fit["amplitude"], fit["resonance_hz"], fit["q"]) / 1e3,
+            color="tab:red",
+            label=f"SHO fit: r = {fit['amplitude']:.3g} +- {fit['amplitude_se']:.2g} pm, "
+            f"f0 = {fit['resonance_hz'] / 1e3:.2f} kHz, Q = {fit['q']:.0f}",
+        )
     t = float(data.points.t[last])
-    ax.set(xlabel="drive frequency (kHz)", ylabel="amplitude (nm)",
-           title=f"last sweep of point {last} (x = {format_position(data.points.x[last], 3)} um, t = {t:.3g} s)")
+    ax.set(
+        xlabel="drive frequency (kHz)",
+        ylabel="amplitude (nm)",
+        title=f"last sweep of point {last} (x = {format_position(data.points.x[last], 3)} um, t = {t:.3g} s)",
+    )
     ax.legend(fontsize=8)
     out = out_dir / f"{path.stem}_sweep.png"
     fig.savefig(out, dpi=DPI)
@@ -299,8 +369,15 @@ def figures_from_file(path: str | Path) -> dict:
     if data.summary is None:
         raise CampaignFileError(f"{path}: campaign not finished (status {data.status})")
     record = campaign_figures(
-        config, build(config.instrument), data.steps.t_opt, data.summary.t_opt, data.grid["x"],
-        data.summary.f_mean, data.shots.t, data.steps.latency_s, _first_converged(data.steps),
+        config,
+        build(config.instrument),
+        data.steps.t_opt,
+        data.summary.t_opt,
+        data.grid["x"],
+        data.summary.f_mean,
+        data.shots.t,
+        data.steps.latency_s,
+        _first_converged(data.steps),
     )
     record.update(seed=data.seed, file=str(path))
     return record
@@ -349,11 +426,18 @@ def convergence_figure(records: list[dict], out: Path) -> None:
         steps = [r["converged_step"] for r in records if r["policy"] == policy]
         k = np.asarray([n_steps + 1 if s is None else s for s in steps])
         counts = np.asarray([np.sum(k == b) for b in bins])
-        ax.bar(bins + (i - (len(policies) - 1) / 2) * width, counts, width=width,
-               label=f"{policy} ({len(steps)} campaigns, median {np.median(k):.0f})")
+        ax.bar(
+            bins + (i - (len(policies) - 1) / 2) * width,
+            counts,
+            width=width,
+            label=f"{policy} ({len(steps)} campaigns, median {np.median(k):.0f})",
+        )
     ax.set_xticks(bins, [str(b) for b in bins[:-1]] + ["never"])
-    ax.set(xlabel="first BO step at which the noise model counts as converged", ylabel="campaigns",
-           title="convergence of the noise model across seeds")
+    ax.set(
+        xlabel="first BO step at which the noise model counts as converged",
+        ylabel="campaigns",
+        title="convergence of the noise model across seeds",
+    )
     locator = ax.yaxis.get_major_locator()
     if isinstance(locator, MaxNLocator):  # the default AutoLocator is one
         locator.set_params(integer=True)

@@ -105,9 +105,17 @@ class RerunView:
     ``noise_law`` (t grid values) are drawn when the instrument knows them; ``wall_clock`` also
     stamps each frame with the time it was logged."""
 
-    def __init__(self, config: CampaignConfig, name: str, rrd: Path | None = None, live: str | None = None,
-                 truth: np.ndarray | None = None, noise_law: Callable | None = None,
-                 warn: Callable[[str], None] = print, wall_clock: bool = True):
+    def __init__(
+        self,
+        config: CampaignConfig,
+        name: str,
+        rrd: Path | None = None,
+        live: str | None = None,
+        truth: np.ndarray | None = None,
+        noise_law: Callable | None = None,
+        warn: Callable[[str], None] = print,
+        wall_clock: bool = True,
+    ):
         self.config, self.warn, self.wall_clock = config, warn, wall_clock
         self.truth, self.noise_law = truth, noise_law
         self.enabled = True
@@ -228,9 +236,15 @@ class RerunView:
         st.log("log", rr.TextLog(frame.text, level="INFO"))
         p = frame.points
         xs = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), -1)
-        coords = {f"x_{a.name}": xs[:, k] for k, a in enumerate(self.config.space.axes)} if xs.shape[1] > 1 else {"x": xs[:, 0]}
-        st.log("campaign/points", rr.AnyValues(**coords, t=p["t"], value=p["value"], noise=p["noise"],
-                                               from_step=p["frame"].astype(np.int64)))
+        coords = (
+            {f"x_{a.name}": xs[:, k] for k, a in enumerate(self.config.space.axes)}
+            if xs.shape[1] > 1
+            else {"x": xs[:, 0]}
+        )
+        st.log(
+            "campaign/points",
+            rr.AnyValues(**coords, t=p["t"], value=p["value"], noise=p["noise"], from_step=p["frame"].astype(np.int64)),
+        )
         if spectrum is not None:
             self._log_spectrum(spectrum, fit)
 
@@ -242,10 +256,13 @@ class RerunView:
         xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), 2)
         px = (xy[:, 0] - s.lows[0]) / (s.highs[0] - s.lows[0]) * (n0 - 1) + 0.5
         py = (s.highs[1] - xy[:, 1]) / (s.highs[1] - s.lows[1]) * (n1 - 1) + 0.5
-        t_colour = colour_image(np.log(np.asarray(p["t"], dtype=np.float64))[None, :], "plasma",
-                                (np.log(s.t_min), np.log(s.t_max)))[0]
-        labels = [f"{'seed' if k == 0 else f'step {k}'}: x={format_position(x)}, t={t:.3g} s"
-                  for k, x, t in zip(p["frame"], xy, p["t"])]
+        t_colour = colour_image(
+            np.log(np.asarray(p["t"], dtype=np.float64))[None, :], "plasma", (np.log(s.t_min), np.log(s.t_max))
+        )[0]
+        labels = [
+            f"{'seed' if k == 0 else f'step {k}'}: x={format_position(x)}, t={t:.3g} s"
+            for k, x, t in zip(p["frame"], xy, p["t"])
+        ]
         images = {}
         if frame.f is not None:
             images["f_mean"] = frame.f.mean
@@ -255,22 +272,41 @@ class RerunView:
         if frame.acq_map is not None:
             images["acquisition"] = frame.acq_map
         for name, values in images.items():
-            st.log(f"area/{name}/image", rr.Image(colour_image(as_image(values, self.config)[::-1],
-                                                               "magma" if name == "f_sd" else "viridis")))
+            st.log(
+                f"area/{name}/image",
+                rr.Image(colour_image(as_image(values, self.config)[::-1], "magma" if name == "f_sd" else "viridis")),
+            )
         for name in ("f_mean", "f_sd", "truth", "acquisition"):
-            st.log(f"area/{name}/points", rr.Points2D(np.stack([px, py], axis=-1), colors=t_colour,
-                                                      radii=np.where(p["frame"] == frame.step, 2.0, 1.2),
-                                                      labels=labels, show_labels=False))
+            st.log(
+                f"area/{name}/points",
+                rr.Points2D(
+                    np.stack([px, py], axis=-1),
+                    colors=t_colour,
+                    radii=np.where(p["frame"] == frame.step, 2.0, 1.2),
+                    labels=labels,
+                    show_labels=False,
+                ),
+            )
 
     def _log_points_on_map(self, frame: Frame) -> None:
         s, p = self.config.space, frame.points
         px = (p["x"] - s.x_min) / (s.x_max - s.x_min) * (s.n_x - 1) + 0.5
         py = (s.t_max - p["t"]) / (s.t_max - s.t_min) * (s.n_t - 1) + 0.5
-        labels = [f"{'seed' if k == 0 else f'step {k}'}: x={x:.4g}, t={t:.3g} s" for k, x, t in zip(p["frame"], p["x"], p["t"])]
+        labels = [
+            f"{'seed' if k == 0 else f'step {k}'}: x={x:.4g}, t={t:.3g} s"
+            for k, x, t in zip(p["frame"], p["x"], p["t"])
+        ]
         colours = colour_by_step(p["frame"], self.config.schedule.n_steps)
-        self._recording.log("acquisition/points", self.rr.Points2D(np.stack([px, py], axis=-1), colors=colours,
-                                                               radii=np.where(p["frame"] == frame.step, 2.5, 1.5),
-                                                               labels=labels, show_labels=False))
+        self._recording.log(
+            "acquisition/points",
+            self.rr.Points2D(
+                np.stack([px, py], axis=-1),
+                colors=colours,
+                radii=np.where(p["frame"] == frame.step, 2.5, 1.5),
+                labels=labels,
+                show_labels=False,
+            ),
+        )
 
     def _log_curve(self, path: str, box: Box, curve: Curve, colour, band: bool = True) -> None:
         rr, st = self.rr, self._recording
@@ -286,11 +322,25 @@ class RerunView:
             st.log("f/truth", rr.LineStrips2D([box(grid, self.truth)], colors=[(40, 40, 40)], radii=0.4))
         if frame.f is not None:
             self._log_curve("f", box, frame.f, (31, 119, 180))
-        st.log("f/points", rr.Points2D(box(p["x"], p["value"]), colors=colour_by_step(p["frame"], self.config.schedule.n_steps),
-                                       radii=2.0, labels=[f"f={v:.4g} +- {n / np.sqrt(k):.2g}" for v, n, k in
-                                                          zip(p["value"], p["noise"], p["n_shots"])], show_labels=False))
-        st.log("f/corners", rr.Points2D(box([s.x_min, s.x_max], [box.v0, box.v1]), radii=0.1, show_labels=True,
-                                        labels=[f"x={s.x_min:g}, f={box.v0:.3g}", f"x={s.x_max:g}, f={box.v1:.3g}"]))
+        st.log(
+            "f/points",
+            rr.Points2D(
+                box(p["x"], p["value"]),
+                colors=colour_by_step(p["frame"], self.config.schedule.n_steps),
+                radii=2.0,
+                labels=[f"f={v:.4g} +- {n / np.sqrt(k):.2g}" for v, n, k in zip(p["value"], p["noise"], p["n_shots"])],
+                show_labels=False,
+            ),
+        )
+        st.log(
+            "f/corners",
+            rr.Points2D(
+                box([s.x_min, s.x_max], [box.v0, box.v1]),
+                radii=0.1,
+                show_labels=True,
+                labels=[f"x={s.x_min:g}, f={box.v0:.3g}", f"x={s.x_max:g}, f={box.v1:.3g}"],
+            ),
+        )
 
     def _log_noise(self, frame: Frame, box: Box) -> None:
         rr, st, s, p = self.rr, self._recording, self.config.space, frame.points
@@ -298,19 +348,42 @@ class RerunView:
             grid = np.linspace(s.t_min, s.t_max, 200)
             st.log("noise/law", rr.LineStrips2D([box(grid, self.noise_law(grid))], colors=[(40, 40, 40)], radii=0.4))
         measured = p["noise_measured"]
-        st.log("noise/points", rr.Points2D(box(p["t"][measured], p["shot_std"][measured]), radii=2.0,
-                                           colors=colour_by_step(p["frame"][measured], self.config.schedule.n_steps)))
-        st.log("noise/corners", rr.Points2D(box([s.t_min, s.t_max], [box.v0, box.v1]), radii=0.1, show_labels=True,
-                                            labels=[f"t={s.t_min:g} s, sd={box.v0:.3g}", f"t={s.t_max:g} s, sd={box.v1:.3g}"]))
+        st.log(
+            "noise/points",
+            rr.Points2D(
+                box(p["t"][measured], p["shot_std"][measured]),
+                radii=2.0,
+                colors=colour_by_step(p["frame"][measured], self.config.schedule.n_steps),
+            ),
+        )
+        st.log(
+            "noise/corners",
+            rr.Points2D(
+                box([s.t_min, s.t_max], [box.v0, box.v1]),
+                radii=0.1,
+                show_labels=True,
+                labels=[f"t={s.t_min:g} s, sd={box.v0:.3g}", f"t={s.t_max:g} s, sd={box.v1:.3g}"],
+            ),
+        )
         if frame.noise is None:
             return
         self._log_curve("noise", box, frame.noise, (214, 39, 40), band=bool(np.any(frame.noise.sd > 0)))
         assert frame.reward is not None  # drawn from the noise model, so there with it
         reward_box = Box((s.t_min, s.t_max), (0.0, 1.0))
-        st.log("reward/curve", rr.LineStrips2D([reward_box(frame.reward.grid, frame.reward.mean)],
-                                               colors=[(44, 160, 44)], radii=0.6))
-        st.log("reward/t_opt", rr.LineStrips2D([reward_box([frame.t_opt, frame.t_opt], [0.0, 1.0])], colors=[(0, 0, 0)],
-                                               radii=0.4, labels=[f"t_opt = {frame.t_opt:.4g} s"], show_labels=True))
+        st.log(
+            "reward/curve",
+            rr.LineStrips2D([reward_box(frame.reward.grid, frame.reward.mean)], colors=[(44, 160, 44)], radii=0.6),
+        )
+        st.log(
+            "reward/t_opt",
+            rr.LineStrips2D(
+                [reward_box([frame.t_opt, frame.t_opt], [0.0, 1.0])],
+                colors=[(0, 0, 0)],
+                radii=0.4,
+                labels=[f"t_opt = {frame.t_opt:.4g} s"],
+                show_labels=True,
+            ),
+        )
 
     def _log_spectrum(self, spectrum: np.ndarray, fit: dict | None) -> None:
         from noisebo.sho import sho_amplitude
@@ -321,10 +394,19 @@ class RerunView:
         st.log("spectrum/data", rr.Points2D(box(freq, amp), radii=0.4, colors=[(120, 120, 120)]))
         if fit is not None and np.isfinite(fit.get("amplitude", np.nan)):
             model = sho_amplitude(freq, fit["amplitude"], fit["resonance_hz"], fit["q"])
-            st.log("spectrum/fit", rr.LineStrips2D([box(freq, model)], colors=[(214, 39, 40)], radii=0.6,
-                                                   labels=[f"SHO fit: r={fit['amplitude']:.3g} pm, "
-                                                           f"f0={fit['resonance_hz'] / 1e3:.2f} kHz, Q={fit['q']:.0f}"],
-                                                   show_labels=True))
+            st.log(
+                "spectrum/fit",
+                rr.LineStrips2D(
+                    [box(freq, model)],
+                    colors=[(214, 39, 40)],
+                    radii=0.6,
+                    labels=[
+                        f"SHO fit: r={fit['amplitude']:.3g} pm, "
+                        f"f0={fit['resonance_hz'] / 1e3:.2f} kHz, Q={fit['q']:.0f}"
+                    ],
+                    show_labels=True,
+                ),
+            )
         else:
             st.log("spectrum/fit", rr.Clear(recursive=False))
 

@@ -9,8 +9,14 @@ import re
 
 from generate.markdown import code, paragraphs, table
 
-KINDS = {"number": "number", "integer": "whole number", "string": "text", "boolean": "true or false",
-         "object": "object", "null": "null"}
+KINDS = {
+    "number": "number",
+    "integer": "whole number",
+    "string": "text",
+    "boolean": "true or false",
+    "object": "object",
+    "null": "null",
+}
 LIMITS = (("minimum", ">="), ("exclusiveMinimum", ">"), ("maximum", "<="), ("exclusiveMaximum", "<"))
 
 
@@ -54,8 +60,11 @@ def fields_table(schema: dict) -> str:
     required = set(schema.get("required", ()))
     rows = []
     for name, field in schema.get("properties", {}).items():
-        given = "required" if name in required else (code(json.dumps(field["default"])) if "default" in field
-                                                     else "optional")
+        given = (
+            "required"
+            if name in required
+            else (code(json.dumps(field["default"])) if "default" in field else "optional")
+        )
         rows.append((code(name), type_text(field), given, field.get("description", "")))
     return table(["field", "type", "default", "meaning"], rows)
 
@@ -73,7 +82,11 @@ def body_of(content: dict) -> str:
     schema = content.get("application/json", {}).get("schema", {})
     if not schema:
         return ""
-    return type_text(schema) if "$ref" in schema or "anyOf" in schema else f"[{schema['title']}](#{anchor(schema['title'])})"
+    return (
+        type_text(schema)
+        if "$ref" in schema or "anyOf" in schema
+        else f"[{schema['title']}](#{anchor(schema['title'])})"
+    )
 
 
 def operation_section(method: str, path: str, op: dict) -> str:
@@ -83,8 +96,10 @@ def operation_section(method: str, path: str, op: dict) -> str:
     body = op.get("requestBody")
     if body:
         parts.append(f"**Body** ({'required' if body.get('required') else 'optional'}): {body_of(body['content'])}\n")
-    rows = [(code(status), body_of(answer.get("content", {})), answer.get("description", ""))
-            for status, answer in op.get("responses", {}).items()]
+    rows = [
+        (code(status), body_of(answer.get("content", {})), answer.get("description", ""))
+        for status, answer in op.get("responses", {}).items()
+    ]
     parts += ["**Answers**\n", table(["status", "body", "meaning"], rows)]
     return "\n".join(parts)
 
@@ -110,8 +125,11 @@ def api_description() -> dict:
 def page() -> str:
     """The generated part of the bridge's protocol page."""
     api = api_description()
-    operations = [operation_section(method, path, op) for path, ops in api["paths"].items()
-                  for method, op in ops.items()]
-    bodies = [f"### {name} {{#{anchor(name)}}}\n\n{paragraphs(schema.get('description'))}\n{fields_table(schema)}"
-              for name, schema in schemas_of(api).items()]
+    operations = [
+        operation_section(method, path, op) for path, ops in api["paths"].items() for method, op in ops.items()
+    ]
+    bodies = [
+        f"### {name} {{#{anchor(name)}}}\n\n{paragraphs(schema.get('description'))}\n{fields_table(schema)}"
+        for name, schema in schemas_of(api).items()
+    ]
     return "\n".join([f"API version {api['info']['version']}.\n", *operations, "## Bodies\n", *bodies])

@@ -69,8 +69,11 @@ def page() -> str:
 
     parser = build_parser()
     parsers, helps = subcommands(parser)
-    overview = table(["command", "what it does"], [(f"[{code('noisebo ' + name)}](#{name})", helps[name])
-                                                    for name in parsers])
-    head = (f"```text\n{usage(parser)}\n```\n\n`noisebo --version` prints the installed version; `noisebo COMMAND --help` "
-            f"prints a command's arguments.\n\n{overview}")
+    overview = table(
+        ["command", "what it does"], [(f"[{code('noisebo ' + name)}](#{name})", helps[name]) for name in parsers]
+    )
+    head = (
+        f"```text\n{usage(parser)}\n```\n\n`noisebo --version` prints the installed version; `noisebo COMMAND --help` "
+        f"prints a command's arguments.\n\n{overview}"
+    )
     return head + "\n" + "\n".join(command_section(name, p, helps[name]) for name, p in parsers.items())

@@ -76,10 +76,20 @@ def render(sections: list[Section]) -> str:
         parts.append(f"Model: {code(s.model.__module__ + '.' + s.model.__qualname__)}\n")
         if s.driver is not None:  # what `noisebo instruments` says of it: its class's first docstring line
             said = (s.driver.__doc__ or "").strip().splitlines()
-            parts.append(f"The driver {code(s.driver.__module__ + '.' + s.driver.__qualname__)}: {said[0] if said else ''}\n")
+            parts.append(
+                f"The driver {code(s.driver.__module__ + '.' + s.driver.__qualname__)}: {said[0] if said else ''}\n"
+            )
         parts.append(paragraphs(s.model.__dict__.get("__doc__")))
-        rows = [(code(s.key(name)), type_text(f.annotation, linker(anchors, s.key(name) + suffix(f.annotation))),
-                 default_text(f), field_constraints(f), f.description or "") for name, f in s.model.model_fields.items()]
+        rows = [
+            (
+                code(s.key(name)),
+                type_text(f.annotation, linker(anchors, s.key(name) + suffix(f.annotation))),
+                default_text(f),
+                field_constraints(f),
+                f.description or "",
+            )
+            for name, f in s.model.model_fields.items()
+        ]
         parts.append(table(["key", "type", "default", "constraints", "meaning"], rows))
     return "\n".join(parts)
 

@@ -70,16 +70,23 @@ def root_table(layout) -> str:
     attrs = layout.root_attrs(fresh_state())
     checked(ROOT_ATTRIBUTES, attrs, "root attributes")
     mutable = set(layout.MUTABLE_ATTRS)
-    rows = [(code(name), type(value).__name__, ROOT_ATTRIBUTES[name] + (" (running file: in `/committed`)"
-                                                                        if name in mutable else ""))
-            for name, value in attrs.items()]
+    rows = [
+        (
+            code(name),
+            type(value).__name__,
+            ROOT_ATTRIBUTES[name] + (" (running file: in `/committed`)" if name in mutable else ""),
+        )
+        for name, value in attrs.items()
+    ]
     return table(["attribute", "type", "meaning"], rows)
 
 
 def column_table(layout, columns: dict, extra: list[tuple] = ()) -> str:
     """/points or /steps: name, dtype, units, description."""
-    rows = [(code(name), layout.column_dtype(name, units).name, units, description)
-            for name, (units, description) in columns.items()]
+    rows = [
+        (code(name), layout.column_dtype(name, units).name, units, description)
+        for name, (units, description) in columns.items()
+    ]
     return table(["column", "dtype", "units", "description"], rows + list(extra))
 
 
@@ -96,21 +103,31 @@ def written_table(fill, *args) -> str:
     with h5py.File("layout.h5", "w", driver="core", backing_store=False) as f:
         fill(f, *args)
         rows: list[tuple] = []
-        f.visititems(lambda path, obj: rows.append((code("/" + path), obj.dtype.name, obj.attrs["units"],
-                                                    obj.attrs["description"])) if isinstance(obj, h5py.Dataset) else None)
+        f.visititems(
+            lambda path, obj: (
+                rows.append((code("/" + path), obj.dtype.name, obj.attrs["units"], obj.attrs["description"]))
+                if isinstance(obj, h5py.Dataset)
+                else None
+            )
+        )
         attrs = {f"/{group}": dict(f[group].attrs) for group in f if f[group].attrs}
     text = table(["dataset", "dtype", "units", "description"], rows)
     for group, values in attrs.items():
         checked(GROUP_ATTRIBUTES, values, f"attributes of {group}")
-        text += f"\nAttributes of {code(group)}:\n\n" + table(["attribute", "type", "meaning"], [
-            (code(name), type(value).__name__, GROUP_ATTRIBUTES[name]) for name, value in values.items()])
+        text += f"\nAttributes of {code(group)}:\n\n" + table(
+            ["attribute", "type", "meaning"],
+            [(code(name), type(value).__name__, GROUP_ATTRIBUTES[name]) for name, value in values.items()],
+        )
     return text
 
 
 def summary_stub():
     one = np.zeros(1)
-    return SimpleNamespace(summary=SimpleNamespace(t_opt=1.0, hyperparameters={}, f_mean=one, f_var=one,
-                                                   noise_fine=one, t_opt_map=one, noise_map=one))
+    return SimpleNamespace(
+        summary=SimpleNamespace(
+            t_opt=1.0, hyperparameters={}, f_mean=one, f_var=one, noise_fine=one, t_opt_map=one, noise_map=one
+        )
+    )
 
 
 def grid_stub():
@@ -124,33 +141,47 @@ def page() -> str:
     from noisebo.storage import layout
 
     checked(ARRAY_SHAPES, layout.ARRAY_COLUMNS, "per-step arrays")
-    step_arrays = [(code(name), layout.array_dtype(name).name, units, f"{description}; {ARRAY_SHAPES[name]}")
-                   for name, (units, description) in layout.ARRAY_COLUMNS.items()]
-    hyper = [(code("hyperparameters/<name>"), "float64", "", "each fitted hyperparameter per step (MAP or posterior "
-              "mean; A0, A1 in units of f)")]
-    return "\n".join([
-        f"Schema {code(layout.SCHEMA)}, version {layout.SCHEMA_VERSION}; files of versions "
-        f"{', '.join(map(str, layout.READABLE_VERSIONS))} are read; checksums from version {layout.CHECKSUMMED_FROM}.\n",
-        "### Root attributes\n", root_table(layout),
-        f"### `/points`\n\nOne row per point, (n_points,); {X_SHAPE}.\n",
-        column_table(layout, layout.POINT_COLUMNS, [(code("step"), "int32", *layout.POINT_STEP)]),
-        f"### `/steps`\n\nOne row per BO step, (n_steps,); {X_SHAPE}.\n",
-        column_table(layout, layout.STEP_COLUMNS, hyper + step_arrays),
-        f"### `/shots`\n\nOne row per shot, (n_shots,); {X_SHAPE}.\n",
-        typed_table(layout.SHOT_COLUMNS, layout.SHOT_TEXT),
-        "### `/shots/fit`\n\nResonance sweeps only: each sweep's SHO fit, (n_shots,).\n",
-        table(["column", "dtype", "units", "description"],
-              [(code(n), "float64", u, d) for n, (u, d) in layout.FIT_UNITS.items()] + [(code("note"), "text", "text",
-                                                                                           layout.FIT_NOTE)]),
-        f"### `/failures`\n\nOne row per failed attempt, (n_failed,); {X_SHAPE}. {layout.FAILURES_DESCRIPTION[:1].upper()}"
-        f"{layout.FAILURES_DESCRIPTION[1:]}.\n",
-        typed_table(layout.FAILURE_COLUMNS, layout.FAILURE_TEXT),
-        f"### `/spectra`\n\n`/spectra/point_NNNN` (shots, rows, samples), float32: {layout.SPECTRA_DESCRIPTION} "
-        f"({layout.SPECTRA_ROWS}).\n",
-        "### `/grid`\n\nThe candidate grids: `x` (n_x,) for one axis; for d > 1 axes the m reference points, (m, d) "
-        "(two axes: the n0 x n1 display grid, axis 0 slowest, so `reshape(n0, n1)` is the image; more: a Halton "
-        "set); `t` (n_t,); `t_fine` (2049,), where the optimal t is searched.\n",
-        written_table(layout.fill_grid, grid_stub()),
-        "### `/summary`\n\nThe final models, once the campaign has them; `t_opt_map` and `noise_map` with a noise "
-        "field only.\n", written_table(layout.fill_summary, summary_stub()),
-    ])
+    step_arrays = [
+        (code(name), layout.array_dtype(name).name, units, f"{description}; {ARRAY_SHAPES[name]}")
+        for name, (units, description) in layout.ARRAY_COLUMNS.items()
+    ]
+    hyper = [
+        (
+            code("hyperparameters/<name>"),
+            "float64",
+            "",
+            "each fitted hyperparameter per step (MAP or posterior mean; A0, A1 in units of f)",
+        )
+    ]
+    return "\n".join(
+        [
+            f"Schema {code(layout.SCHEMA)}, version {layout.SCHEMA_VERSION}; files of versions "
+            f"{', '.join(map(str, layout.READABLE_VERSIONS))} are read; checksums from version {layout.CHECKSUMMED_FROM}.\n",
+            "### Root attributes\n",
+            root_table(layout),
+            f"### `/points`\n\nOne row per point, (n_points,); {X_SHAPE}.\n",
+            column_table(layout, layout.POINT_COLUMNS, [(code("step"), "int32", *layout.POINT_STEP)]),
+            f"### `/steps`\n\nOne row per BO step, (n_steps,); {X_SHAPE}.\n",
+            column_table(layout, layout.STEP_COLUMNS, hyper + step_arrays),
+            f"### `/shots`\n\nOne row per shot, (n_shots,); {X_SHAPE}.\n",
+            typed_table(layout.SHOT_COLUMNS, layout.SHOT_TEXT),
+            "### `/shots/fit`\n\nResonance sweeps only: each sweep's SHO fit, (n_shots,).\n",
+            table(
+                ["column", "dtype", "units", "description"],
+                [(code(n), "float64", u, d) for n, (u, d) in layout.FIT_UNITS.items()]
+                + [(code("note"), "text", "text", layout.FIT_NOTE)],
+            ),
+            f"### `/failures`\n\nOne row per failed attempt, (n_failed,); {X_SHAPE}. {layout.FAILURES_DESCRIPTION[:1].upper()}"
+            f"{layout.FAILURES_DESCRIPTION[1:]}.\n",
+            typed_table(layout.FAILURE_COLUMNS, layout.FAILURE_TEXT),
+            f"### `/spectra`\n\n`/spectra/point_NNNN` (shots, rows, samples), float32: {layout.SPECTRA_DESCRIPTION} "
+            f"({layout.SPECTRA_ROWS}).\n",
+            "### `/grid`\n\nThe candidate grids: `x` (n_x,) for one axis; for d > 1 axes the m reference points, (m, d) "
+            "(two axes: the n0 x n1 display grid, axis 0 slowest, so `reshape(n0, n1)` is the image; more: a Halton "
+            "set); `t` (n_t,); `t_fine` (2049,), where the optimal t is searched.\n",
+            written_table(layout.fill_grid, grid_stub()),
+            "### `/summary`\n\nThe final models, once the campaign has them; `t_opt_map` and `noise_map` with a noise "
+            "field only.\n",
+            written_table(layout.fill_summary, summary_stub()),
+        ]
+    )

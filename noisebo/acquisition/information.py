@@ -27,16 +27,15 @@ import jax.numpy as jnp
 SHOT_OPTIONS = (1, 2, 3, 5, 8, 13, 20, 30, 50)
 
 
-
-
 def variance_reduction(q: jnp.ndarray, f_var: jnp.ndarray, noise_var: jnp.ndarray) -> jnp.ndarray:
     """IVR (..., m, k) of a point at each candidate: q (m,) and f_var (m,) at the candidates,
     noise_var (m, k) or (k,) the variance of the point's value (Noise^2 / n) at k times."""
     return q[:, None] / (f_var[:, None] + noise_var)
 
 
-def rate_map(q: jnp.ndarray, f_var: jnp.ndarray, noise_sd: jnp.ndarray, t: jnp.ndarray, shots,
-             overhead_s: float) -> jnp.ndarray:
+def rate_map(
+    q: jnp.ndarray, f_var: jnp.ndarray, noise_sd: jnp.ndarray, t: jnp.ndarray, shots, overhead_s: float
+) -> jnp.ndarray:
     """rate(x, t, n) (m, n_t) for n = ``shots``: q, f_var (m,); noise_sd (n_t,) or (m, n_t) the
     single-shot noise; t (n_t,) s; per-point overhead (s)."""
     noise_sd = noise_sd if noise_sd.ndim == 2 else noise_sd[None, :]
@@ -49,8 +48,9 @@ def shot_options(shots_before: int, shots_after: int) -> tuple[int, ...]:
     return tuple(sorted({n for n in SHOT_OPTIONS if n <= shots_before} | {shots_after}))
 
 
-def t_opt_rate(t_draws: jnp.ndarray, noise_draws: jnp.ndarray, t: jnp.ndarray, rel_var: float,
-               shots: int, overhead_s: float) -> jnp.ndarray:
+def t_opt_rate(
+    t_draws: jnp.ndarray, noise_draws: jnp.ndarray, t: jnp.ndarray, rel_var: float, shots: int, overhead_s: float
+) -> jnp.ndarray:
     """How much measuring the noise at each t of the grid t (n_t,) with ``shots`` shots narrows
     the posterior of the optimal t, per second (s^2 of t* per s; ``schedule.noise_t:
     informative``).

@@ -88,8 +88,9 @@ def reward_driven(post: Posterior, shots: int, acq: AcquisitionConfig, rew: Rewa
     return acq_x * (weight if _field(post) else weight[None, :])
 
 
-def _time_acquisition(post: Posterior, noise: jnp.ndarray, noise_var: jnp.ndarray, rew: RewardConfig,
-                      acq: AcquisitionConfig) -> jnp.ndarray:
+def _time_acquisition(
+    post: Posterior, noise: jnp.ndarray, noise_var: jnp.ndarray, rew: RewardConfig, acq: AcquisitionConfig
+) -> jnp.ndarray:
     """EI on the reward normalised over the t grid, per row of noise curves (..., n_t)."""
     raw = reward(post.t, noise, rew.alpha, rew.beta)
     span = jnp.max(raw, axis=-1, keepdims=True) - jnp.min(raw, axis=-1, keepdims=True)
@@ -141,13 +142,24 @@ class Policy:
     chooses_shots: bool = False
     paper: int = 0
 
-    def acquisition_map(self, post: Posterior, shots, acq: AcquisitionConfig, rew: RewardConfig,
-                        overhead_s: float = 0.0) -> jnp.ndarray:
+    def acquisition_map(
+        self, post: Posterior, shots, acq: AcquisitionConfig, rew: RewardConfig, overhead_s: float = 0.0
+    ) -> jnp.ndarray:
         raise NotImplementedError
 
-    def point_scores(self, post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.ndarray, shots,
-                     acq: AcquisitionConfig, rew: RewardConfig, noise: NoiseRows | None = None,
-                     spread: jnp.ndarray | None = None, overhead_s: float = 0.0) -> jnp.ndarray:
+    def point_scores(
+        self,
+        post: Posterior,
+        mean: jnp.ndarray,
+        var: jnp.ndarray,
+        j: jnp.ndarray,
+        shots,
+        acq: AcquisitionConfig,
+        rew: RewardConfig,
+        noise: NoiseRows | None = None,
+        spread: jnp.ndarray | None = None,
+        overhead_s: float = 0.0,
+    ) -> jnp.ndarray:
         raise NotImplementedError
 
 
@@ -217,8 +229,9 @@ def policy_of(acq: AcquisitionConfig) -> Policy:
     return registry.policy(acq.policy)
 
 
-def acquisition_map(post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig,
-                    overhead_s: float = 0.0) -> jnp.ndarray:
+def acquisition_map(
+    post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig, overhead_s: float = 0.0
+) -> jnp.ndarray:
     """The configured policy's acquisition over the (x, t) grid, (n_x, n_t); for info_rate, the
     rate at ``shots`` shots with ``overhead_s`` per point (f units^2 per s)."""
     return policy_of(acq).acquisition_map(post, shots, acq, rew, overhead_s)
@@ -229,9 +242,18 @@ def _at(rows: jnp.ndarray, j: jnp.ndarray) -> jnp.ndarray:
     return jnp.take_along_axis(rows, j[..., None], axis=-1)[..., 0]
 
 
-def point_scores(post: Posterior, mean: jnp.ndarray, var: jnp.ndarray, j: jnp.ndarray, shots,
-                 acq: AcquisitionConfig, rew: RewardConfig, noise: NoiseRows | None = None,
-                 spread: jnp.ndarray | None = None, overhead_s: float = 0.0) -> jnp.ndarray:
+def point_scores(
+    post: Posterior,
+    mean: jnp.ndarray,
+    var: jnp.ndarray,
+    j: jnp.ndarray,
+    shots,
+    acq: AcquisitionConfig,
+    rew: RewardConfig,
+    noise: NoiseRows | None = None,
+    spread: jnp.ndarray | None = None,
+    overhead_s: float = 0.0,
+) -> jnp.ndarray:
     """The configured policy's score at points off the x grid: latent f ``mean`` and ``var``
     (any shape) at each point, paired with the t-grid index ``j`` (same shape); for a noise
     field, ``noise`` at the points; for a policy that ``uses_spread``, ``spread`` (q, same

@@ -67,8 +67,14 @@ def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceCon
 
 
 @lru_cache(maxsize=None)
-def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, primary_first: bool,
-                         field_kind: str | None = None, overhead_s: float = 0.0):
+def _propose_nd_compiled(
+    acq: AcquisitionConfig,
+    rew: RewardConfig,
+    space: SpaceConfig,
+    primary_first: bool,
+    field_kind: str | None = None,
+    overhead_s: float = 0.0,
+):
     """For d > 1: the policy's map on the reference points, then ``search.refine`` from its best
     ``STARTS`` entries (each keeps its t); with a noise field (its law ``field_kind``) each
     candidate is scored with the noise predicted where it lies. Returns the map's maximum over t
@@ -96,7 +102,8 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
             flat = candidates.reshape(k * p, d)
             mean, var = inference.combine(
                 *primary.predict_samples(fitted.primary.params, fitted.primary_data, flat),
-                primary_first, fitted.primary.weights,
+                primary_first,
+                fitted.primary.weights,
             )
             raw_mean, raw_var = std.mean + std.scale * mean, std.scale**2 * var
             noise = None
@@ -104,8 +111,18 @@ def _propose_nd_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: Space
                 rows = noise_rows(flat)
                 noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t))
             q = spread(fitted, flat, xi, primary_first).reshape(k, p) if uses_spread else None
-            return point_scores(post, raw_mean.reshape(k, p), raw_var.reshape(k, p),
-                                jnp.broadcast_to(j[:, None], (k, p)), shots, acq, rew, noise, q, overhead_s)
+            return point_scores(
+                post,
+                raw_mean.reshape(k, p),
+                raw_var.reshape(k, p),
+                jnp.broadcast_to(j[:, None], (k, p)),
+                shots,
+                acq,
+                rew,
+                noise,
+                q,
+                overhead_s,
+            )
 
         best_x, best_s = refine(score, xs[i], key, spacing)
         best = jnp.argmax(best_s)
@@ -151,8 +168,13 @@ def affordable(config: CampaignConfig, shots: int, left: float | None) -> tuple[
 
 
 def acquire(
-    config: CampaignConfig, fitted: Fitted, prediction: Prediction, convergence: Convergence, step: int,
-    key: jax.Array | None = None, budget_left: float | None = None,
+    config: CampaignConfig,
+    fitted: Fitted,
+    prediction: Prediction,
+    convergence: Convergence,
+    step: int,
+    key: jax.Array | None = None,
+    budget_left: float | None = None,
 ) -> Decision:
     """The acquire stage: the policy's proposal of BO step ``step`` from the posterior
     (``prediction``) and where the noise model stands (``convergence``), among the times (and
@@ -218,8 +240,9 @@ def _propose(config: CampaignConfig, fitted: Fitted, post: Posterior, key, shots
         i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
         noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
         return (float(g.x[i]),), j, float(acq_map[i, j]), acq_map, noise_at_t
-    acq_map, x_scaled, j, acq_value, noise_at = _propose_nd_program(config, fitted)(post, float(shots), fitted, key,
-                                                                                  allowed)
+    acq_map, x_scaled, j, acq_value, noise_at = _propose_nd_program(config, fitted)(
+        post, float(shots), fitted, key, allowed
+    )
     lows, highs = np.asarray(s.lows), np.asarray(s.highs)
     x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
     return x, int(j), float(acq_value), acq_map, float(noise_at)
@@ -233,9 +256,16 @@ def informative_t(prediction: Prediction, j: int, shots: int, config: CampaignCo
         return j
     allowed, _ = affordable(config, shots, budget_left)
     t = grids(config).t
-    rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws, jnp.asarray(t),
-                                             float(noise_model.sampling_rel_var(shots)), shots,
-                                             config.schedule.point_overhead_s))
+    rate = np.asarray(
+        information.t_opt_rate(
+            prediction.t_draws,
+            prediction.noise_draws,
+            jnp.asarray(t),
+            float(noise_model.sampling_rel_var(shots)),
+            shots,
+            config.schedule.point_overhead_s,
+        )
+    )
     rate = np.where(np.asarray(allowed), rate, -np.inf)
     best = int(np.argmax(rate))
     return best if rate[best] > 0 else j
@@ -264,8 +294,14 @@ def _over_x(curves) -> np.ndarray:
 
 def _propose_nd_program(config: CampaignConfig, fitted: Fitted):
     nm = config.noise_model
-    return _propose_nd_compiled(config.acquisition, config.reward, config.space, fitted.primary.map_first,
-                                None if nm.field is None else nm.mean, config.schedule.point_overhead_s)
+    return _propose_nd_compiled(
+        config.acquisition,
+        config.reward,
+        config.space,
+        fitted.primary.map_first,
+        None if nm.field is None else nm.mean,
+        config.schedule.point_overhead_s,
+    )
 
 
 def propose_key(seed: int, step: int) -> jax.Array:

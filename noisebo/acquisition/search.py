@@ -21,12 +21,9 @@ PER_ROUND = 32  # random neighbours tried around each per round
 ROUNDS = 6  # radii: 2h, h, h/2, ... for reference spacing h
 
 
-
-
-
-
-def refine(score: Callable[[jnp.ndarray], jnp.ndarray], starts: jnp.ndarray, key: jax.Array,
-           spacing: float) -> tuple[jnp.ndarray, jnp.ndarray]:
+def refine(
+    score: Callable[[jnp.ndarray], jnp.ndarray], starts: jnp.ndarray, key: jax.Array, spacing: float
+) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Random local search from each of K starts (K, d) in scaled coordinates, inside [0, 1]^d.
 
     ``score`` maps candidates (K, P, d) to scores (K, P), row k scored as start k is (its t).

@@ -26,8 +26,10 @@ def stand_in_seeds(config: CampaignConfig, seed: int) -> CampaignState:
     """The campaign's seed points with stand-in readings (value = index, noise 1): a state of the
     shapes its first decision works on, before anything is measured."""
     shots = config.schedule.seed_shots
-    points = tuple(Point(tuple(row[:-1]), float(row[-1]), float(i), 1.0, shots, 1.0, True)
-                   for i, row in enumerate(seed_points(config, seed)))
+    points = tuple(
+        Point(tuple(row[:-1]), float(row[-1]), float(i), 1.0, shots, 1.0, True)
+        for i, row in enumerate(seed_points(config, seed))
+    )
     return CampaignState(points=points)
 
 
@@ -70,12 +72,20 @@ _COMPILING_LOCK = threading.Lock()
 def programs_key(config: CampaignConfig, capacities: tuple[int, int] | None) -> tuple:
     """What identifies a decision's compiled programs: the config sections they depend on and
     the padded capacities."""
-    return (config.primary_model, config.noise_model, config.inference, config.space, config.reward,
-            config.acquisition, None if capacities is None else tuple(capacities))
+    return (
+        config.primary_model,
+        config.noise_model,
+        config.inference,
+        config.space,
+        config.reward,
+        config.acquisition,
+        None if capacities is None else tuple(capacities),
+    )
 
 
-def compile_ahead(config: CampaignConfig, state: CampaignState, previous: dict | None,
-                  capacities: tuple[int, int]) -> None:
+def compile_ahead(
+    config: CampaignConfig, state: CampaignState, previous: dict | None, capacities: tuple[int, int]
+) -> None:
     """Run a decision's programs (a multi-start fit and the prediction) at ``capacities`` and
     discard the results: JAX keeps them compiled for when the campaign crosses there. Meant for
     a background thread while the instrument measures (MAP mode; NUTS samplers are per thread);
@@ -87,8 +97,13 @@ def compile_ahead(config: CampaignConfig, state: CampaignState, previous: dict |
         fitted = fit_models(config, state, fit_key(0, 0), previous, False, capacities)
         posterior = predict(config, fitted, state, policy_of(config.acquisition).uses_spread).posterior
         if config.space.dimensions > 1:  # the refinement's program depends on the capacity too
-            posterior = _propose_nd_program(config, fitted)(posterior, float(config.schedule.shots_before), fitted,
-                                                            propose_key(0, 0), jnp.asarray(affordable(config, 1, None)[0]))
+            posterior = _propose_nd_program(config, fitted)(
+                posterior,
+                float(config.schedule.shots_before),
+                fitted,
+                propose_key(0, 0),
+                jnp.asarray(affordable(config, 1, None)[0]),
+            )
         jax.block_until_ready(posterior)
     finally:
         done.set()

@@ -27,7 +27,15 @@ from noisebo.campaign.compile_ahead import wait_for_compilation
 from noisebo.config import CampaignConfig
 from noisebo.models.convergence import assess
 from noisebo.models.fitting import (
-    Fitted, NoiseFit, PrimaryFit, combined, fit_gp, fit_key, fit_keys, fit_noise_model, warm_step,
+    Fitted,
+    NoiseFit,
+    PrimaryFit,
+    combined,
+    fit_gp,
+    fit_key,
+    fit_keys,
+    fit_noise_model,
+    warm_step,
 )
 from noisebo.models.prediction import predict
 from noisebo.state import CampaignState
@@ -63,6 +71,7 @@ class StepInputs:
 # Each stage records its own time, so a decision's latency is its arithmetic's whatever runs the
 # stages (plain calls, or Prefect tasks whose bookkeeping is the orchestration's, not the decision's).
 
+
 def noise_stage(step: StepInputs) -> NoiseFit:
     """The fit noise model stage of ``step``, timed."""
     started = time.perf_counter()
@@ -81,13 +90,18 @@ def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision
     """Predict, assess and acquire for ``step``: the decision, its ``latency_s`` the three
     stages' own time."""
     started = time.perf_counter()
-    decision, _ = decide_on(step.config, combined(gp, noise), step.points, step.step, step.propose_key,
-                            step.budget_left)
+    decision, _ = decide_on(
+        step.config, combined(gp, noise), step.points, step.step, step.propose_key, step.budget_left
+    )
     return replace(decision, latency_s=noise.seconds + gp.seconds + time.perf_counter() - started)
 
 
 def decide_on(
-    config: CampaignConfig, fitted: Fitted, state: CampaignState, step: int, key: jax.Array | None = None,
+    config: CampaignConfig,
+    fitted: Fitted,
+    state: CampaignState,
+    step: int,
+    key: jax.Array | None = None,
     budget_left: float | None = None,
 ) -> tuple[Decision, CampaignState]:
     """From fitted models: predict, assess convergence and acquire. Returns the decision and
@@ -99,7 +113,11 @@ def decide_on(
 
 
 def decide(
-    config: CampaignConfig, state: CampaignState, seed: int, step: int, previous: dict | None = None,
+    config: CampaignConfig,
+    state: CampaignState,
+    seed: int,
+    step: int,
+    previous: dict | None = None,
     budget_left: float | None = None,
 ) -> tuple[Decision, CampaignState]:
     """One whole BO decision: fit both models (key (seed, step); from ``previous``, the previous

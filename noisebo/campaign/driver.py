@@ -54,8 +54,9 @@ def take_shot(instrument, seed: int, request: Request) -> Outcome:
         return ShotError(kind, str(error))
 
 
-def take_point(instrument, state: EngineState, committed: Commit, measure: Measure = take_shot,
-               reduce: bool = True) -> EngineState:
+def take_point(
+    instrument, state: EngineState, committed: Commit, measure: Measure = take_shot, reduce: bool = True
+) -> EngineState:
     """The shots of the point under way, each committed as it is taken (a failed attempt too, and
     tried again), until the engine wants something else: a decision, the next point, or nothing
     more. Returns the state after the last commit. With ``reduce`` False the point's reduction
@@ -68,7 +69,9 @@ def take_point(instrument, state: EngineState, committed: Commit, measure: Measu
             outcome = measure(instrument, state.seed, step)
         except MeasurementStopped as stopped:
             return committed(state, engine.stop(state, Status.ABORTED, str(stopped)))
-        state = committed(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False, reduce=reduce).events)
+        state = committed(
+            state, engine.tell(state, step, {step.taken: outcome}, decide_next=False, reduce=reduce).events
+        )
         point, step = step.point, engine.ask(state)
         if isinstance(step, Request) and step.point != point:
             break
@@ -89,10 +92,6 @@ def in_memory(state: EngineState, events: Sequence[Event]) -> EngineState:
     after = engine.apply_all(state, events)
     assert after is not None  # events applied to a campaign leave a campaign
     return after
-
-
-
-
 
 
 def drive(
@@ -174,7 +173,10 @@ def now_utc() -> str:
 
 
 def run_campaign(
-    config: CampaignConfig, instrument, seed: int, driver: DriverInfo | None = None,
+    config: CampaignConfig,
+    instrument,
+    seed: int,
+    driver: DriverInfo | None = None,
     on_commit: Callable[[EngineState, Sequence[Event]], None] | None = None,
 ) -> CampaignRun:
     """A whole campaign in this process, in memory (benchmarks, tests). ``on_commit`` sees the

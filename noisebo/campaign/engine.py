@@ -113,8 +113,14 @@ class Transition(NamedTuple):
 
 
 def start(started: Started) -> EngineState:
-    return EngineState(started.config, started.seed, started.driver, dict(started.versions), started.created_utc,
-                       budget_s=started.config.schedule.budget_s)
+    return EngineState(
+        started.config,
+        started.seed,
+        started.driver,
+        dict(started.versions),
+        started.created_utc,
+        budget_s=started.config.schedule.budget_s,
+    )
 
 
 def _spend(state: EngineState, t: float) -> EngineState:
@@ -149,9 +155,16 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
         if event.index != index or len(event.values) != len(state.taken):
             raise EngineError(f"point {event.index} out of order")
         rejected = sum(1 for v in event.values if not v.ok)
-        return replace(state, data=state.data.with_point(event.point), points=state.points + (PointEntry(event, state.taken),),
-                       taken=(), wanted=None, pending_rejected=0, n_rejected=state.n_rejected + rejected,
-                       point_begun=False)
+        return replace(
+            state,
+            data=state.data.with_point(event.point),
+            points=state.points + (PointEntry(event, state.taken),),
+            taken=(),
+            wanted=None,
+            pending_rejected=0,
+            n_rejected=state.n_rejected + rejected,
+            point_begun=False,
+        )
     if isinstance(event, Decided):
         d = event.decision
         if d.step != len(state.decisions) or _pending_decision(state) is not None:
@@ -201,7 +214,8 @@ def ask(state: EngineState) -> Request | DecisionDue | Done:
         if request.taken >= request.wanted:
             return DecisionDue(len(state.decisions), reduce=True)
         cost = (0.0 if state.point_begun else state.config.schedule.point_overhead_s) + request.t * (
-            request.wanted - request.taken)
+            request.wanted - request.taken
+        )
         short = _unaffordable(state, cost, f"point {request.point} needs {cost:.4g} s more")
         return DecisionDue(len(state.decisions), final=True, budget=short) if short else request
     sched = state.config.schedule
@@ -210,7 +224,9 @@ def ask(state: EngineState) -> Request | DecisionDue | Done:
 
         cheapest = cheapest_point_s(state.config)
         short = _unaffordable(state, cheapest, f"the cheapest point costs {cheapest:.4g} s")
-        return DecisionDue(len(state.decisions), final=True, budget=short) if short else DecisionDue(len(state.decisions))
+        return (
+            DecisionDue(len(state.decisions), final=True, budget=short) if short else DecisionDue(len(state.decisions))
+        )
     return DecisionDue(sched.n_steps, final=True)
 
 
@@ -242,12 +258,14 @@ def _point_under_way(state: EngineState) -> Request | None:
     if decision is None:
         return None
     noise = None if decision.measure_noise else decision.noise_at_t
-    return Request(index, decision.step, decision.x, decision.t, state.wanted or decision.shots, len(state.taken),
-                   noise)
+    return Request(
+        index, decision.step, decision.x, decision.t, state.wanted or decision.shots, len(state.taken), noise
+    )
 
 
-def tell(state: EngineState, request: Request, outcomes: Mapping[int, Outcome], decide_next: bool = True,
-         reduce: bool = True) -> Transition:
+def tell(
+    state: EngineState, request: Request, outcomes: Mapping[int, Outcome], decide_next: bool = True, reduce: bool = True
+) -> Transition:
     """Record readings (or failed attempts) for ``request``, shot by shot in shot order; a point
     whose wanted shots are all in is reduced and committed (or asks for more shots when too few
     are usable); the failure budget is checked after each. With ``decide_next``, a decision that
@@ -258,8 +276,10 @@ def tell(state: EngineState, request: Request, outcomes: Mapping[int, Outcome], 
     for shot in sorted(outcomes):
         current = ask(state)
         if not isinstance(current, Request) or current.point != request.point:
-            raise EngineError(f"point {request.point} is not being measured now"
-                              + (f" (point {current.point} is)" if isinstance(current, Request) else ""))
+            raise EngineError(
+                f"point {request.point} is not being measured now"
+                + (f" (point {current.point} is)" if isinstance(current, Request) else "")
+            )
         if shot != current.taken:
             raise EngineError(f"shot {shot} of point {request.point} is not wanted now; shot {current.taken} is next")
         for event in _record(state, current, shot, outcomes[shot], reduce):
@@ -290,8 +310,7 @@ def _reduce(state: EngineState, request: Request, make=make_point) -> list[Event
     cfg = state.config
     readings = [s.reading for s in state.taken]
     try:
-        point, values = make(request.x, request.t, readings, request.model_noise, cfg.reduction,
-                                   cfg.schedule.clip_sd)
+        point, values = make(request.x, request.t, readings, request.model_noise, cfg.reduction, cfg.schedule.clip_sd)
     except NoUsableShots as short:
         more = MoreShots(request.point, len(readings) + short.missing, short.rejected, str(short))
         return [more, *_budget(apply(state, more))]

@@ -21,8 +21,10 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
             p = event.point
             label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
             budget = "" if state.budget_s is None else f" ({state.spent_s:.4g} of {state.budget_s:.4g} s spent)"
-            lines.append(f"{label}: x={format_position(p.x)} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} "
-                         f"noise={p.noise:.3g}{budget}")
+            lines.append(
+                f"{label}: x={format_position(p.x)} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} "
+                f"noise={p.noise:.3g}{budget}"
+            )
         elif isinstance(event, MoreShots):
             lines.append(f"point {event.point}: {event.reason}; taking more shots ({event.wanted} in all)")
         elif isinstance(event, Decided):
@@ -38,9 +40,11 @@ def decision_lines(state: EngineState, decision) -> list[str]:
     lines = []
     dropped = state.config.noise_model.profile is not None and not decision.profile_in_use
     if dropped and state.data.profile_dropped_step is None:
-        lines.append(f"noise profile contradicted at step {decision.step + 1} (posterior predictive p = "
-                     f"{decision.profile_p:.2g} < {state.config.noise_model.profile_alpha:g} on the replicate "
-                     "scatter): its prior is dropped and the noise law is learned afresh")
+        lines.append(
+            f"noise profile contradicted at step {decision.step + 1} (posterior predictive p = "
+            f"{decision.profile_p:.2g} < {state.config.noise_model.profile_alpha:g} on the replicate "
+            "scatter): its prior is dropped and the noise law is learned afresh"
+        )
     if decision.converged and not state.data.is_converged:
         lines.append(f"noise model converged at step {decision.step + 1}: t_opt = {decision.t_opt:.4g} s")
     return lines

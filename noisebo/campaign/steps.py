@@ -69,7 +69,11 @@ def paired_positions(x: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def make_point(
-    x, t: float, readings: Sequence, model_noise: float | None, reduction: ReductionConfig,
+    x,
+    t: float,
+    readings: Sequence,
+    model_noise: float | None,
+    reduction: ReductionConfig,
     clip_sd: float | None = None,
 ) -> tuple[Point, list[ShotValue]]:
     """A point from its readings (spectra are fitted here) and each shot's value. The point uses
@@ -105,13 +109,12 @@ def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summar
         noise_fine=np.asarray(pred.noise_fine, dtype=np.float64),
         t_opt=float(pred.posterior.t_opt),
         hyperparameters=hyperparameters(fitted),
-        **({} if pred.posterior.t_opt_map is None else {
-            "t_opt_map": np.asarray(pred.posterior.t_opt_map, dtype=np.float64),
-            "noise_map": np.asarray(pred.posterior.noise_at_t_opt, dtype=np.float64)}),
+        **(
+            {}
+            if pred.posterior.t_opt_map is None
+            else {
+                "t_opt_map": np.asarray(pred.posterior.t_opt_map, dtype=np.float64),
+                "noise_map": np.asarray(pred.posterior.noise_at_t_opt, dtype=np.float64),
+            }
+        ),
     )
-
-
-
-
-
-

@@ -51,8 +51,6 @@ def first_converged_step(t_opt_history: Sequence[float], window: int, threshold:
     return None
 
 
-
-
 class Convergence(NamedTuple):
     """Where the noise model stands after a step's prediction: the predicted optimal ``t_opt``
     (s), t*(x) on the reference points for a noise field (``t_opt_map`` (m,), else (0,)),

@@ -53,8 +53,12 @@ def training_inputs(config: CampaignConfig, state: CampaignState, scaled_positio
     """The points that train the noise model (``CampaignState.noise_training_mask``): scaled
     positions (k, d), t (k,) s, sample sd (k,) and shots (k,)."""
     train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
-    return (scaled_positions[train], state.column("t")[train], state.column("shot_std")[train],
-            state.column("n_shots")[train])
+    return (
+        scaled_positions[train],
+        state.column("t")[train],
+        state.column("shot_std")[train],
+        state.column("n_shots")[train],
+    )
 
 
 def groups_needed(config: CampaignConfig, state: CampaignState, scaled_positions: np.ndarray) -> int:
@@ -96,8 +100,13 @@ def previous_law(previous: dict | None, data: noise_field.FieldData, scale: floa
 
 
 def fit_field(
-    config: CampaignConfig, state: CampaignState, scaled_positions: np.ndarray, key: jax.Array,
-    previous: dict | None, warm: bool, capacity: int | None,
+    config: CampaignConfig,
+    state: CampaignState,
+    scaled_positions: np.ndarray,
+    key: jax.Array,
+    previous: dict | None,
+    warm: bool,
+    capacity: int | None,
 ) -> tuple[inference.Samples, noise_field.FieldData, float, int, bool]:
     """Fit the noise field on the campaign's noise-training points.
 
@@ -114,20 +123,39 @@ def fit_field(
     distinct = min(int(np.unique(t).size), inf.max_inputs)
     field = nm.field
     assert field is not None  # fit_field runs for a noise field only
-    data, scale, groups = noise_field.prepare(x, t, std, shots, nm, field, s.t_min, s.t_max, inf.max_inputs,
-                                              capacity, t_capacity(distinct))
+    data, scale, groups = noise_field.prepare(
+        x, t, std, shots, nm, field, s.t_min, s.t_max, inf.max_inputs, capacity, t_capacity(distinct)
+    )
     hyper = previous_field(previous, data)
     if hyper is not None:
         data = noise_field.set_field(data, hyper)
     law = previous_law(previous, data, scale)
-    samples, data = noise_field.fit(data, nm, field, key, FIELD_RESTARTS, inf.laplace_samples,
-                                    guesses=[law] if law else (), draws=not warm, scan=not (warm and hyper is not None))
+    samples, data = noise_field.fit(
+        data,
+        nm,
+        field,
+        key,
+        FIELD_RESTARTS,
+        inf.laplace_samples,
+        guesses=[law] if law else (),
+        draws=not warm,
+        scan=not (warm and hyper is not None),
+    )
     return samples, data, scale, groups.count.size, groups.binned
 
 
 def rows(
-    kind: str, samples: inference.Samples, data: noise_field.FieldData, scale, xs: jnp.ndarray,
-    t: jnp.ndarray, ts: jnp.ndarray, t_fine: jnp.ndarray, ts_fine: jnp.ndarray, alpha: float, beta: float,
+    kind: str,
+    samples: inference.Samples,
+    data: noise_field.FieldData,
+    scale,
+    xs: jnp.ndarray,
+    t: jnp.ndarray,
+    ts: jnp.ndarray,
+    t_fine: jnp.ndarray,
+    ts_fine: jnp.ndarray,
+    alpha: float,
+    beta: float,
 ) -> FieldRows:
     """The field at scaled positions xs (m, d) over the t grid t (n_t,) s / ts scaled, and its
     t*(x) on the fine grid t_fine / ts_fine (k,): value units. The mean is the MAP point's, the
@@ -143,8 +171,15 @@ def rows(
 
 
 def best_training_reward(
-    kind: str, samples: inference.Samples, data: noise_field.FieldData, scale, t: jnp.ndarray,
-    t_min: float, t_max: float, alpha: float, beta: float,
+    kind: str,
+    samples: inference.Samples,
+    data: noise_field.FieldData,
+    scale,
+    t: jnp.ndarray,
+    t_min: float,
+    t_max: float,
+    alpha: float,
+    beta: float,
 ) -> jnp.ndarray:
     """The incumbent of the time acquisition: the largest normalised reward of a training group,
     each normalised over the t grid t (n_t,) at its own position (as the policies normalise the

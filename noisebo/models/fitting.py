@@ -57,8 +57,9 @@ def _models_for(primary_config: PrimaryModelConfig, noise_config: NoiseModelConf
     return primary.make_model(primary_config, dimensions), noise_model.make_model(noise_config)
 
 
-def _fit_one(config: CampaignConfig, model, data, key, guesses: list, laplace: int, quadrature: int,
-             warm: bool) -> inference.Samples:
+def _fit_one(
+    config: CampaignConfig, model, data, key, guesses: list, laplace: int, quadrature: int, warm: bool
+) -> inference.Samples:
     inf = config.inference
     if inf.mode == "nuts":
         return inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.predict_samples)
@@ -137,8 +138,18 @@ class PrimaryFit(NamedTuple):
 
 def combined(gp: PrimaryFit, noise: NoiseFit) -> Fitted:
     """The two fits as the prediction takes them."""
-    return Fitted(gp.samples, gp.data, gp.standardisation, noise.samples, noise.data, noise.scale, gp.inputs,
-                  noise.inputs, gp.binned or noise.binned, noise.profile)
+    return Fitted(
+        gp.samples,
+        gp.data,
+        gp.standardisation,
+        noise.samples,
+        noise.data,
+        noise.scale,
+        gp.inputs,
+        noise.inputs,
+        gp.binned or noise.binned,
+        noise.profile,
+    )
 
 
 def _columns(config: CampaignConfig, state: CampaignState):
@@ -149,7 +160,11 @@ def _columns(config: CampaignConfig, state: CampaignState):
 
 
 def fit_noise_model(
-    config: CampaignConfig, state: CampaignState, key: jax.Array, previous: dict | None = None, warm: bool = False,
+    config: CampaignConfig,
+    state: CampaignState,
+    key: jax.Array,
+    previous: dict | None = None,
+    warm: bool = False,
     capacity: int | None = None,
 ) -> NoiseFit:
     """Fit the noise model (or the noise field, when ``noise_model.field`` is set) on its
@@ -163,15 +178,17 @@ def fit_noise_model(
     k_noise = key
     warm = warm and bool(_previous_guesses(previous, "primary", 1.0))
     if config.noise_model.field is not None:
-        samples, field_data, scale, inputs, binned = field_fit.fit_field(config, state, scaled(s, x), k_noise, previous,
-                                                                         warm, capacity)
+        samples, field_data, scale, inputs, binned = field_fit.fit_field(
+            config, state, scaled(s, x), k_noise, previous, warm, capacity
+        )
         return NoiseFit(samples, field_data, scale, inputs, binned, warm)
     cfg = config.noise_model
     train = state.noise_training_mask(cfg.learn_after_convergence, config.schedule.shots_after)
     t_train, std_train, n_train = t[train], state.column("shot_std")[train], n_shots[train]
     check = profile_check.verdict(cfg, state.profile_dropped_step is not None, t_train, std_train, n_train)
-    data, scale, groups = noise_model.prepare(t_train, std_train, n_train, cfg, s.t_min, s.t_max, inf.max_inputs,
-                                              capacity, check.in_use)
+    data, scale, groups = noise_model.prepare(
+        t_train, std_train, n_train, cfg, s.t_min, s.t_max, inf.max_inputs, capacity, check.in_use
+    )
     n_warm = _previous_guesses(previous, "noise", scale, np.asarray(data.bounds))
     warm = warm and bool(n_warm)
     guesses = n_warm if warm else [noise_model.initial_guess(data, cfg)] + noise_model.profile_guess(data, cfg) + n_warm
@@ -180,7 +197,11 @@ def fit_noise_model(
 
 
 def fit_gp(
-    config: CampaignConfig, state: CampaignState, noise: NoiseFit, key: jax.Array, previous: dict | None = None,
+    config: CampaignConfig,
+    state: CampaignState,
+    noise: NoiseFit,
+    key: jax.Array,
+    previous: dict | None = None,
     capacity: int | None = None,
 ) -> PrimaryFit:
     """Fit the primary GP of f on every point, each with its measurement variance noise^2 /
@@ -198,7 +219,11 @@ def fit_gp(
 
 
 def fit_models(
-    config: CampaignConfig, state: CampaignState, key: jax.Array, previous: dict | None = None, warm: bool = False,
+    config: CampaignConfig,
+    state: CampaignState,
+    key: jax.Array,
+    previous: dict | None = None,
+    warm: bool = False,
     capacities: tuple[int, int] | None = None,
 ) -> Fitted:
     """Both fit stages in turn (``fit_noise_model``, then ``fit_gp``) on one key, as the

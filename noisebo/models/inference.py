@@ -141,8 +141,13 @@ def negative_log_posterior(model: Callable) -> Callable:
 
 
 @lru_cache(maxsize=None)
-def _map_program(model: Callable, restarts: int, laplace_samples: int, quadrature_nodes: int = 0,
-                 laplace_basis: Callable | None = None) -> _MapProgram:
+def _map_program(
+    model: Callable,
+    restarts: int,
+    laplace_samples: int,
+    quadrature_nodes: int = 0,
+    laplace_basis: Callable | None = None,
+) -> _MapProgram:
     """Jitted pieces of a MAP fit; compiled once per model and padded data shape.
     ``laplace_basis``: see ``fit_map``."""
     unravel_for, objective = _unravel(model), negative_log_posterior(model)
@@ -158,8 +163,9 @@ def _map_program(model: Callable, restarts: int, laplace_samples: int, quadratur
         flats = best[None, :]
         if laplace_samples and laplace_basis is not None:
             template = unconstrain_fn(model, (data,), {}, _latent_prior_draw(model, jax.random.PRNGKey(0), data))
-            draws = _subspace_draws(objective, best, data, key, laplace_samples,
-                                    _block_basis(template, laplace_basis(data)))
+            draws = _subspace_draws(
+                objective, best, data, key, laplace_samples, _block_basis(template, laplace_basis(data))
+            )
             flats = jnp.concatenate([flats, best + draws], axis=0)
         elif laplace_samples:
             evals, evecs = _eigen_curvature(objective, best, data)
@@ -203,7 +209,7 @@ def _block_basis(template: dict, bases: dict) -> jnp.ndarray:
     rows = sum(b.shape[0] for b in blocks)
     out, r, c = jnp.zeros((rows, sum(b.shape[1] for b in blocks))), 0, 0
     for b in blocks:
-        out = out.at[r:r + b.shape[0], c:c + b.shape[1]].set(b)
+        out = out.at[r : r + b.shape[0], c : c + b.shape[1]].set(b)
         r, c = r + b.shape[0], c + b.shape[1]
     return out
 
@@ -214,8 +220,14 @@ def _minimise(value_and_grad, x0: np.ndarray, data) -> tuple[np.ndarray, float]:
         return float(value), np.asarray(grad, dtype=np.float64)
 
     bounds = [(-UNCONSTRAINED_BOUND, UNCONSTRAINED_BOUND)] * x0.shape[0]
-    result = optimize.minimize(fun, np.clip(x0, -UNCONSTRAINED_BOUND, UNCONSTRAINED_BOUND), jac=True,
-                               method="L-BFGS-B", bounds=bounds, options={"maxiter": 300})
+    result = optimize.minimize(
+        fun,
+        np.clip(x0, -UNCONSTRAINED_BOUND, UNCONSTRAINED_BOUND),
+        jac=True,
+        method="L-BFGS-B",
+        bounds=bounds,
+        options={"maxiter": 300},
+    )
     return result.x, float(result.fun)
 
 
@@ -228,8 +240,15 @@ def nuts_runner(model: Callable, warmup: int, samples: int, thread: int) -> MCMC
 
 
 def fit_map(
-    model, data, key, restarts: int, laplace_samples: int = 0, guess: dict | Sequence[dict] | None = None,
-    quadrature_nodes: int = 0, draws: bool = True, laplace_basis: Callable | None = None,
+    model,
+    data,
+    key,
+    restarts: int,
+    laplace_samples: int = 0,
+    guess: dict | Sequence[dict] | None = None,
+    quadrature_nodes: int = 0,
+    draws: bool = True,
+    laplace_basis: Callable | None = None,
 ) -> Samples:
     """MAP of ``model(data)``: L-BFGS-B from each ``guess`` (a dict of constrained values of every
     latent site, or a sequence of them, tried first) and, with ``draws``, from ``restarts``

@@ -215,8 +215,13 @@ def spectral_sd(freq: jnp.ndarray, amplitude, lengths: jnp.ndarray) -> jnp.ndarr
     kernel of standard deviation ``amplitude`` and lengths (d,): S(w) = amplitude^2 c_d prod(l)
     (2 nu + sum (l w)^2)^-(nu + d/2), c_d = 2^d pi^(d/2) Gamma(nu + d/2) (2 nu)^nu / Gamma(nu)."""
     d = freq.shape[1]
-    log_c = (d * math.log(2.0) + 0.5 * d * math.log(math.pi) + math.lgamma(NU + 0.5 * d) + NU * math.log(2 * NU)
-             - math.lgamma(NU))
+    log_c = (
+        d * math.log(2.0)
+        + 0.5 * d * math.log(math.pi)
+        + math.lgamma(NU + 0.5 * d)
+        + NU * math.log(2 * NU)
+        - math.lgamma(NU)
+    )
     q = jnp.sum((freq * lengths) ** 2, axis=-1)
     log_s = 2.0 * jnp.log(amplitude) + log_c + jnp.sum(jnp.log(lengths)) - (NU + 0.5 * d) * jnp.log(2 * NU + q)
     return jnp.exp(0.5 * log_s)
@@ -368,8 +373,17 @@ def make_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
 
 
 def prepare(
-    x, t, shot_std, n_shots, cfg: NoiseModelConfig, field: NoiseFieldConfig, t_min: float, t_max: float,
-    max_inputs: int, capacity: int | None = None, t_capacity: int | None = None,
+    x,
+    t,
+    shot_std,
+    n_shots,
+    cfg: NoiseModelConfig,
+    field: NoiseFieldConfig,
+    t_min: float,
+    t_max: float,
+    max_inputs: int,
+    capacity: int | None = None,
+    t_capacity: int | None = None,
 ) -> tuple[FieldData, float, Grouped]:
     """Merge measured noise (numpy: x (n, d) scaled to [0, 1] (or (n,) for one axis), t (n,)
     seconds, shot_std (n,) the sample sd of each point's shots, n_shots (n,) >= 2) into one group
@@ -442,8 +456,9 @@ def prepare(
         field_amplitude=jnp.asarray(np.full(n_fields, math.exp(field.amplitude_loc))),
         field_lengths=jnp.asarray(np.full((n_fields, dims), math.exp(field.length_loc))),
     )
-    groups = Grouped(np.column_stack([gx, (gt - t_min) / span]), merged.mean, merged.var, merged.count,
-                     merged.scatter, t_binned)
+    groups = Grouped(
+        np.column_stack([gx, (gt - t_min) / span]), merged.mean, merged.var, merged.count, merged.scatter, t_binned
+    )
     return data, scale, groups
 
 
@@ -465,8 +480,9 @@ class _Groups(NamedTuple):
 
 def _real(data: FieldData) -> _Groups:
     mask = np.asarray(data.mask)
-    return _Groups(*(np.asarray(a)[mask] for a in (data.t, data.y, data.rel_var, data.count, data.scatter,
-                                                   data.x, data.phi)))
+    return _Groups(
+        *(np.asarray(a)[mask] for a in (data.t, data.y, data.rel_var, data.count, data.scatter, data.x, data.phi))
+    )
 
 
 def _spread_subset(x: np.ndarray, keep: int) -> np.ndarray:
@@ -601,33 +617,50 @@ def estimate_field(
     values = (point["a0"] * _exp(fields[0]), point["a1"] * _exp(fields[1]))
     prior = jnp.asarray([field.amplitude_loc, field.amplitude_scale, field.length_loc, field.length_scale])
     lo = [field.amplitude_loc - 4 * field.amplitude_scale] + list(
-        np.maximum(field.length_loc - 4 * field.length_scale, np.log(shortest_length(data))))
+        np.maximum(field.length_loc - 4 * field.length_scale, np.log(shortest_length(data)))
+    )
     hi = [field.amplitude_loc + 4 * field.amplitude_scale] + [field.length_loc + 4 * field.length_scale] * dims
     for f in range(n_fields):
         g_now = jnp.where(jnp.asarray(pmask), log_fields(point, data, phi)[f], 0.0)
         other = values[1] * data.t ** (-p) if f == 0 else values[0]
-        ev = _Evidence(phi, jnp.asarray(pmask), g_now, jnp.asarray(pos), jnp.asarray(gmask),
-                       jnp.asarray(np.full(mask.shape[0], float(point["a0" if f == 0 else "a1"]))), other)
+        ev = _Evidence(
+            phi,
+            jnp.asarray(pmask),
+            g_now,
+            jnp.asarray(pos),
+            jnp.asarray(gmask),
+            jnp.asarray(np.full(mask.shape[0], float(point["a0" if f == 0 else "a1"]))),
+            other,
+        )
 
         def fun(theta, f=f, ev=ev):
             # Always from the point's field, so the objective is a fixed function of theta.
-            (value, _), grad = _evidence_value_and_grad(jnp.asarray(theta), cfg.mean, f, SCORING_STEPS, ev, data, p,
-                                                        prior)
+            (value, _), grad = _evidence_value_and_grad(
+                jnp.asarray(theta), cfg.mean, f, SCORING_STEPS, ev, data, p, prior
+            )
             value = float(value)
             if not np.isfinite(value) or not np.all(np.isfinite(np.asarray(grad))):
                 return 1e10, np.zeros_like(theta)
             return value, np.asarray(grad)
 
-        now = np.clip(np.log(np.concatenate([np.asarray(data.field_amplitude[f:f + 1]),
-                                             np.asarray(data.field_lengths[f])])), lo, hi)
+        now = np.clip(
+            np.log(np.concatenate([np.asarray(data.field_amplitude[f : f + 1]), np.asarray(data.field_lengths[f])])),
+            lo,
+            hi,
+        )
         starts: list[np.ndarray] = [now]
         if from_medians:
             # The evidence can have a mode per shape (round, or long along one axis: a wall), so
             # the best of a few shapes at the current amplitude is a second start.
             shapes = [np.full(dims, field.length_loc + c * field.length_scale) for c in (-1.0, 0.0, 1.0)]
             for k in range(dims if dims > 1 else 0):
-                shapes.append(np.where(np.arange(dims) == k, field.length_loc + field.length_scale,
-                                       field.length_loc - field.length_scale))
+                shapes.append(
+                    np.where(
+                        np.arange(dims) == k,
+                        field.length_loc + field.length_scale,
+                        field.length_loc - field.length_scale,
+                    )
+                )
             candidates = [np.clip(np.concatenate([now[:1], shape]), lo, hi) for shape in shapes]
             losses = [fun(c)[0] for c in candidates]
             scan = candidates[int(np.argmin(losses))]
@@ -635,8 +668,9 @@ def estimate_field(
                 starts.append(scan)
         best = None
         for x0 in starts:
-            res = optimize.minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)),
-                                    options={"ftol": 1e-6})
+            res = optimize.minimize(
+                fun, x0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)), options={"ftol": 1e-6}
+            )
             if best is None or res.fun < best.fun:
                 best = res
         assert best is not None  # starts holds the current point at least
@@ -720,8 +754,11 @@ def initial_guess(data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfi
     factors = np.geomspace(0.25, 4.0, 41)
     a0s = np.clip(np.exp(levels[0]) * factors, bounds[0, 0] + eps, bounds[0, 1] - eps)
     a1s = np.clip((np.exp(levels[1]) if n_fields > 1 else base["a1"]) * factors, bounds[1, 0] + eps, bounds[1, 1] - eps)
-    m = np.asarray(mean_law(cfg.mean, gr.t[None, None, :], a0s[:, None, None] * np.exp(fields[0]),
-                            a1s[None, :, None] * np.exp(g1), p))
+    m = np.asarray(
+        mean_law(
+            cfg.mean, gr.t[None, None, :], a0s[:, None, None] * np.exp(fields[0]), a1s[None, :, None] * np.exp(g1), p
+        )
+    )
     m = np.maximum(m, 1e-12)
     nll = np.sum((y - m) ** 2 / (m**2 * gr.rel) + 2.0 * np.log(m), axis=-1)
     i, j = np.unravel_index(int(np.argmin(nll)), nll.shape)
@@ -750,8 +787,15 @@ def _cached_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: in
 
 
 def fit(
-    data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfig, key: jax.Array, restarts: int,
-    laplace_samples: int = 0, guesses: Sequence[dict] = (), draws: bool = True, estimate: bool = True,
+    data: FieldData,
+    cfg: NoiseModelConfig,
+    field: NoiseFieldConfig,
+    key: jax.Array,
+    restarts: int,
+    laplace_samples: int = 0,
+    guesses: Sequence[dict] = (),
+    draws: bool = True,
+    estimate: bool = True,
     scan: bool | None = None,
 ) -> tuple[inference.Samples, FieldData]:
     """The whole fit: the fields' hyperparameters, then the MAP of everything else.
@@ -779,11 +823,16 @@ def fit(
         return guess if all(f"{p}_z" in guess for p in field_names(field)) else initial_guess(data, cfg, field, guess)
 
     if estimate:
-        data = set_field(data, estimate_field(data, cfg, field, initial_guess(data, cfg, field),
-                                              from_medians=not guesses if scan is None else scan))
+        data = set_field(
+            data,
+            estimate_field(
+                data, cfg, field, initial_guess(data, cfg, field), from_medians=not guesses if scan is None else scan
+            ),
+        )
     starts = [*(completed(g) for g in guesses), initial_guess(data, cfg, field)]
-    samples = inference.fit_map(model, data, key, restarts, laplace_samples, starts, draws=draws,
-                                laplace_basis=laplace_basis)
+    samples = inference.fit_map(
+        model, data, key, restarts, laplace_samples, starts, draws=draws, laplace_basis=laplace_basis
+    )
     return samples, data
 
 

@@ -99,7 +99,6 @@ def make_model(cfg: NoiseModelConfig):
     return noise_model
 
 
-
 class Replicates(Protocol):
     """What the law's likelihood and its starting points read: ``NoiseData``, or a noise field's
     ``noise_field.FieldData``, which carries the same groups and bounds."""
@@ -141,8 +140,15 @@ def prior_rows(cfg: NoiseModelConfig, scale: float) -> np.ndarray:
 
 
 def prepare(
-    t, shot_std, n_shots, cfg: NoiseModelConfig, t_min: float, t_max: float, max_inputs: int,
-    capacity: int | None = None, profile_in_use: bool = True,
+    t,
+    shot_std,
+    n_shots,
+    cfg: NoiseModelConfig,
+    t_min: float,
+    t_max: float,
+    max_inputs: int,
+    capacity: int | None = None,
+    profile_in_use: bool = True,
 ) -> tuple[NoiseData, float, Grouped]:
     """Merge measured noise (numpy (n,): t in s, sample std, shots per point) by t and pad it
     for the model (to ``capacity``, default the groups' ``capacity_for``); with a profile, its
@@ -175,8 +181,9 @@ def prepare(
         bounds=jnp.asarray(bounds),
     )
     if cfg.profile is not None:
-        data = data._replace(prior=jnp.asarray(prior_rows(cfg, scale)),
-                             prior_weight=jnp.asarray(1.0 if profile_in_use else 0.0))
+        data = data._replace(
+            prior=jnp.asarray(prior_rows(cfg, scale)), prior_weight=jnp.asarray(1.0 if profile_in_use else 0.0)
+        )
     return data, scale, groups
 
 
@@ -222,9 +229,14 @@ def profile_guess(data: NoiseData, cfg: NoiseModelConfig) -> list[dict[str, floa
     law = registry.noise_law(cfg.mean)
     bounds, prior = np.asarray(data.bounds), np.asarray(data.prior)
     eps = 1e-6
-    guess = {name: float(np.clip(prior[row, 0], bounds[row, 0] + eps, bounds[row, 1] - eps))
-             for row, name in enumerate(("a0", "a1", "p")) if name != "p" or law.infers_exponent}
-    return [guess | {"amplitude": float(np.exp(cfg.residual_amplitude_loc)), "length": float(np.exp(RESIDUAL_LENGTH_LOC))}]
+    guess = {
+        name: float(np.clip(prior[row, 0], bounds[row, 0] + eps, bounds[row, 1] - eps))
+        for row, name in enumerate(("a0", "a1", "p"))
+        if name != "p" or law.infers_exponent
+    }
+    return [
+        guess | {"amplitude": float(np.exp(cfg.residual_amplitude_loc)), "length": float(np.exp(RESIDUAL_LENGTH_LOC))}
+    ]
 
 
 def predict_one(

@@ -107,17 +107,24 @@ def _t_draws(kind: str, fitted: Fitted, s: SpaceConfig, rew: RewardConfig) -> tu
     g = space_grids(s)
     t_all = jnp.asarray(np.concatenate([g.t, g.t_fine]))
     assert isinstance(fitted.noise_data, noise_model.NoiseData)  # a noise field's draws: field_fit
-    means, _ = noise_model.predict_samples(kind, fitted.noise.params, fitted.noise_data, t_all,
-                                           (t_all - s.t_min) / (s.t_max - s.t_min), 0)
+    means, _ = noise_model.predict_samples(
+        kind, fitted.noise.params, fitted.noise_data, t_all, (t_all - s.t_min) / (s.t_max - s.t_min), 0
+    )
     means = means * fitted.noise_scale
-    n_t, t_fine = g.t.shape[0], t_all[g.t.shape[0]:]
+    n_t, t_fine = g.t.shape[0], t_all[g.t.shape[0] :]
     best = jnp.argmax(reward(t_fine[None, :], means[:, n_t:], rew.alpha, rew.beta), axis=1)
     return t_fine[best], means[:, :n_t]
 
 
 def _predict_program(config: CampaignConfig, uses_spread: bool):
-    return _predict_compiled(config.space, config.reward, config.noise_model.mean, config.noise_model.field is not None,
-                             uses_spread, config.schedule.convergence == "posterior")
+    return _predict_compiled(
+        config.space,
+        config.reward,
+        config.noise_model.mean,
+        config.noise_model.field is not None,
+        uses_spread,
+        config.schedule.convergence == "posterior",
+    )
 
 
 def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray) -> field_fit.FieldRows:
@@ -126,12 +133,24 @@ def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs:
     t, t_fine = jnp.asarray(g.t), jnp.asarray(g.t_fine)
     span = s.t_max - s.t_min
     assert isinstance(fitted.noise_data, noise_field.FieldData)
-    return field_fit.rows(kind, fitted.noise, fitted.noise_data, fitted.noise_scale, xs, t, (t - s.t_min) / span,
-                               t_fine, (t_fine - s.t_min) / span, rew.alpha, rew.beta)
+    return field_fit.rows(
+        kind,
+        fitted.noise,
+        fitted.noise_data,
+        fitted.noise_scale,
+        xs,
+        t,
+        (t - s.t_min) / span,
+        t_fine,
+        (t_fine - s.t_min) / span,
+        rew.alpha,
+        rew.beta,
+    )
 
 
-def _field_prediction(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray, f_mean,
-                      f_var, f_best) -> Prediction:
+def _field_prediction(
+    kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray, f_mean, f_var, f_best
+) -> Prediction:
     """The policies' posterior with a noise field: a noise curve per reference point, t*(x), and
     for the whole sample the t that maximises the x-averaged reward (on the x-averaged curve,
     which the prediction's ``noise_fine`` holds)."""
@@ -140,11 +159,21 @@ def _field_prediction(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitt
     noise_fine = jnp.mean(rows.fine, axis=0)
     best_i = optimal_index(t_fine, noise_fine, rew.alpha, rew.beta)
     assert isinstance(fitted.noise_data, noise_field.FieldData)
-    best_reward = field_fit.best_training_reward(kind, fitted.noise, fitted.noise_data, fitted.noise_scale, t,
-                                                      s.t_min, s.t_max, rew.alpha, rew.beta)
-    post = Posterior(f_mean=f_mean, f_var=f_var, noise_mean=rows.mean, noise_var=rows.var, t=t,
-                     t_opt=t_fine[best_i], noise_at_t_opt=rows.at_t_opt, f_best=f_best, reward_best=best_reward,
-                     t_opt_map=rows.t_opt)
+    best_reward = field_fit.best_training_reward(
+        kind, fitted.noise, fitted.noise_data, fitted.noise_scale, t, s.t_min, s.t_max, rew.alpha, rew.beta
+    )
+    post = Posterior(
+        f_mean=f_mean,
+        f_var=f_var,
+        noise_mean=rows.mean,
+        noise_var=rows.var,
+        t=t,
+        t_opt=t_fine[best_i],
+        noise_at_t_opt=rows.at_t_opt,
+        f_best=f_best,
+        reward_best=best_reward,
+        t_opt_map=rows.t_opt,
+    )
     return Prediction(post, noise_fine, peak_t(t, reward(t[None, :], rows.draws, rew.alpha, rew.beta)))
 
 
@@ -163,8 +192,9 @@ def peak_t(t: jnp.ndarray, values: jnp.ndarray) -> jnp.ndarray:
 
 
 @lru_cache(maxsize=None)
-def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: bool = False, info: bool = False,
-                      draws: bool = False):
+def _predict_compiled(
+    s: SpaceConfig, rew: RewardConfig, kind: str, has_field: bool = False, info: bool = False, draws: bool = False
+):
     g = space_grids(s)
     xs = jnp.asarray(scaled(s, g.x))
     xi = jnp.asarray(integration_points(s))
@@ -183,12 +213,14 @@ def _predict_compiled(s: SpaceConfig, rew: RewardConfig, kind: str, has_field: b
     def _predict(fitted: Fitted, primary_first: bool, noise_first: bool, f_best) -> Prediction:
         std = fitted.standardisation
         f_mean, f_var = inference.combine(
-            *primary.predict_samples(fitted.primary.params, fitted.primary_data, xs), primary_first,
+            *primary.predict_samples(fitted.primary.params, fitted.primary_data, xs),
+            primary_first,
             fitted.primary.weights,
         )
         if has_field:
-            return _field_prediction(kind, s, rew, fitted, xs, std.mean + std.scale * f_mean, std.scale**2 * f_var,
-                                     f_best)
+            return _field_prediction(
+                kind, s, rew, fitted, xs, std.mean + std.scale * f_mean, std.scale**2 * f_var, f_best
+            )
         t_train = fitted.noise_data.t
         t_all = jnp.concatenate([jnp.asarray(g.t), jnp.asarray(g.t_fine), t_train])
         ts_all = (t_all - s.t_min) / (s.t_max - s.t_min)
@@ -220,6 +252,4 @@ def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState, uses_s
     ``uses_spread`` (a policy that integrates the variance of f) also the spread weights q(x)."""
     values = state.column("value")
     f_best = float(values.max() if config.acquisition.maximize else values.min())
-    return _predict_program(config, uses_spread)(
-        fitted, fitted.primary.map_first, fitted.noise.map_first, f_best
-    )
+    return _predict_program(config, uses_spread)(fitted, fitted.primary.map_first, fitted.noise.map_first, f_best)

@@ -58,8 +58,10 @@ def make_model(prior: PrimaryModelConfig, dimensions: int = 1):
 
     def primary_model(data: PrimaryData) -> None:
         amplitude = numpyro.sample("amplitude", dist.LogNormal(prior.amplitude_loc, prior.amplitude_scale))
-        lengths = {name: numpyro.sample(name, dist.LogNormal(prior.length_loc, prior.length_scale))
-                   for name in length_names(dimensions)}
+        lengths = {
+            name: numpyro.sample(name, dist.LogNormal(prior.length_loc, prior.length_scale))
+            for name in length_names(dimensions)
+        }
         cov = masked_covariance(kernel(data.x, data.x, {"amplitude": amplitude, **lengths}), data.var, data.mask)
         numpyro.sample("y", dist.MultivariateNormal(jnp.zeros_like(data.y), covariance_matrix=cov), obs=data.y)
 

@@ -31,8 +31,9 @@ class NotDistillable(ValueError):
     """Campaigns that no profile can be made of; the message says why."""
 
 
-def distil(config: CampaignConfig, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray,
-           key: jax.Array) -> dict[str, ParameterPosterior]:
+def distil(
+    config: CampaignConfig, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray, key: jax.Array
+) -> dict[str, ParameterPosterior]:
     """The posterior of the noise law of ``config.noise_model`` fitted to pooled noise
     measurements: t (n,) s, the sample sd of each point's shots (n,) in value units, and their
     number (n,). Returns "a0", "a1" (value units) and, for a law with an exponent, "p", each as

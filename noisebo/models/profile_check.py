@@ -90,8 +90,10 @@ def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof
 
     starts = [[_profile(cfg).parameters[n].mean for n in names]]
     scale = float(np.median(s)) if np.median(s) > 0 else 1.0
-    starts += [[scale * f0, scale * f1] + ([0.5] if law.infers_exponent else []) for f0, f1 in
-               ((0.5, 0.5), (0.05, 1.0), (1.0, 0.05))]
+    starts += [
+        [scale * f0, scale * f1] + ([0.5] if law.infers_exponent else [])
+        for f0, f1 in ((0.5, 0.5), (0.05, 1.0), (1.0, 0.05))
+    ]
     best = np.inf
     for start in starts:
         x0 = np.clip(start, [b[0] for b in bounds], [b[1] for b in bounds])
@@ -119,8 +121,9 @@ def p_value(cfg: NoiseModelConfig, t: np.ndarray, shot_std: np.ndarray, n_shots:
     return float(np.sum(weights * stats.chi2.sf(np.maximum(ratios, 0.0), free)))
 
 
-def verdict(cfg: NoiseModelConfig, dropped: bool, t: np.ndarray, shot_std: np.ndarray,
-            n_shots: np.ndarray) -> ProfileCheck:
+def verdict(
+    cfg: NoiseModelConfig, dropped: bool, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray
+) -> ProfileCheck:
     """This step's ``ProfileCheck`` of ``cfg.profile`` on its noise model's training points
     (``p_value``), given whether an earlier step ``dropped`` it: in use while every step's
     p-value has been at least ``cfg.profile_alpha`` (or NaN)."""

@@ -33,7 +33,9 @@ def true_optimal_t(noise_law, t_min: float, t_max: float, alpha: float, beta: fl
     i = int(np.argmax(values))
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
     result = optimize.minimize_scalar(
-        lambda t: alpha * t**2 + beta * float(noise_law(np.asarray(t))), bounds=(lo, hi), method="bounded",
+        lambda t: alpha * t**2 + beta * float(noise_law(np.asarray(t))),
+        bounds=(lo, hi),
+        method="bounded",
         options={"xatol": 1e-10},
     )
     return float(result.x)

@@ -41,8 +41,22 @@ def too_long_line(tmp_path_factory) -> tuple[Path, str]:
     path = tmp_path_factory.mktemp("configs") / "pfm_long.yaml"
     path.write_text(yaml.safe_dump(data))
     out = tmp_path_factory.mktemp("cli_out")
-    proc = subprocess.run([sys.executable, "-c", "import sys; from cli.main import main; sys.exit(main(sys.argv[1:]))",
-                           "run", str(path), "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from cli.main import main; sys.exit(main(sys.argv[1:]))",
+            "run",
+            str(path),
+            "--out",
+            str(out),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert proc.returncode == 2, proc.stderr
     assert not any(out.iterdir()), "the CLI created something for a refused config"
     lines = proc.stderr.strip().splitlines()
@@ -55,8 +69,14 @@ def test_a_line_past_the_scan_is_refused_at_once_as_the_cli_refuses_it(name, too
     path, cli_message = too_long_line
     assert "leaves the instrument's extent" in cli_message and str(path) in cli_message
     started = time.perf_counter()
-    proc = subprocess.run([sys.executable, str(BENCHMARKS / f"{name}.py"), "--config", str(path)],
-                          cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
+    proc = subprocess.run(
+        [sys.executable, str(BENCHMARKS / f"{name}.py"), "--config", str(path)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     elapsed = time.perf_counter() - started
     assert proc.returncode == 2, proc.stderr[-2000:]
     assert proc.stderr.strip().splitlines() == [f"{name}.py: error: {cli_message}"]
@@ -84,8 +104,10 @@ def test_an_unknown_design_is_one_line_naming_the_known_ones(capsys):
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1, lines
     assert lines[0].startswith("budget.py: error: argument --designs: unknown design 'info rate', 'fixed t*'; known: ")
-    known = ("reward, double, fixed t=0.2, fixed t=0.5318, fixed t=1.414, fixed t=2.512 (t*), fixed t=3.761, "
-             "fixed t=10, info_rate, budget cold, budget info_rate, budget warm, gpcam, fixed")  # Forrester: t in [0.2, 10] s, t*(law) = 2.512 s
+    known = (
+        "reward, double, fixed t=0.2, fixed t=0.5318, fixed t=1.414, fixed t=2.512 (t*), fixed t=3.761, "
+        "fixed t=10, info_rate, budget cold, budget info_rate, budget warm, gpcam, fixed"
+    )  # Forrester: t in [0.2, 10] s, t*(law) = 2.512 s
     assert lines[0].split("known: ", 1)[1].startswith(known)
 
 
@@ -93,12 +115,26 @@ def test_the_five_log_spaced_fixed_times_and_their_names():
     """[0.2, 10] s: 0.2 * 50 ** (k / 4) = 0.2, 0.5318, 1.414, 3.761, 10 (hand-computed), by t
     with t* among them, its name tagged; 4 significant digits, no exponent, no trailing zeros."""
     fixed = budget.fixed_designs(0.2, 10.0, 2.511886)
-    assert list(fixed) == ["fixed t=0.2", "fixed t=0.5318", "fixed t=1.414", "fixed t=2.512 (t*)",
-                           "fixed t=3.761", "fixed t=10"]
+    assert list(fixed) == [
+        "fixed t=0.2",
+        "fixed t=0.5318",
+        "fixed t=1.414",
+        "fixed t=2.512 (t*)",
+        "fixed t=3.761",
+        "fixed t=10",
+    ]
     assert [fixed[n] for n in fixed] == pytest.approx([0.2, 0.531830, 1.414214, 2.511886, 3.760603, 10.0], rel=1e-6)
     assert budget.fixed_designs(0.1, 2.0, 0.4697) == pytest.approx(
-        {"fixed t=0.1": 0.1, "fixed t=0.2115": 0.211474, "fixed t=0.4472": 0.447214, "fixed t=0.4697 (t*)": 0.4697,
-         "fixed t=0.9457": 0.945742, "fixed t=2": 2.0}, rel=1e-5)
+        {
+            "fixed t=0.1": 0.1,
+            "fixed t=0.2115": 0.211474,
+            "fixed t=0.4472": 0.447214,
+            "fixed t=0.4697 (t*)": 0.4697,
+            "fixed t=0.9457": 0.945742,
+            "fixed t=2": 2.0,
+        },
+        rel=1e-5,
+    )
     assert [budget.t_label(t) for t in (0.25, 1.0, 12345.6, 0.00012345)] == ["0.25", "1", "12350", "0.0001234"]
     # t* on one of the five: still its own design, the name tells them apart
     assert list(budget.fixed_designs(0.2, 10.0, 10.0))[-2:] == ["fixed t=10", "fixed t=10 (t*)"]
@@ -107,8 +143,15 @@ def test_the_five_log_spaced_fixed_times_and_their_names():
 def test_fixed_selects_every_fixed_design_at_once():
     known = ["reward", "double", *budget.fixed_designs(0.2, 10.0, 2.511886), "info_rate"]
     names, unknown = budget.resolve(budget.design_names("info_rate,fixed"), known)
-    assert unknown == [] and names == ["info_rate", "fixed t=0.2", "fixed t=0.5318", "fixed t=1.414",
-                                       "fixed t=2.512 (t*)", "fixed t=3.761", "fixed t=10"]
+    assert unknown == [] and names == [
+        "info_rate",
+        "fixed t=0.2",
+        "fixed t=0.5318",
+        "fixed t=1.414",
+        "fixed t=2.512 (t*)",
+        "fixed t=3.761",
+        "fixed t=10",
+    ]
     names, unknown = budget.resolve(["fixed t=10", "fixed", "fixed t=0.53"], known)
     assert len(names) == 6 and names[0] == "fixed t=10" and unknown == ["fixed t=0.53"]
 
@@ -129,27 +172,34 @@ def test_the_best_fixed_design_in_hindsight_is_the_minimum_of_the_medians_at_eac
     """Hand-made: three seeds per design; medians at 10 / 20 / 30 s: a 3.0 / 2.0 / 1.5, b - (no
     model in two of three seeds) / 1.0 / 1.2; the paper's policy is lower still but not fixed."""
     records = {
-        "fixed t=0.2": [_record(0, [5, 15, 25], [3.0, 2.0, 1.5]), _record(1, [5, 15, 25], [2.0, 1.0, 1.0]),
-                        _record(2, [5, 15, 25], [4.0, 3.0, 2.0])],
-        "fixed t=10": [_record(0, [5, 15, 25], [float("nan"), 1.0, 1.2]), _record(1, [15, 25], [0.5, 1.2]),
-                       _record(2, [15, 25], [1.5, 1.1])],
+        "fixed t=0.2": [
+            _record(0, [5, 15, 25], [3.0, 2.0, 1.5]),
+            _record(1, [5, 15, 25], [2.0, 1.0, 1.0]),
+            _record(2, [5, 15, 25], [4.0, 3.0, 2.0]),
+        ],
+        "fixed t=10": [
+            _record(0, [5, 15, 25], [float("nan"), 1.0, 1.2]),
+            _record(1, [15, 25], [0.5, 1.2]),
+            _record(2, [15, 25], [1.5, 1.1]),
+        ],
         "reward": [_record(0, [5], [0.1]), _record(1, [5], [0.1]), _record(2, [5], [0.1])],
         "fixed t=3": [],  # none measured: ignored
     }
-    assert budget.best_in_hindsight(records, [10, 20, 30]) == [(3.0, "fixed t=0.2"), (1.0, "fixed t=10"),
-                                                               (1.2, "fixed t=10")]
+    assert budget.best_in_hindsight(records, [10, 20, 30]) == [
+        (3.0, "fixed t=0.2"),
+        (1.0, "fixed t=10"),
+        (1.2, "fixed t=10"),
+    ]
     assert budget.best_in_hindsight(records, [1]) == [None]  # no fixed design has a model yet
 
 
 def test_the_report_keys_records_by_the_names_typed_and_names_its_t_star(tmp_path, capsys):
     """--report measures nothing: the JSON's records under the typed name (an old "info rate" key is
     read as info_rate) come out under that name, the t errors named as against t*(law)."""
-    record = {"seed": 0, "times_s": [10.0, 50.0], "rmse": [1.0, 0.4], "points": 12, "t_opt": 2.4,
-              "t_rel_error": 0.0}
+    record = {"seed": 0, "times_s": [10.0, 50.0], "rmse": [1.0, 0.4], "points": 12, "t_opt": 2.4, "t_rel_error": 0.0}
     path = tmp_path / "budget.json"
     path.write_text(json.dumps({"records": {"info rate": [record]}}))
-    assert budget.main(["--report", "--json", str(path), "--designs", "info_rate", "--budget", "60",
-                        "--at", "20"]) == 0
+    assert budget.main(["--report", "--json", str(path), "--designs", "info_rate", "--budget", "60", "--at", "20"]) == 0
     out = capsys.readouterr().out
     assert "| info_rate (1 seeds) |" in out
     assert "final t within 5 % of t*(law)" in out and "t errors below compare against t*(law)" in out
@@ -159,14 +209,26 @@ def test_the_report_of_a_json_with_the_earlier_fixed_designs(tmp_path, capsys):
     """A JSON written with "fixed t_min", "fixed t*", "fixed t_max" (the t range and t* it stores,
     here another than the config's) reports them under today's names, with the best in hindsight;
     a key it does not know is shown as it is."""
+
     def recs(errors):
         return [_record(s, [10.0, 50.0], [e, e / 2]) for s, e in enumerate(errors)]
 
     path = tmp_path / "old.json"
-    path.write_text(json.dumps({"config": {"space": {"t_min": 0.1, "t_max": 2.0}}, "t_star": 0.4697,
-                                "records": {"fixed t_min": recs([1.0, 2.0, 3.0]), "fixed t*": recs([4.0, 5.0, 6.0]),
-                                            "fixed t_max": recs([0.5, 0.6, 0.7]), "reward": recs([9.0, 9.0, 9.0]),
-                                            "someone's design": recs([8.0, 8.0, 8.0])}}))
+    path.write_text(
+        json.dumps(
+            {
+                "config": {"space": {"t_min": 0.1, "t_max": 2.0}},
+                "t_star": 0.4697,
+                "records": {
+                    "fixed t_min": recs([1.0, 2.0, 3.0]),
+                    "fixed t*": recs([4.0, 5.0, 6.0]),
+                    "fixed t_max": recs([0.5, 0.6, 0.7]),
+                    "reward": recs([9.0, 9.0, 9.0]),
+                    "someone's design": recs([8.0, 8.0, 8.0]),
+                },
+            }
+        )
+    )
     assert budget.main(["--report", "--json", str(path), "--budget", "60", "--at", "20"]) == 0
     out = capsys.readouterr().out
     for name in ("fixed t=0.1", "fixed t=0.4697 (t*)", "fixed t=2", "reward", "someone's design"):
@@ -182,8 +244,9 @@ def test_the_two_t_star_definitions():
     forrester = validated(load_config(ROOT / "data" / "configs" / "forrester.yaml"))
     instrument = build(forrester.instrument)
     s, r = forrester.space, forrester.reward
-    assert _tstar.law_t_star(forrester, instrument) == true_optimal_t(instrument.noise_law, s.t_min, s.t_max,
-                                                                      r.alpha, r.beta)
+    assert _tstar.law_t_star(forrester, instrument) == true_optimal_t(
+        instrument.noise_law, s.t_min, s.t_max, r.alpha, r.beta
+    )
     stars = _tstar.t_stars(forrester, instrument)  # the noise is the same at every x: one t*
     assert stars[_tstar.X_AVG] == pytest.approx(stars[_tstar.LAW], rel=1e-6) and not _tstar.differ(stars)
     assert f"{_tstar.LAW} = {_tstar.X_AVG} = " in _tstar.describe(stars, _tstar.LAW)
@@ -192,5 +255,7 @@ def test_the_two_t_star_definitions():
     stars = _tstar.t_stars(wall, build(wall.instrument))
     assert _tstar.differ(stars) and stars[_tstar.X_AVG] / stars[_tstar.LAW] - 1 > 0.05
     line = _tstar.describe(stars, _tstar.X_AVG)
-    assert f"{_tstar.LAW} = {stars[_tstar.LAW]:.4f} s" in line and f"{_tstar.X_AVG} = {stars[_tstar.X_AVG]:.4f} s" in line
+    assert (
+        f"{_tstar.LAW} = {stars[_tstar.LAW]:.4f} s" in line and f"{_tstar.X_AVG} = {stars[_tstar.X_AVG]:.4f} s" in line
+    )
     assert line.endswith(f"compare against {_tstar.X_AVG}")

@@ -28,14 +28,30 @@ from noisebo.instruments import build
 from noisebo.models.grids import grids
 
 BUDGET_S = 40.0
-RECORD_KEYS = {"seed", "times_s", "rmse", "points", "status", "spent_s", "t_opt", "t_rel_error", "shots", "t",
-               "latency_s", "wall_s"}
+RECORD_KEYS = {
+    "seed",
+    "times_s",
+    "rmse",
+    "points",
+    "status",
+    "spent_s",
+    "t_opt",
+    "t_rel_error",
+    "shots",
+    "t",
+    "latency_s",
+    "wall_s",
+}
 
 
 @pytest.fixture(scope="module")
 def campaign():
-    config = validated_config(ROOT / "data" / "configs" / "forrester.yaml", lambda c: c.with_overrides(
-        schedule={"budget_s": BUDGET_S, "point_overhead_s": 0.5, "n_steps": budget.NO_STEP_LIMIT}))
+    config = validated_config(
+        ROOT / "data" / "configs" / "forrester.yaml",
+        lambda c: c.with_overrides(
+            schedule={"budget_s": BUDGET_S, "point_overhead_s": 0.5, "n_steps": budget.NO_STEP_LIMIT}
+        ),
+    )
     instrument = build(config.instrument)
     return config, instrument, budget.scorer(config, instrument), t_stars(config, instrument)[LAW]
 
@@ -55,7 +71,9 @@ def test_record_has_run_ones_layout(records, campaign):
     rec = records[0]
     assert set(rec) == RECORD_KEYS
     assert rec["seed"] == 3 and rec["status"] == "budget_spent"
-    assert len(rec["times_s"]) == len(rec["rmse"]) == len(rec["shots"]) + 1  # the seed points' model, then one per point
+    assert (
+        len(rec["times_s"]) == len(rec["rmse"]) == len(rec["shots"]) + 1
+    )  # the seed points' model, then one per point
     assert len(rec["t"]) == len(rec["shots"]) == rec["points"] - config.schedule.n_seed
     assert all(n >= config.schedule.shots_after for n in rec["shots"])
     t_grid = grids(config).t

@@ -29,9 +29,28 @@ def certificate(tmp_path_factory) -> tuple[Path, Path]:
     """A self-signed certificate for 127.0.0.1 and its key, made with openssl as the README says."""
     where = tmp_path_factory.mktemp("tls")
     cert, key = where / "bridge.pem", where / "bridge.key"
-    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-keyout", str(key),
-                    "-out", str(cert), "-subj", "/CN=127.0.0.1", "-addext", "subjectAltName=IP:127.0.0.1"],
-                   check=True, capture_output=True)
+    subprocess.run(
+        [
+            "openssl",
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "2",
+            "-keyout",
+            str(key),
+            "-out",
+            str(cert),
+            "-subj",
+            "/CN=127.0.0.1",
+            "-addext",
+            "subjectAltName=IP:127.0.0.1",
+        ],
+        check=True,
+        capture_output=True,
+    )
     return cert, key
 
 
@@ -40,8 +59,9 @@ def remote_config(base: str, overrides: dict, port: int = 0, **settings):
     config = validated(load_config(base)).with_overrides(**overrides)
     spectra = config.instrument.kind == "pfm"
     shape = {"reading": "spectrum" if spectra else "scalar"}
-    return validated(config.with_overrides(instrument={"kind": "remote", "settings": {
-        "port": port, "shape": shape, **settings}}))
+    return validated(
+        config.with_overrides(instrument={"kind": "remote", "settings": {"port": port, "shape": shape, **settings}})
+    )
 
 
 @dataclass
@@ -83,8 +103,9 @@ def served(config, path: Path, seed: int = 0):
         recorder.close()
 
 
-def call(url: str, method: str, path: str, body: bytes | None = None, token: str | None = TOKEN,
-         headers: dict | None = None) -> tuple[int, dict | str]:
+def call(
+    url: str, method: str, path: str, body: bytes | None = None, token: str | None = TOKEN, headers: dict | None = None
+) -> tuple[int, dict | str]:
     """(status, JSON answer or text) of one HTTP call."""
     sent = {"Content-Type": "application/json", **(headers or {})}
     if token is not None:

@@ -41,8 +41,13 @@ def write_remote_config(path: Path, port: int) -> Path:
 def start_client(url: str, capture: bool = False) -> subprocess.Popen:
     """The instrument PC's process; its output captured only for one that will not be killed."""
     out = subprocess.PIPE if capture else subprocess.DEVNULL
-    return subprocess.Popen([sys.executable, "examples/instrument_pc/serve_simulator.py", url, SOURCE],
-                            env=os.environ, stdout=out, stderr=out, text=True)
+    return subprocess.Popen(
+        [sys.executable, "examples/instrument_pc/serve_simulator.py", url, SOURCE],
+        env=os.environ,
+        stdout=out,
+        stderr=out,
+        text=True,
+    )
 
 
 def journal_length(path: Path) -> int:
@@ -56,14 +61,16 @@ def wait_for_length(path: Path, n: int, alive, timeout: float = 240, what=lambda
     deadline = time.monotonic() + timeout
     while journal_length(path) < n:
         assert alive(), f"the process ended before the moment to kill it: {what()}"
-        assert time.monotonic() < deadline, (f"the journal did not reach {n} records "
-                                             f"({journal_length(path)} after {timeout:.0f} s): {what()}")
+        assert time.monotonic() < deadline, (
+            f"the journal did not reach {n} records ({journal_length(path)} after {timeout:.0f} s): {what()}"
+        )
         time.sleep(0.02)
 
 
 def assert_same_campaign(path: Path, expected) -> None:
     state = records.rebuild(journal.read(path.with_suffix(".journal"))[0])
     assert state.status.value == "completed"
-    assert [[(s.point, s.shot, s.reading) for s in p.shots] for p in state.points] == \
-        [[(s.point, s.shot, s.reading) for s in p.shots] for p in expected.points]
+    assert [[(s.point, s.shot, s.reading) for s in p.shots] for p in state.points] == [
+        [(s.point, s.shot, s.reading) for s in p.shots] for p in expected.points
+    ]
     assert [p.committed for p in state.points] == [p.committed for p in expected.points]

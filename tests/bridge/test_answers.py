@@ -12,8 +12,9 @@ from noisebo.campaign import engine
 from noisebo.config import CampaignConfig
 from noisebo.events import DriverInfo
 
-CONFIG = CampaignConfig().with_overrides(space={"n_x": 40, "n_t": 30},
-                                         schedule={"n_seed": 2, "n_steps": 0, "shots_before": 2})
+CONFIG = CampaignConfig().with_overrides(
+    space={"n_x": 40, "n_t": 30}, schedule={"n_seed": 2, "n_steps": 0, "shots_before": 2}
+)
 
 
 def conforms(model: type[BaseModel], answer: dict, every_field: bool = True) -> None:

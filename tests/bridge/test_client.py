@@ -32,16 +32,24 @@ PACKED = {"rows": 2, "dtype": "float64", "data": "AAAAAAAA8D8AAAAAAAAAQAAAAAAAAA
 REQUEST = ShotRequest("c", 2, 1, 0, [0.5], 1.0, 3, 4, 0, "scalar")
 
 
-@pytest.mark.parametrize("result, body", [
-    (lambda r: 1.25, {"value": 1.25}),
-    (lambda r: Spectrum([[1, 2], [3, 4]], "mine"), {"spectrum": PACKED, "reduction": "mine"}),
-    (lambda r: [[1, 2], [3, 4]], {"spectrum": PACKED, "reduction": "sho"}),
-    (lambda r: np.array([[1, 2], [3, 4]], dtype=np.float32),
-     {"spectrum": {"rows": 2, "dtype": "float32", "data": "AACAPwAAAEAAAEBAAACAQA=="}, "reduction": "sho"}),
-    (lambda r: float("nan"), {"error": "measure returned nan", "attempt": 4}),
-    (lambda r: [[1.0, float("inf")]], {"error": "measure returned a spectrum with non-finite values", "attempt": 4}),
-    (lambda r: 1 / 0, {"error": "ZeroDivisionError: division by zero", "attempt": 4}),
-])
+@pytest.mark.parametrize(
+    "result, body",
+    [
+        (lambda r: 1.25, {"value": 1.25}),
+        (lambda r: Spectrum([[1, 2], [3, 4]], "mine"), {"spectrum": PACKED, "reduction": "mine"}),
+        (lambda r: [[1, 2], [3, 4]], {"spectrum": PACKED, "reduction": "sho"}),
+        (
+            lambda r: np.array([[1, 2], [3, 4]], dtype=np.float32),
+            {"spectrum": {"rows": 2, "dtype": "float32", "data": "AACAPwAAAEAAAEBAAACAQA=="}, "reduction": "sho"},
+        ),
+        (lambda r: float("nan"), {"error": "measure returned nan", "attempt": 4}),
+        (
+            lambda r: [[1.0, float("inf")]],
+            {"error": "measure returned a spectrum with non-finite values", "attempt": 4},
+        ),
+        (lambda r: 1 / 0, {"error": "ZeroDivisionError: division by zero", "attempt": 4}),
+    ],
+)
 def test_what_measure_returns_or_raises_becomes_the_body(result, body):
     assert reading_body(REQUEST, result) == {"campaign": "c", **body}
 
@@ -74,8 +82,9 @@ def test_the_client_serves_a_campaign_over_https_with_its_certificate(tmp_path, 
     config = remote_config("data/configs/forrester.yaml", SMALL, tls_certfile=str(cert), tls_keyfile=str(key))
     with served(config, tmp_path / "c.h5") as running:
         assert running.url.startswith("https://127.0.0.1:")
-        status = serve_instrument(running.url, TOKEN, lambda r: 10.0 * r.point + r.shot, poll_s=2,
-                                  log=lambda line: None, cafile=str(cert))
+        status = serve_instrument(
+            running.url, TOKEN, lambda r: 10.0 * r.point + r.shot, poll_s=2, log=lambda line: None, cafile=str(cert)
+        )
         final = running.final()
     assert status == "completed"
     assert [s.reading.value for p in final.points for s in p.shots] == [0.0, 1.0, 10.0, 11.0]
@@ -96,8 +105,12 @@ def test_the_client_waits_for_a_campaign_that_is_not_up_yet(tmp_path):
         port = s.getsockname()[1]
     lines, outcome = [], {}
     url = f"http://127.0.0.1:{port}"
-    worker = threading.Thread(target=lambda: outcome.update(status=serve_instrument(
-        url, TOKEN, lambda r: 1.0, poll_s=1, retry_s=0.5, log=lines.append)), daemon=True)
+    worker = threading.Thread(
+        target=lambda: outcome.update(
+            status=serve_instrument(url, TOKEN, lambda r: 1.0, poll_s=1, retry_s=0.5, log=lines.append)
+        ),
+        daemon=True,
+    )
     worker.start()
     worker.join(1.5)
     assert worker.is_alive() and "cannot reach" in lines[0]
@@ -117,11 +130,18 @@ def test_the_client_file_copied_alone_serves_a_campaign(tmp_path):
     shutil.copy(CLIENT, pc / "client.py")
     (pc / "measure.py").write_text(
         "import sys\nfrom client import serve_instrument\n"
-        "print(serve_instrument(sys.argv[1], sys.argv[2], lambda request: 10.0 * request.point + request.shot))\n")
+        "print(serve_instrument(sys.argv[1], sys.argv[2], lambda request: 10.0 * request.point + request.shot))\n"
+    )
     config = remote_config("data/configs/forrester.yaml", SMALL)
     with served(config, tmp_path / "c.h5") as running:
-        done = subprocess.run([sys.executable, "-E", "-s", "measure.py", running.url, TOKEN], cwd=pc,
-                              capture_output=True, text=True, timeout=120, check=False)
+        done = subprocess.run(
+            [sys.executable, "-E", "-s", "measure.py", running.url, TOKEN],
+            cwd=pc,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
         final = running.final()
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "completed"

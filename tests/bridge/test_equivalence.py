@@ -28,8 +28,13 @@ def test_a_simulator_served_from_another_process_gives_the_in_process_campaign(t
     source = f"data/configs/{name}.yaml"
     config = remote_config(source, CASES[name])
     with served(config, tmp_path / f"{name}.h5", seed=5) as running:
-        client = subprocess.run([sys.executable, "examples/instrument_pc/serve_simulator.py", running.url, source],
-                                capture_output=True, text=True, timeout=300, env=os.environ)
+        client = subprocess.run(
+            [sys.executable, "examples/instrument_pc/serve_simulator.py", running.url, source],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=os.environ,
+        )
         remote = running.final()
     assert client.returncode == 0, client.stderr
     assert client.stdout.strip() == "completed"

@@ -10,8 +10,9 @@ from noisebo.events import DriverInfo, ShotError
 from noisebo.failures import InstrumentError, InstrumentTimeout
 from noisebo.reduction import Reading
 
-CONFIG = CampaignConfig().with_overrides(space={"n_x": 40, "n_t": 30},
-                                         schedule={"n_seed": 2, "n_steps": 0, "shots_before": 2})
+CONFIG = CampaignConfig().with_overrides(
+    space={"n_x": 40, "n_t": 30}, schedule={"n_seed": 2, "n_steps": 0, "shots_before": 2}
+)
 
 
 class Clock:
@@ -54,7 +55,13 @@ def test_the_next_shot_is_what_the_engine_asks_for():
     exchange, state = fresh()
     request = engine.ask(state)
     shot = exchange.next_shot(0.0)
-    assert (shot["kind"], shot["point"], shot["shot"], shot["x"], shot["t"]) == ("shot", 0, 0, list(request.x), request.t)
+    assert (shot["kind"], shot["point"], shot["shot"], shot["x"], shot["t"]) == (
+        "shot",
+        0,
+        0,
+        list(request.x),
+        request.t,
+    )
     assert (shot["wanted"], shot["attempt"], shot["seed"], shot["step"]) == (2, 0, 3, 0)  # step 0: a seed point
     assert shot["campaign"] == "campaign/reward/s3@2026-11-23T00:00:00+00:00"
 
@@ -72,10 +79,13 @@ def test_a_reading_is_acknowledged_once_journaled_and_a_repeat_is_a_duplicate():
     assert exchange.next_shot(0.0)["shot"] == 1
 
 
-@pytest.mark.parametrize("point, shot, message", [
-    (0, 1, "point 0 shot 1 is not wanted; the shot wanted now is point 0 shot 0"),
-    (4, 0, "point 4 shot 0 is not wanted"),
-])
+@pytest.mark.parametrize(
+    "point, shot, message",
+    [
+        (0, 1, "point 0 shot 1 is not wanted; the shot wanted now is point 0 shot 0"),
+        (4, 0, "point 4 shot 0 is not wanted"),
+    ],
+)
 def test_a_shot_that_is_not_wanted_is_refused(point, shot, message):
     exchange, _ = fresh()
     with pytest.raises(WireError, match=message):
@@ -113,7 +123,9 @@ def test_silence_after_contact_is_a_timeout_but_before_any_contact_the_campaign_
     clock = Clock()
     exchange, state = fresh(clock)
     request = engine.ask(state)
-    waiting = threading.Thread(target=lambda: pytest.raises(InstrumentError, exchange.wait_outcome, request.x, request.t))
+    waiting = threading.Thread(
+        target=lambda: pytest.raises(InstrumentError, exchange.wait_outcome, request.x, request.t)
+    )
     clock.now = 1000.0
     waiting.start()
     waiting.join(0.5)

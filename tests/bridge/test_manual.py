@@ -45,14 +45,24 @@ def test_a_campaign_told_by_hand_equals_the_in_process_one(tmp_path, capsys):
             break
         text = cli(capsys, "ask", campaign)[1]
         steps[request["point"]] = (request["step"], text.split("(")[1].split(")")[0])
-        values = [repr(simulator.simulate(np.asarray(request["x"]), request["t"],
-                                          numpy_rng(request["seed"], MEASURE, request["point"], shot)).value)
-                  for shot in range(request["shot"], request["wanted"])]
+        values = [
+            repr(
+                simulator.simulate(
+                    np.asarray(request["x"]), request["t"], numpy_rng(request["seed"], MEASURE, request["point"], shot)
+                ).value
+            )
+            for shot in range(request["shot"], request["wanted"])
+        ]
         assert cli(capsys, "tell", campaign, "--point", request["point"], *values)[0] == 0
     assert request["status"] == "completed"
     # 3 seed points (step 0), then BO steps 1 and 2 of 2
-    assert steps == {0: (0, "seed point"), 1: (0, "seed point"), 2: (0, "seed point"), 3: (1, "BO step 1/2"),
-                     4: (2, "BO step 2/2")}
+    assert steps == {
+        0: (0, "seed point"),
+        1: (0, "seed point"),
+        2: (0, "seed point"),
+        3: (1, "BO step 1/2"),
+        4: (2, "BO step 2/2"),
+    }
     local = run_campaign(config, simulator, 7).final
     with Recorder.attach(campaign) as recorder:
         told = recorder.state
@@ -68,15 +78,18 @@ def started(tmp_path, capsys):
     return tmp_path / "forrester_reward_s0000.h5"
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--point", "3", "1.0"], "--point 3: the point being measured is 0"),
-    (["1", "2", "3", "4", "5"], "point 0 wants 4 more shots (shots 0-3); got 5"),
-    (["1.0", "nan"], "'nan' is not a finite number"),
-    (["1.0", "high"], "'high' is not a number"),
-    ([], "give the shots' readings as VALUE..., or --spectrum FILE..., or one --error REASON"),
-    (["1.0", "--error", "x"], "give the shots' readings"),
-    (["--spectrum", "s.npy"], "this campaign's readings are numbers"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--point", "3", "1.0"], "--point 3: the point being measured is 0"),
+        (["1", "2", "3", "4", "5"], "point 0 wants 4 more shots (shots 0-3); got 5"),
+        (["1.0", "nan"], "'nan' is not a finite number"),
+        (["1.0", "high"], "'high' is not a number"),
+        ([], "give the shots' readings as VALUE..., or --spectrum FILE..., or one --error REASON"),
+        (["1.0", "--error", "x"], "give the shots' readings"),
+        (["--spectrum", "s.npy"], "this campaign's readings are numbers"),
+    ],
+)
 def test_a_tell_that_does_not_fit_is_refused_and_records_nothing(started, capsys, argv, message):
     before = started.with_suffix(".journal").read_bytes()
     code, _, err = cli(capsys, "tell", started, *argv)

@@ -10,10 +10,19 @@ from noisebo.bridge.page import number, plot, render, ticks
 from noisebo.campaign.driver import run_campaign
 from noisebo.instruments import build
 
-RUNNING = {"status": "running", "reason": "", "campaign": "tiny/reward/s3@2026", "points": 7, "points_total": 7,
-           "shots": 42, "failed_attempts": 1, "now": "measuring",
-           "current": {"point": 7, "step": 5, "shot": 1, "shots_wanted": 3, "x": [0.25], "t": 1.5},
-           "last_point": None, "instrument_pc": {"connected": True, "polling": True, "last_seen_s_ago": 0.2}}
+RUNNING = {
+    "status": "running",
+    "reason": "",
+    "campaign": "tiny/reward/s3@2026",
+    "points": 7,
+    "points_total": 7,
+    "shots": 42,
+    "failed_attempts": 1,
+    "now": "measuring",
+    "current": {"point": 7, "step": 5, "shot": 1, "shots_wanted": 3, "x": [0.25], "t": 1.5},
+    "last_point": None,
+    "instrument_pc": {"connected": True, "polling": True, "last_seen_s_ago": 0.2},
+}
 
 
 @pytest.fixture(scope="module")
@@ -27,18 +36,32 @@ def seeds_only(tiny_config):
     return run_campaign(config, build(config.instrument), 3).final
 
 
-@pytest.mark.parametrize(("value", "shown"), [
-    (None, "-"), (float("nan"), "-"), (True, "yes"), (np.bool_(False), "no"), (0.123456789, "0.1235"),
-    (12345.678, "1.235e+04"), ((0.5,), "0.5"), ((0.5, 2.0), "(0.5, 2)"), (3, "3"),
-])
+@pytest.mark.parametrize(
+    ("value", "shown"),
+    [
+        (None, "-"),
+        (float("nan"), "-"),
+        (True, "yes"),
+        (np.bool_(False), "no"),
+        (0.123456789, "0.1235"),
+        (12345.678, "1.235e+04"),
+        ((0.5,), "0.5"),
+        ((0.5, 2.0), "(0.5, 2)"),
+        (3, "3"),
+    ],
+)
 def test_numbers_are_shown_for_a_person(value, shown):
     assert number(value) == shown
 
 
-@pytest.mark.parametrize(("lo", "hi", "expected"), [
-    (0.0, 1.0, [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]), (-1.0, 0.30103, [-1.0, -0.5, 0.0]),
-    (3.0, 3.0, [3.0]),
-])
+@pytest.mark.parametrize(
+    ("lo", "hi", "expected"),
+    [
+        (0.0, 1.0, [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]),
+        (-1.0, 0.30103, [-1.0, -0.5, 0.0]),
+        (3.0, 3.0, [3.0]),
+    ],
+)
 def test_ticks_are_round_and_within_the_range(lo, hi, expected):
     assert ticks(lo, hi) == pytest.approx(expected)
 
@@ -53,15 +76,15 @@ def test_the_page_of_a_campaign_under_way(finished):
     assert "instrument PC: connected, waiting for the next shot" in text
     assert page.count("<svg") == 2 and page.count("<polyline") == 2 and page.count("<polygon") == 2
     assert page.count("<circle") == len(finished.points) + sum(
-        e.committed.point.noise_measured for e in finished.points)  # every point in f; measured sd in noise
+        e.committed.point.noise_measured for e in finished.points
+    )  # every point in f; measured sd in noise
     last = finished.points[-1].committed.point
     assert f"<td>{len(finished.points) - 1}</td><td>{number(last.x)}</td><td>{number(last.t)}</td>" in page
     assert "http-equiv='refresh'" in page
 
 
 def test_the_page_holds_no_python_reprs_and_loads_nothing(finished):
-    page = render(RUNNING | {"instrument_pc": {"connected": True, "polling": False, "last_seen_s_ago": None}},
-                  finished)
+    page = render(RUNNING | {"instrument_pc": {"connected": True, "polling": False, "last_seen_s_ago": None}}, finished)
     text = re.sub(r"<[^>]+>", " ", page)
     for repr_word in ("None", "True", "False", "nan", "array("):
         assert repr_word not in text

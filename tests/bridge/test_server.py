@@ -46,35 +46,72 @@ def big_chunked_body():
     yield b'"}'
 
 
-@pytest.mark.parametrize("path, body, token, status, message", [
-    ("/shots/1/0", VALUE, None, 401, "missing token"),
-    ("/shots/1/0", VALUE, "wrong", 403, "wrong token"),
-    ("/shots/0/1", json.dumps({"value": 2.0}).encode(), "ok", 200, None),  # the same reading again: a duplicate
-    ("/shots/0/1", json.dumps({"value": 7.0}).encode(), "ok", 409, "already recorded with a different reading"),
-    ("/shots/1/0", b'{"value": NaN}', "ok", 422, "not a finite number"),
-    ("/shots/1/0", b'{"value": Infinity}', "ok", 422, "value: inf is not a finite number"),
-    ("/shots/1/0", b'{"value": "0.5"}', "ok", 422, "body.value: Input should be a valid number, got the string '0.5'"),
-    ("/shots/1/0", b'{"value": "1e3"}', "ok", 422, "body.value: Input should be a valid number, got the string '1e3'"),
-    ("/shots/1/0", b'{"value": true}', "ok", 422, "body.value: Input should be a valid number, got the boolean true"),
-    ("/shots/1/0", b'{"error": "x", "attempt": "0"}', "ok", 422,
-     "body.attempt: Input should be a valid integer, got the string '0'"),
-    ("/shots/1/0", b'{"error": "x", "attempt": false}', "ok", 422,
-     "body.attempt: Input should be a valid integer, got the boolean false"),
-    ("/shots/1/0", big_body, "ok", 413, "the body of 73400345 bytes is over the bridge's limit of 1024 bytes"),
-    ("/shots/1/0", big_chunked_body, "ok", 413, "the body is over the bridge's limit of 1024 bytes"),
-    ("/shots/1/0", big_body, "wrong", 403, "wrong token"),  # refused before the body is read, and still heard
-    ("/shots/1/0?token=" + TOKEN, VALUE, None, 401, HEADER_ONLY),
-    ("/shots/1/0?token=" + TOKEN, VALUE, "ok", 401, HEADER_ONLY),
-    ("/shots/1/0", json.dumps({"spectrum": [[1.0] * 9] * 3}).encode(), "ok", 422, "one number per shot"),
-    ("/shots/1/0", json.dumps({"value": 1.0, "pad": "x" * 2000}).encode(), "ok", 413, "over the bridge's limit of 1024 bytes"),
-    ("/shots/1/5", VALUE, "ok", 409, "point 1 shot 5 is not wanted; the shot wanted now is point 1 shot 0"),
-    ("/shots/9/0", VALUE, "ok", 409, "point 9 shot 0 is not wanted"),
-    ("/shots/0/2", VALUE, "ok", 409, "point 0 shot 2 is finished"),
-    ("/shots/1/0", b'{"value": 1.0', "ok", 400, "the body is not JSON"),
-    ("/shots/1/0", b'{"reading": 1.0}', "ok", 422, "body.reading"),
-    ("/shots/x/0", VALUE, "ok", 422, "path.point"),
-    ("/shots/-1/0", VALUE, "ok", 422, "path.point"),
-])
+@pytest.mark.parametrize(
+    "path, body, token, status, message",
+    [
+        ("/shots/1/0", VALUE, None, 401, "missing token"),
+        ("/shots/1/0", VALUE, "wrong", 403, "wrong token"),
+        ("/shots/0/1", json.dumps({"value": 2.0}).encode(), "ok", 200, None),  # the same reading again: a duplicate
+        ("/shots/0/1", json.dumps({"value": 7.0}).encode(), "ok", 409, "already recorded with a different reading"),
+        ("/shots/1/0", b'{"value": NaN}', "ok", 422, "not a finite number"),
+        ("/shots/1/0", b'{"value": Infinity}', "ok", 422, "value: inf is not a finite number"),
+        (
+            "/shots/1/0",
+            b'{"value": "0.5"}',
+            "ok",
+            422,
+            "body.value: Input should be a valid number, got the string '0.5'",
+        ),
+        (
+            "/shots/1/0",
+            b'{"value": "1e3"}',
+            "ok",
+            422,
+            "body.value: Input should be a valid number, got the string '1e3'",
+        ),
+        (
+            "/shots/1/0",
+            b'{"value": true}',
+            "ok",
+            422,
+            "body.value: Input should be a valid number, got the boolean true",
+        ),
+        (
+            "/shots/1/0",
+            b'{"error": "x", "attempt": "0"}',
+            "ok",
+            422,
+            "body.attempt: Input should be a valid integer, got the string '0'",
+        ),
+        (
+            "/shots/1/0",
+            b'{"error": "x", "attempt": false}',
+            "ok",
+            422,
+            "body.attempt: Input should be a valid integer, got the boolean false",
+        ),
+        ("/shots/1/0", big_body, "ok", 413, "the body of 73400345 bytes is over the bridge's limit of 1024 bytes"),
+        ("/shots/1/0", big_chunked_body, "ok", 413, "the body is over the bridge's limit of 1024 bytes"),
+        ("/shots/1/0", big_body, "wrong", 403, "wrong token"),  # refused before the body is read, and still heard
+        ("/shots/1/0?token=" + TOKEN, VALUE, None, 401, HEADER_ONLY),
+        ("/shots/1/0?token=" + TOKEN, VALUE, "ok", 401, HEADER_ONLY),
+        ("/shots/1/0", json.dumps({"spectrum": [[1.0] * 9] * 3}).encode(), "ok", 422, "one number per shot"),
+        (
+            "/shots/1/0",
+            json.dumps({"value": 1.0, "pad": "x" * 2000}).encode(),
+            "ok",
+            413,
+            "over the bridge's limit of 1024 bytes",
+        ),
+        ("/shots/1/5", VALUE, "ok", 409, "point 1 shot 5 is not wanted; the shot wanted now is point 1 shot 0"),
+        ("/shots/9/0", VALUE, "ok", 409, "point 9 shot 0 is not wanted"),
+        ("/shots/0/2", VALUE, "ok", 409, "point 0 shot 2 is finished"),
+        ("/shots/1/0", b'{"value": 1.0', "ok", 400, "the body is not JSON"),
+        ("/shots/1/0", b'{"reading": 1.0}', "ok", 422, "body.reading"),
+        ("/shots/x/0", VALUE, "ok", 422, "path.point"),
+        ("/shots/-1/0", VALUE, "ok", 422, "path.point"),
+    ],
+)
 def test_bad_input_is_refused_with_the_problem_named_and_nothing_recorded(campaign, path, body, token, status, message):
     """Sent by Python's urllib to the real server: a client that sends its whole body before it
     reads the answer hears the refusal (not a reset connection) even for a 70 MiB body."""
@@ -127,12 +164,15 @@ def test_the_campaign_completes_and_its_file_holds_each_reading_once(campaign):
         assert f.attrs["status"] == "completed"
 
 
-@pytest.mark.parametrize("spectrum, message", [
-    ([[1.0] * 50] * 4, "4 rows × 50 samples; expected 2 or 3 rows"),
-    ([1.0] * 50, "body.spectrum.rows.0"),
-    ([[1.0] * 50, [1.0] * 50, [1.0] * 49], "rows of different lengths [49, 50]"),
-    ([[1.0] * 3] * 3, "3 samples per row; expected 8 to"),
-])
+@pytest.mark.parametrize(
+    "spectrum, message",
+    [
+        ([[1.0] * 50] * 4, "4 rows × 50 samples; expected 2 or 3 rows"),
+        ([1.0] * 50, "body.spectrum.rows.0"),
+        ([[1.0] * 50, [1.0] * 50, [1.0] * 49], "rows of different lengths [49, 50]"),
+        ([[1.0] * 3] * 3, "3 samples per row; expected 8 to"),
+    ],
+)
 def test_a_spectrum_of_the_wrong_shape_is_refused(tmp_path, spectrum, message):
     config = remote_config("data/configs/pfm.yaml", SMALL)
     with served(config, tmp_path / "pfm.h5") as running:
@@ -162,16 +202,25 @@ def free_port() -> int:
 SHORT = "a" * 31  # one character short of what a bridge beyond this computer needs
 
 
-@pytest.mark.parametrize("host, env_token, file_token, message", [
-    ("0.0.0.0", SHORT, None, "instrument.settings.host 0.0.0.0 lets other computers reach the bridge, which then needs a "
-                             "token of at least 32 characters; $NOISEBO_BRIDGE_TOKEN holds one of 31"),
-    ("::", "test-token-123", None, "$NOISEBO_BRIDGE_TOKEN holds one of 14"),
-    ("192.0.2.7", SHORT, None, "instrument.settings.host 192.0.2.7 lets other computers reach the bridge"),
-    ("campaign-pc.example", SHORT, None, "instrument.settings.host campaign-pc.example lets other computers"),
-    ("0.0.0.0", None, SHORT, "the token file TOKEN_FILE holds one of 31: delete it for a new one"),
-])
+@pytest.mark.parametrize(
+    "host, env_token, file_token, message",
+    [
+        (
+            "0.0.0.0",
+            SHORT,
+            None,
+            "instrument.settings.host 0.0.0.0 lets other computers reach the bridge, which then needs a "
+            "token of at least 32 characters; $NOISEBO_BRIDGE_TOKEN holds one of 31",
+        ),
+        ("::", "test-token-123", None, "$NOISEBO_BRIDGE_TOKEN holds one of 14"),
+        ("192.0.2.7", SHORT, None, "instrument.settings.host 192.0.2.7 lets other computers reach the bridge"),
+        ("campaign-pc.example", SHORT, None, "instrument.settings.host campaign-pc.example lets other computers"),
+        ("0.0.0.0", None, SHORT, "the token file TOKEN_FILE holds one of 31: delete it for a new one"),
+    ],
+)
 def test_a_short_token_off_loopback_is_refused_before_anything_is_bound_or_written(
-        tmp_path, monkeypatch, capfd, host, env_token, file_token, message):
+    tmp_path, monkeypatch, capfd, host, env_token, file_token, message
+):
     """Validated before the bridge binds (no traffic leaves loopback: the port is never opened)."""
     token_file = tmp_path / "bridge.token"
     if env_token is None:
@@ -192,17 +241,22 @@ def test_a_short_token_off_loopback_is_refused_before_anything_is_bound_or_writt
         s.bind(("127.0.0.1", port))  # free: nothing was bound
 
 
-@pytest.mark.parametrize("settings, message", [
-    ({"port": "8765"}, "instrument.settings.port: expected a whole number, got the string '8765'"),
-    ({"port": True}, "instrument.settings.port: expected a whole number, got the boolean true"),
-    ({"silence_s": "120"}, "instrument.settings.silence_s: expected a number, got the string '120'"),
-    ({"silence_s": float("nan")}, "instrument.settings.silence_s: must be a finite number, got nan"),
-    ({"max_body_mib": False}, "instrument.settings.max_body_mib: expected a number, got the boolean false"),
-    ({"shape": {"reading": "spectrum", "min_samples": "8"}},
-     "instrument.settings.shape.min_samples: expected a whole number, got the string '8'"),
-    ({"tls_certfile": "cert.pem"}, "tls_certfile is given without tls_keyfile"),
-    ({"tls_keyfile": "key.pem"}, "tls_keyfile is given without tls_certfile"),
-])
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ({"port": "8765"}, "instrument.settings.port: expected a whole number, got the string '8765'"),
+        ({"port": True}, "instrument.settings.port: expected a whole number, got the boolean true"),
+        ({"silence_s": "120"}, "instrument.settings.silence_s: expected a number, got the string '120'"),
+        ({"silence_s": float("nan")}, "instrument.settings.silence_s: must be a finite number, got nan"),
+        ({"max_body_mib": False}, "instrument.settings.max_body_mib: expected a number, got the boolean false"),
+        (
+            {"shape": {"reading": "spectrum", "min_samples": "8"}},
+            "instrument.settings.shape.min_samples: expected a whole number, got the string '8'",
+        ),
+        ({"tls_certfile": "cert.pem"}, "tls_certfile is given without tls_keyfile"),
+        ({"tls_keyfile": "key.pem"}, "tls_keyfile is given without tls_certfile"),
+    ],
+)
 def test_bridge_settings_of_the_wrong_type_are_a_config_error(settings, message):
     with pytest.raises(ConfigError, match=message):
         remote_config("data/configs/forrester.yaml", SMALL, **settings)
@@ -267,8 +321,9 @@ def test_off_loopback_plain_http_is_warned_of_once(tmp_path, monkeypatch, capfd,
         url = f"{'https' if tls else 'http'}://127.0.0.1:{port}/status"
         context = ssl.create_default_context(cafile=str(cert)) if tls else None
         with pytest.raises(urllib.error.HTTPError) as refused:
-            urllib.request.urlopen(urllib.request.Request(url, headers={"Authorization": "Bearer short"}), timeout=30,
-                                   context=context)
+            urllib.request.urlopen(
+                urllib.request.Request(url, headers={"Authorization": "Bearer short"}), timeout=30, context=context
+            )
         refused.value.close()
         assert refused.value.code == 403
     finally:
@@ -279,11 +334,14 @@ def test_off_loopback_plain_http_is_warned_of_once(tmp_path, monkeypatch, capfd,
     assert "reachable from the network" in out and long_token not in out + err
 
 
-@pytest.mark.parametrize("which, message", [
-    ("tls_certfile", "instrument.settings.tls_certfile: no file"),
-    ("tls_keyfile", "instrument.settings.tls_keyfile: no file"),
-    ("swapped", "are not a PEM certificate and its key"),
-])
+@pytest.mark.parametrize(
+    "which, message",
+    [
+        ("tls_certfile", "instrument.settings.tls_certfile: no file"),
+        ("tls_keyfile", "instrument.settings.tls_keyfile: no file"),
+        ("swapped", "are not a PEM certificate and its key"),
+    ],
+)
 def test_a_certificate_that_cannot_be_loaded_stops_the_bridge_before_it_binds(tmp_path, certificate, which, message):
     cert, key = (str(p) for p in certificate)
     files = {"tls_certfile": cert, "tls_keyfile": key}

@@ -23,8 +23,10 @@ ABORT_WITHIN_S = 2.0
 
 def remote_yaml(path: Path, token_file: Path) -> Path:
     config = validated(load_config(SOURCE)).with_overrides(**OVERRIDES)
-    config = config.with_overrides(name="waiting", instrument={"kind": "remote", "settings": {
-        "host": "127.0.0.1", "port": 0, "token_file": str(token_file)}})
+    config = config.with_overrides(
+        name="waiting",
+        instrument={"kind": "remote", "settings": {"host": "127.0.0.1", "port": 0, "token_file": str(token_file)}},
+    )
     path.write_text(yaml.safe_dump(config.model_dump(mode="json")))
     return path
 
@@ -39,9 +41,19 @@ def journaled_status(path: Path) -> str | None:
 def test_sigterm_while_waiting_for_an_instrument_pc_that_never_connected_aborts_within_2_s(tmp_path):
     token_file, path = tmp_path / "bridge.token", tmp_path / "waiting.h5"
     env = {k: v for k, v in os.environ.items() if k != "NOISEBO_BRIDGE_TOKEN"}
-    campaign = subprocess.Popen([sys.executable, "-m", "tests.bridge.campaign_process",
-                                 str(remote_yaml(tmp_path / "waiting.yaml", token_file)), str(path)],
-                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    campaign = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "tests.bridge.campaign_process",
+            str(remote_yaml(tmp_path / "waiting.yaml", token_file)),
+            str(path),
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         serving = ""
         while "bridge: serving" not in serving:
@@ -65,6 +77,11 @@ def test_sigterm_while_waiting_for_an_instrument_pc_that_never_connected_aborts_
     assert campaign.returncode == 0, err
     assert out.strip().splitlines()[-1] == "aborted SIGTERM received"
     state = records.rebuild(journal.read(path.with_suffix(".journal"))[0])
-    assert (state.status.value, state.reason, state.n_shots, len(state.failures)) == ("aborted", "SIGTERM received", 0, 0)
+    assert (state.status.value, state.reason, state.n_shots, len(state.failures)) == (
+        "aborted",
+        "SIGTERM received",
+        0,
+        0,
+    )
     with h5py.File(path, "r") as f:
         assert f.attrs["status"] == "aborted"

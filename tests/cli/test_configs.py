@@ -17,8 +17,9 @@ CHECKOUT = sorted(p.stem for p in (ROOT / "data" / "configs").glob("*.yaml"))
 
 
 def noisebo(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "noisebo.cli", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "noisebo.cli", *args], cwd=cwd, capture_output=True, text=True, timeout=300, check=False
+    )
 
 
 def test_the_shipped_configs_are_the_checkouts():
@@ -31,7 +32,9 @@ def test_config_lists_each_with_what_it_is(tmp_path):
     assert out.returncode == 0
     lines = out.stdout.splitlines()
     assert [line.split()[0] for line in lines] == CHECKOUT
-    assert "The paper's Forrester simulation (section 3.1)" in next(line for line in lines if line.startswith("forrester "))
+    assert "The paper's Forrester simulation (section 3.1)" in next(
+        line for line in lines if line.startswith("forrester ")
+    )
 
 
 @pytest.mark.parametrize("name", ["forrester", "forrester.yaml"])
@@ -42,13 +45,19 @@ def test_config_prints_the_file_to_start_from(tmp_path, name):
     assert yaml.safe_load(out.stdout)["name"] == "forrester"
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["config", "nope"], "noisebo: error: no shipped config 'nope'; shipped: branin, forrester,"),
-    (["run", "nope"], "noisebo: error: nope: cannot read config (no such file, and no shipped config of that name; "
-                      "shipped: branin,"),
-    (["run", "sub/forrester"], "noisebo: error: sub/forrester: cannot read config (no such file, and no shipped"),
-    (["start", "nope.yaml"], "noisebo: error: nope.yaml: cannot read config (no such file, and no shipped"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["config", "nope"], "noisebo: error: no shipped config 'nope'; shipped: branin, forrester,"),
+        (
+            ["run", "nope"],
+            "noisebo: error: nope: cannot read config (no such file, and no shipped config of that name; "
+            "shipped: branin,",
+        ),
+        (["run", "sub/forrester"], "noisebo: error: sub/forrester: cannot read config (no such file, and no shipped"),
+        (["start", "nope.yaml"], "noisebo: error: nope.yaml: cannot read config (no such file, and no shipped"),
+    ],
+)
 def test_an_unknown_name_is_one_line_and_exit_2(tmp_path, args, message):
     out = noisebo(*args, cwd=tmp_path)
     assert out.returncode == 2 and out.stderr.startswith(message)

@@ -52,16 +52,25 @@ def _damage(kind: str, path: Path) -> None:
         path.write_bytes(b"%PDF-1.7\n" + bytes(range(256)) * 64)
 
 
-DAMAGES = ["truncated", "metadata byte flipped", "data byte flipped", "superblock zeroed", "empty", "a directory",
-           "another program's file"]
+DAMAGES = [
+    "truncated",
+    "metadata byte flipped",
+    "data byte flipped",
+    "superblock zeroed",
+    "empty",
+    "a directory",
+    "another program's file",
+]
 COMMANDS = [["inspect"], ["inspect", "--json"], ["report"], ["replay"]]
 
 
 @pytest.fixture(scope="module")
 def campaigns(tmp_path_factory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("campaigns")
-    return {"finished": finished(folder / "finished.h5", spectra=False),
-            "killed": killed(folder / "killed.h5", spectra=False)}
+    return {
+        "finished": finished(folder / "finished.h5", spectra=False),
+        "killed": killed(folder / "killed.h5", spectra=False),
+    }
 
 
 def run_cli(argv: list[str], capsys) -> tuple[int, str, float]:
@@ -135,13 +144,15 @@ def test_keep_intact_moves_the_damaged_journal_aside_and_keeps_the_records_befor
     path = tmp_path / "c.h5"
     shutil.copy(campaigns["killed"], path)
     source = campaigns["killed"].with_suffix(".journal")
-    (offset, record), = _journal_offsets(source, 1, seed=3)
+    ((offset, record),) = _journal_offsets(source, 1, seed=3)
     data = bytearray(source.read_bytes())
     data[offset] ^= 0xFF
     path.with_suffix(".journal").write_bytes(bytes(data))
     assert main(["rebuild", str(path), "--keep-intact"]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert f"record {record} (at byte " in out[0] and out[1].startswith(f"moved it to {path}.journal.damaged"[:-len("c.h5.journal.damaged")])
+    assert f"record {record} (at byte " in out[0] and out[1].startswith(
+        f"moved it to {path}.journal.damaged"[: -len("c.h5.journal.damaged")]
+    )
     assert Path(f"{path.with_suffix('.journal')}.damaged").read_bytes() == bytes(data)
     kept, _, damage = journal.scan(path.with_suffix(".journal"))
     assert damage is None and len(kept) == record

@@ -28,8 +28,13 @@ def cli_env(tmp_path: Path, api_url: str) -> dict[str, str]:
 
 
 def start_run(config: Path, tmp_path: Path, env: dict[str, str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(config), "--out", str(tmp_path / "runs"),
-                             "--no-rrd"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "noisebo.cli.main", "run", str(config), "--out", str(tmp_path / "runs"), "--no-rrd"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def wait_for_line(stream, prefix: str) -> str:
@@ -92,8 +97,9 @@ def test_an_unreachable_prefect_server_is_one_line_and_a_log(tiny_config, tmp_pa
     run = start_run(config, tmp_path, cli_env(tmp_path, f"http://127.0.0.1:{closed_port()}/api"))
     _, stderr = run.communicate(timeout=300)
     assert run.returncode == 3
-    assert_one_line_naming_a_log(stderr, tmp_path, "noisebo: error: RuntimeError: Failed to reach API at",
-                                 "httpx.ConnectError")
+    assert_one_line_naming_a_log(
+        stderr, tmp_path, "noisebo: error: RuntimeError: Failed to reach API at", "httpx.ConnectError"
+    )
 
 
 def test_a_failing_flow_is_one_line_without_prefects_traceback(tiny_config, tmp_path, prefect_harness):
@@ -101,8 +107,9 @@ def test_a_failing_flow_is_one_line_without_prefects_traceback(tiny_config, tmp_
     run = start_run(config, tmp_path, cli_env(tmp_path, prefect_harness))
     _, stderr = run.communicate(timeout=300)
     assert run.returncode == 3
-    assert_one_line_naming_a_log(stderr, tmp_path, "noisebo: stopped: failure budget exceeded",
-                                 "noisebo.failures.FailureBudgetExceeded")
+    assert_one_line_naming_a_log(
+        stderr, tmp_path, "noisebo: stopped: failure budget exceeded", "noisebo.failures.FailureBudgetExceeded"
+    )
     assert "Encountered exception during execution" in (next((tmp_path / "logs").glob("*.log"))).read_text()
 
 
@@ -114,12 +121,17 @@ def test_a_bridge_port_in_use_is_one_line_without_prefects_traceback(tiny_config
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         remote = load_config(root / "data" / "configs" / "forrester_remote.yaml")
-        config = remote.with_overrides(space=tiny_config.space.model_dump(), schedule=tiny_config.schedule.model_dump(),
-                                       instrument={"settings": {"port": taken.getsockname()[1]}})
+        config = remote.with_overrides(
+            space=tiny_config.space.model_dump(),
+            schedule=tiny_config.schedule.model_dump(),
+            instrument={"settings": {"port": taken.getsockname()[1]}},
+        )
         path = tmp_path / "remote.yaml"
         path.write_text(yaml.safe_dump(config.model_dump(mode="json")))
         env = cli_env(tmp_path, prefect_harness) | {"NOISEBO_BRIDGE_TOKEN": "t" * 32}
         run = start_run(path, tmp_path, env)
         _, stderr = run.communicate(timeout=300)
     assert run.returncode == 3
-    assert_one_line_naming_a_log(stderr, tmp_path, "noisebo: error: the bridge cannot listen on", "InstrumentUnavailable")
+    assert_one_line_naming_a_log(
+        stderr, tmp_path, "noisebo: error: the bridge cannot listen on", "InstrumentUnavailable"
+    )

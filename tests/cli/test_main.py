@@ -73,7 +73,10 @@ CASES = [
     (["run", "empty.yaml"], "empty.yaml: the file is empty"),
     (["run", "broken.yaml"], "broken.yaml: not valid YAML at line 2"),
     (["run", "inverted.yaml"], "t_min (5.0) must be below t_max (1.0)"),
-    (["run", "laser.yaml"], "instrument.kind: no installed instrument driver 'laser'; installed: branin, forrester, manual, pfm, remote"),
+    (
+        ["run", "laser.yaml"],
+        "instrument.kind: no installed instrument driver 'laser'; installed: branin, forrester, manual, pfm, remote",
+    ),
     (["run", "bad_setting.yaml"], "instrument.settings.a0: Input should be greater than or equal to 0"),
     (["run", "unknown_setting.yaml"], "instrument.settings.colour: Extra inputs are not permitted"),
     (["run", "v1_layout.yaml"], "instrument.a0: Extra inputs are not permitted (a driver's own settings go under"),
@@ -94,7 +97,10 @@ CASES = [
     (["inspect", "future.h5"], "schema version 99"),
     (["sweep", "TINY", "--seeds", "a-b"], "--seeds 'a-b'"),
     (["sweep", "TINY", "--seeds", "1", "--workers", "0"], "--workers must be at least 1"),
-    (["inspect", "truncated.h5"], "truncated.h5: damaged campaign file (Unable to synchronously open file (truncated file"),
+    (
+        ["inspect", "truncated.h5"],
+        "truncated.h5: damaged campaign file (Unable to synchronously open file (truncated file",
+    ),
     (["resume", "truncated.h5"], "cannot resume truncated.h5"),
     (["report", "truncated.h5"], "truncated.h5: damaged campaign file (Unable to synchronously open file (truncated"),
     (["report", "empty.h5"], "empty file (0 bytes)"),
@@ -142,7 +148,9 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
     assert [p["step"] for p in data["points"]] == [0, 0, 0, 1, 2, 3, 4]
     assert {"x", "t", "n_shots", "value", "noise", "t_opt"} <= set(data["points"][3])
     assert data["points"][0]["t_opt"] is None and data["points"][3]["t_opt"] is not None
-    assert data["first_converged_step"] is None or 3 <= data["first_converged_step"] <= 4  # window 3: step 3 at the earliest
+    assert (
+        data["first_converged_step"] is None or 3 <= data["first_converged_step"] <= 4
+    )  # window 3: step 3 at the earliest
     assert main(["inspect", path]) == 0
     text = capsys.readouterr().out
     assert "status completed" in text and "t_opt (s)" in text
@@ -158,14 +166,18 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
     assert (tmp_path / "figs" / "tiny_reward_s0002_report.png").exists()
 
 
-@pytest.mark.parametrize("argv, env, message", [
-    (["serve", "TINY"], None, "serve needs a Prefect server"),
-    (["serve", "TINY", "--interval", "-5"], "http://127.0.0.1:9/api", "--interval must be a positive"),
-    (["serve", "broken.yaml"], "http://127.0.0.1:9/api", "not valid YAML"),
-    (["serve", "TINY", "--cron", "0 2 * * *", "--interval", "60"], None, "not allowed with argument"),
-])
-def test_serve_refuses_bad_input_before_registering_anything(argv, env, message, tmp_path, tiny_yaml, monkeypatch,
-                                                             capsys):
+@pytest.mark.parametrize(
+    "argv, env, message",
+    [
+        (["serve", "TINY"], None, "serve needs a Prefect server"),
+        (["serve", "TINY", "--interval", "-5"], "http://127.0.0.1:9/api", "--interval must be a positive"),
+        (["serve", "broken.yaml"], "http://127.0.0.1:9/api", "not valid YAML"),
+        (["serve", "TINY", "--cron", "0 2 * * *", "--interval", "60"], None, "not allowed with argument"),
+    ],
+)
+def test_serve_refuses_bad_input_before_registering_anything(
+    argv, env, message, tmp_path, tiny_yaml, monkeypatch, capsys
+):
     setup_files(tmp_path, tiny_yaml)
     monkeypatch.chdir(tmp_path)
     if env is None:
@@ -225,7 +237,7 @@ def test_a_schema_3_file_and_its_campaign_written_anew_inspect_the_same(tmp_path
         text = capsys.readouterr().out
         assert "noise model converged at step 3;" in text
         lines = text.splitlines()
-        table = lines[[line.split()[0] for line in lines].index("step") + 1:][:7]
+        table = lines[[line.split()[0] for line in lines].index("step") + 1 :][:7]
         assert [line.split()[0] for line in table] == ["seed"] * 3 + ["1", "2", "3", "4"]
     assert (seen[old]["schema_version"], seen[new]["schema_version"]) == (3, 4)
     for summary in seen.values():
@@ -242,13 +254,20 @@ def test_a_temporary_server_that_does_not_start_in_time_is_one_line_and_no_file(
 
     env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
     env.update(PREFECT_HOME=str(tmp_path / "prefect"), PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS="1")
-    done = subprocess.run([sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs")],
-                          env=env, capture_output=True, text=True, timeout=300, check=False)
+    done = subprocess.run(
+        [sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 3
     assert done.stderr.splitlines() == [
         "noisebo: error: Prefect's temporary local server did not answer within 1 s (is the machine busy?); allow it "
         "longer with PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS=300, or start a server once with `prefect server "
-        "start --host 127.0.0.1` and export PREFECT_API_URL=http://127.0.0.1:4200/api; nothing was measured"]
+        "start --host 127.0.0.1` and export PREFECT_API_URL=http://127.0.0.1:4200/api; nothing was measured"
+    ]
     assert not (tmp_path / "runs").exists()
 
 
@@ -264,8 +283,10 @@ def test_a_spent_budget_is_resumed_only_with_a_larger_one(tiny_config, tmp_path,
     record = read_record(path)
     assert record.status == "budget_spent" and record.budget_s == 60.0 and spent <= 60.0
     before = snapshot(tmp_path)
-    for argv, message in ((["resume", str(path)], "continue it with a larger budget"),
-                          (["resume", str(path), "--budget-s", "30"], f"it has spent {spent:.4g} s already")):
+    for argv, message in (
+        (["resume", str(path)], "continue it with a larger budget"),
+        (["resume", str(path), "--budget-s", "30"], f"it has spent {spent:.4g} s already"),
+    ):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and message in err

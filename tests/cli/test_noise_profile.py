@@ -27,8 +27,11 @@ def campaigns(tmp_path_factory, tiny_config):
     folder = tmp_path_factory.mktemp("profiles")
     config = tiny_config.with_overrides(schedule={"n_steps": 2})
     other = config.with_overrides(instrument={"kind": "forrester", "settings": {"a0": 0.5, "a1": 1.0}})
-    return {"a": finished(folder / "a.h5", config, 1), "b": finished(folder / "b.h5", config, 2),
-            "other": finished(folder / "other.h5", other, 3)}
+    return {
+        "a": finished(folder / "a.h5", config, 1),
+        "b": finished(folder / "b.h5", config, 2),
+        "other": finished(folder / "other.h5", other, 3),
+    }
 
 
 def test_a_profile_pools_the_campaigns_noise_measurements(campaigns, tmp_path, capsys):

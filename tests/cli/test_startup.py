@@ -11,7 +11,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 HEAVY = ["jax", "prefect", "numpyro", "fastapi", "matplotlib", "rerun"]
-LOADED_AFTER = """
+LOADED_AFTER = (
+    """
 import json, sys
 from noisebo.cli.main import main
 try:
@@ -19,12 +20,15 @@ try:
 except SystemExit as stop:
     code = stop.code
 print(json.dumps({"code": code, "loaded": [m for m in %r if m in sys.modules]}))
-""" % HEAVY
+"""
+    % HEAVY
+)
 
 
 def loaded_after(args: list[str], cwd: Path) -> dict:
-    out = subprocess.run([sys.executable, "-c", LOADED_AFTER, *args], cwd=cwd, capture_output=True, text=True,
-                         timeout=300, check=False)
+    out = subprocess.run(
+        [sys.executable, "-c", LOADED_AFTER, *args], cwd=cwd, capture_output=True, text=True, timeout=300, check=False
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -32,8 +36,21 @@ def loaded_after(args: list[str], cwd: Path) -> dict:
 def started_file(tmp_path_factory):
     """A campaign measured by hand, as `noisebo start` makes it (running, nothing measured)."""
     where = tmp_path_factory.mktemp("started")
-    subprocess.run([sys.executable, "-m", "noisebo.cli", "start", str(ROOT / "data" / "configs" / "forrester_manual.yaml"),
-                    "--out", str(where)], capture_output=True, text=True, timeout=300, check=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "noisebo.cli",
+            "start",
+            str(ROOT / "data" / "configs" / "forrester_manual.yaml"),
+            "--out",
+            str(where),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
     return next(where.glob("*.h5"))
 
 
@@ -56,20 +73,29 @@ def test_a_journals_config_is_checked_by_name_without_loading_its_plugins(tiny_c
     stored = tiny_config.model_dump(mode="json")
     assert parse_config(stored, "journal", load_plugins=False) == tiny_config
     stored["acquisition"]["policy"] = "no_such_policy"
-    with pytest.raises(ConfigError, match="journal: acquisition.policy: no installed policy 'no_such_policy'; installed: "):
+    with pytest.raises(
+        ConfigError, match="journal: acquisition.policy: no installed policy 'no_such_policy'; installed: "
+    ):
         parse_config(stored, "journal", load_plugins=False)
 
 
 def test_a_bad_config_is_still_one_line_and_exit_2(tmp_path):
     """ConfigError is caught although the CLI imports noisebo.config only when a command loads one."""
     (tmp_path / "bad.yaml").write_text("name: bad\nspace: {n_x: -1}\n")
-    out = subprocess.run([sys.executable, "-m", "noisebo.cli", "run", "bad.yaml"], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=300, check=False)
+    out = subprocess.run(
+        [sys.executable, "-m", "noisebo.cli", "run", "bad.yaml"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert out.returncode == 2
     assert out.stderr.startswith("noisebo: error: bad.yaml") and len(out.stderr.strip().splitlines()) == 1
 
 
 def test_version_is_the_installed_distributions():
-    out = subprocess.run([sys.executable, "-m", "noisebo.cli", "--version"], capture_output=True, text=True,
-                         timeout=120, check=True)
+    out = subprocess.run(
+        [sys.executable, "-m", "noisebo.cli", "--version"], capture_output=True, text=True, timeout=120, check=True
+    )
     assert out.stdout.strip() == f"noisebo {importlib.metadata.version('noisebo')}"

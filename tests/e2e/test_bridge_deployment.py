@@ -19,14 +19,33 @@ def test_a_deployment_run_serves_its_instrument_through_the_bridge(prefect_serve
     config = write_remote_config(tmp_path / "killed.yaml", port)
     env = {**prefect_server, "NOISEBO_BRIDGE_TOKEN": "deployment-token"}
     out, serve_log = tmp_path / "runs", tmp_path / "serve.log"
-    server = start([str(BIN / "noisebo"), "serve", str(config), "--out", str(out), "--sweep-seeds", "0"], env, serve_log)
+    server = start(
+        [str(BIN / "noisebo"), "serve", str(config), "--out", str(out), "--sweep-seeds", "0"], env, serve_log
+    )
     try:
-        listed = lambda: "campaign/killed" in subprocess.run(  # noqa: E731
-            [str(BIN / "prefect"), "deployment", "ls"], env=env, capture_output=True, text=True, check=False).stdout
+
+        def listed() -> bool:
+            ls = [str(BIN / "prefect"), "deployment", "ls"]
+            return "campaign/killed" in subprocess.run(ls, env=env, capture_output=True, text=True, check=False).stdout
+
         wait_for(listed, 180, "the deployments to register", [serve_log])
-        run = subprocess.Popen([str(BIN / "prefect"), "deployment", "run", "campaign/killed", "--param", f"seed={SEED}",
-                                "--watch", "--watch-timeout", "600"], env=env, stdout=subprocess.PIPE,
-                               stderr=subprocess.STDOUT, text=True)
+        run = subprocess.Popen(
+            [
+                str(BIN / "prefect"),
+                "deployment",
+                "run",
+                "campaign/killed",
+                "--param",
+                f"seed={SEED}",
+                "--watch",
+                "--watch-timeout",
+                "600",
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         client = start_client(f"http://127.0.0.1:{port}", capture=True)
         watched, _ = run.communicate(timeout=660)
         served, err = client.communicate(timeout=60)

@@ -24,7 +24,8 @@ pytestmark = pytest.mark.e2e
 
 @pytest.mark.parametrize("seed", [12])  # about 60 s a seed; more seeds kill at more moments
 def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_pc_keeps_serving(
-        seed, tmp_path, prefect_server, monkeypatch):
+    seed, tmp_path, prefect_server, monkeypatch
+):
     monkeypatch.setenv("NOISEBO_BRIDGE_TOKEN", "kill-test-token")
     port = free_port()
     config = write_remote_config(tmp_path / "killed.yaml", port)
@@ -48,8 +49,9 @@ def test_the_campaign_killed_at_random_moments_and_resumed_while_the_instrument_
             campaign.send_signal(signal.SIGKILL)
             campaign.wait()
             assert client.poll() is None, f"the instrument PC's process ended: {client.communicate()}"
-        done = subprocess.run([*cli, "resume", str(path), "--no-rrd"], env=env, capture_output=True, text=True,
-                              timeout=300, check=False)
+        done = subprocess.run(
+            [*cli, "resume", str(path), "--no-rrd"], env=env, capture_output=True, text=True, timeout=300, check=False
+        )
         assert done.returncode == 0, done.stderr[-3000:]
         served, err = client.communicate(timeout=60)
     finally:

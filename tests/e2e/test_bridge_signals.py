@@ -25,8 +25,13 @@ def test_sigterm_while_noisebo_run_waits_for_the_instrument_pc_aborts_within_2_s
     config = write_remote_config(tmp_path / "killed.yaml", port)
     path = tmp_path / "runs" / "killed_reward_s0000.h5"
     env = {**os.environ, **prefect_server, "NOISEBO_BRIDGE_TOKEN": TOKEN}
-    campaign = subprocess.Popen([*CLI, "run", str(config), "--out", str(tmp_path / "runs"), "--no-rrd"], env=env,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    campaign = subprocess.Popen(
+        [*CLI, "run", str(config), "--out", str(tmp_path / "runs"), "--no-rrd"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         deadline = time.monotonic() + 240
         while not path.with_suffix(".journal").exists() or _now(port) != "measuring":
@@ -62,11 +67,19 @@ def test_a_short_token_off_loopback_stops_noisebo_run_in_one_line(tmp_path, pref
     data["instrument"]["settings"].update(host="0.0.0.0", token_file=str(tmp_path / "bridge.token"))
     config.write_text(yaml.safe_dump(data))
     env = {**os.environ, **prefect_server, "NOISEBO_BRIDGE_TOKEN": "too-short"}
-    done = subprocess.run([*CLI, "run", str(config), "--out", str(tmp_path / "runs"), "--no-rrd"], env=env,
-                          capture_output=True, text=True, timeout=300, check=False)
+    done = subprocess.run(
+        [*CLI, "run", str(config), "--out", str(tmp_path / "runs"), "--no-rrd"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 3
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, done.stderr
-    assert lines[0].startswith("noisebo: error: instrument.settings.host 0.0.0.0 lets other computers reach the bridge, "
-                               "which then needs a token of at least 32 characters; $NOISEBO_BRIDGE_TOKEN holds one of 9")
+    assert lines[0].startswith(
+        "noisebo: error: instrument.settings.host 0.0.0.0 lets other computers reach the bridge, "
+        "which then needs a token of at least 32 characters; $NOISEBO_BRIDGE_TOKEN holds one of 9"
+    )
     assert not (tmp_path / "runs").exists() and not (tmp_path / "bridge.token").exists()

@@ -27,11 +27,29 @@ def served(prefect_server, tiny_config, tmp_path_factory):
     config = tmp / "tiny.yaml"
     config.write_text(yaml.safe_dump(tiny_config.model_dump(mode="json")))
     out, serve_log = tmp / "runs", tmp / "serve.log"
-    process = start([str(BIN / "noisebo"), "serve", str(config), "--out", str(out), "--sweep-seeds", "0-1",
-                     "--sweep-policy", "reward", "--interval", "60"], env, serve_log)
+    process = start(
+        [
+            str(BIN / "noisebo"),
+            "serve",
+            str(config),
+            "--out",
+            str(out),
+            "--sweep-seeds",
+            "0-1",
+            "--sweep-policy",
+            "reward",
+            "--interval",
+            "60",
+        ],
+        env,
+        serve_log,
+    )
     try:
-        listed = lambda: "campaign/tiny" in subprocess.run(  # noqa: E731
-            [str(BIN / "prefect"), "deployment", "ls"], env=env, capture_output=True, text=True).stdout
+
+        def listed() -> bool:
+            ls = [str(BIN / "prefect"), "deployment", "ls"]
+            return "campaign/tiny" in subprocess.run(ls, env=env, capture_output=True, text=True).stdout
+
         wait_for(listed, 180, "the deployments to register", [serve_log])
         yield env, out, serve_log
     finally:
@@ -41,9 +59,23 @@ def served(prefect_server, tiny_config, tmp_path_factory):
 def test_deployment_run_with_a_parameter_runs_the_campaign(served, tiny_config):
     env, out, serve_log = served
     for _ in range(2):  # the same seed twice: each run in a folder of its own
-        run = subprocess.run([str(BIN / "prefect"), "deployment", "run", "campaign/tiny", "--param", "seed=3",
-                              "--watch", "--watch-timeout", "600"], env=env, capture_output=True, text=True,
-                             timeout=660)
+        run = subprocess.run(
+            [
+                str(BIN / "prefect"),
+                "deployment",
+                "run",
+                "campaign/tiny",
+                "--param",
+                "seed=3",
+                "--watch",
+                "--watch-timeout",
+                "600",
+            ],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=660,
+        )
         assert run.returncode == 0, run.stdout + run.stderr + serve_log.read_text()[-3000:]
         assert "COMPLETED" in (run.stdout + run.stderr).upper()
     files = sorted(out.glob("tiny-reward-s3-*/tiny_reward_s0003.h5"))
@@ -60,8 +92,9 @@ def test_the_scheduled_sweep_runs_by_itself_and_summarises(served, tiny_config):
     summaries = lambda: sorted((out / "sweep-tiny").glob("*/sweep_summary.md"))  # noqa: E731
     wait_for(lambda: bool(summaries()), 420, "the scheduled sweep", [serve_log])
     sweep_dir = summaries()[0].parent  # OUT/sweep-tiny/<scheduled start>
-    inspect = subprocess.run([str(BIN / "prefect"), "deployment", "inspect", "sweep/tiny"], env=env,
-                             capture_output=True, text=True)
+    inspect = subprocess.run(
+        [str(BIN / "prefect"), "deployment", "inspect", "sweep/tiny"], env=env, capture_output=True, text=True
+    )
     assert "interval" in inspect.stdout and "60" in inspect.stdout
     assert (sweep_dir / "convergence_steps.png").exists()
     alone = run_campaign(tiny_config, build(tiny_config.instrument), 1)

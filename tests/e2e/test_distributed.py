@@ -20,9 +20,27 @@ def test_a_dask_sweep_equals_each_seed_alone(prefect_server, tiny_config, tmp_pa
     config = tmp_path / "tiny.yaml"
     config.write_text(yaml.safe_dump(tiny_config.model_dump(mode="json")))
     out = tmp_path / "sweep"
-    done = subprocess.run([str(BIN / "noisebo"), "sweep", str(config), "--seeds", "0-1", "--policy", "both",
-                           "--runner", "dask", "--workers", "2", "--out", str(out)],
-                          env=prefect_server, capture_output=True, text=True, timeout=900)
+    done = subprocess.run(
+        [
+            str(BIN / "noisebo"),
+            "sweep",
+            str(config),
+            "--seeds",
+            "0-1",
+            "--policy",
+            "both",
+            "--runner",
+            "dask",
+            "--workers",
+            "2",
+            "--out",
+            str(out),
+        ],
+        env=prefect_server,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     assert "on 2 local Dask worker processes" in done.stdout
     for policy in ("reward", "double"):
@@ -39,19 +57,42 @@ def test_a_sweep_on_two_prefect_workers_equals_each_seed_alone(prefect_server, t
     config = tmp_path / "tiny.yaml"
     config.write_text(yaml.safe_dump(tiny_config.model_dump(mode="json")))
     env = prefect_server
-    deployed = subprocess.run([str(BIN / "noisebo"), "deploy", str(config), "--pool", "e2e-pool",
-                               "--out", str(tmp_path / "unused")], env=env, capture_output=True, text=True, timeout=300)
+    deployed = subprocess.run(
+        [str(BIN / "noisebo"), "deploy", str(config), "--pool", "e2e-pool", "--out", str(tmp_path / "unused")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert deployed.returncode == 0, deployed.stdout + deployed.stderr
     logs = [tmp_path / f"worker{i}.log" for i in (1, 2)]
     worker_env = dict(env, PREFECT_LOGGING_LEVEL="INFO")  # their logs name the runs they take
-    workers = [start([str(BIN / "prefect"), "worker", "start", "--pool", "e2e-pool", "--limit", "1"], worker_env, log)
-               for log in logs]
+    workers = [
+        start([str(BIN / "prefect"), "worker", "start", "--pool", "e2e-pool", "--limit", "1"], worker_env, log)
+        for log in logs
+    ]
     try:
         wait_for(lambda: all("started" in log.read_text() for log in logs), 120, "two workers", logs)
         out = tmp_path / "sweep"
-        done = subprocess.run([str(BIN / "noisebo"), "sweep", str(config), "--seeds", "0-2", "--policy", "reward",
-                               "--runner", "workers", "--out", str(out)],
-                              env=env, capture_output=True, text=True, timeout=900)
+        done = subprocess.run(
+            [
+                str(BIN / "noisebo"),
+                "sweep",
+                str(config),
+                "--seeds",
+                "0-2",
+                "--policy",
+                "reward",
+                "--runner",
+                "workers",
+                "--out",
+                str(out),
+            ],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
         assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     finally:
         for worker in workers:

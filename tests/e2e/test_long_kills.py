@@ -22,8 +22,7 @@ pytestmark = pytest.mark.e2e
 
 SEED = 5
 POINTS = 200
-CONFIG = validated(load_config("data/configs/pfm.yaml").with_overrides(
-    name="long", schedule={"n_steps": POINTS - 3}))
+CONFIG = validated(load_config("data/configs/pfm.yaml").with_overrides(name="long", schedule={"n_steps": POINTS - 3}))
 
 
 @pytest.fixture(scope="module")
@@ -39,8 +38,9 @@ def long_yaml(tmp_path):
 
 
 def noisebo(args, env):
-    return subprocess.run([sys.executable, "-m", "noisebo.cli.main", *args], env=env, capture_output=True, text=True,
-                          timeout=900)
+    return subprocess.run(
+        [sys.executable, "-m", "noisebo.cli.main", *args], env=env, capture_output=True, text=True, timeout=900
+    )
 
 
 def assert_equals_reference(path, final):

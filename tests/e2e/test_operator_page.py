@@ -27,7 +27,16 @@ if str(BENCHMARKS) not in sys.path:
     sys.path.append(str(BENCHMARKS))  # the screenshot script's campaign and Chromium helpers
 
 from screenshot_operator_page import (  # noqa: E402
-    CONFIG, WINDOW, ChromiumMissing, chromium_run, find_chromium, page_text, rendered, running_campaign, screenshot)
+    CONFIG,
+    WINDOW,
+    ChromiumMissing,
+    chromium_run,
+    find_chromium,
+    page_text,
+    rendered,
+    running_campaign,
+    screenshot,
+)
 
 pytestmark = pytest.mark.e2e
 HELD_AT = 8  # points measured when the page is loaded: 3 seed points and 5 BO steps
@@ -78,9 +87,14 @@ def test_chromium_renders_the_page_of_the_running_campaign(campaign, chromium, t
     assert colours is None or len(colours) > 50, "the screenshot is (nearly) one colour"  # not a blank page
 
 
-@pytest.mark.parametrize(("query", "headers", "code"), [
-    ("", {}, 401), ("?token=wrong-token", {}, 403), ("", {"Authorization": "Bearer wrong-token"}, 403),
-])
+@pytest.mark.parametrize(
+    ("query", "headers", "code"),
+    [
+        ("", {}, 401),
+        ("?token=wrong-token", {}, 403),
+        ("", {"Authorization": "Bearer wrong-token"}, 403),
+    ],
+)
 def test_the_page_without_the_token_or_with_a_wrong_one_shows_nothing_of_the_campaign(campaign, query, headers, code):
     status, body = get(f"{campaign.url}/{query}", headers)
     assert status == code
@@ -88,10 +102,14 @@ def test_the_page_without_the_token_or_with_a_wrong_one_shows_nothing_of_the_cam
     assert "forrester" not in body and campaign.token not in body
 
 
-@pytest.mark.parametrize(("query", "headers", "code"), [
-    ("", {}, 401), ("", {"Authorization": "Bearer wrong-token"}, 403),
-    ("?token={token}", {}, 401),  # the token in a URL opens the page only
-])
+@pytest.mark.parametrize(
+    ("query", "headers", "code"),
+    [
+        ("", {}, 401),
+        ("", {"Authorization": "Bearer wrong-token"}, 403),
+        ("?token={token}", {}, 401),  # the token in a URL opens the page only
+    ],
+)
 def test_the_status_without_the_token_or_with_a_wrong_one_gives_no_campaign_data(campaign, query, headers, code):
     status, body = get(f"{campaign.url}/status{query.format(token=campaign.token)}", headers)
     assert status == code

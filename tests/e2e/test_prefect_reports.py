@@ -25,9 +25,25 @@ def write_config(path: Path, config) -> Path:
 
 
 def noisebo_run(env, config: Path, out: Path, seed: int) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "noisebo.cli.main", "run", str(config), "--seed", str(seed), "--out", str(out),
-                           "--no-rrd"], env=env, capture_output=True, text=True, timeout=600,
-                          cwd=Path(__file__).resolve().parents[2])
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "noisebo.cli.main",
+            "run",
+            str(config),
+            "--seed",
+            str(seed),
+            "--out",
+            str(out),
+            "--no-rrd",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=Path(__file__).resolve().parents[2],
+    )
 
 
 @pytest.fixture(scope="module")
@@ -52,8 +68,9 @@ def flow_run_named(api, name: str):
 def events_named(api, name: str, resource: str) -> list:
     from prefect.events.filters import EventFilter, EventNameFilter, EventResourceFilter
 
-    page = api.read_events(EventFilter(event=EventNameFilter(name=[name]),
-                                       resource=EventResourceFilter(id=[resource])), limit=50)
+    page = api.read_events(
+        EventFilter(event=EventNameFilter(name=[name]), resource=EventResourceFilter(id=[resource])), limit=50
+    )
     return page.events
 
 
@@ -71,8 +88,9 @@ def task_run_names(api, flow_run_id, expected: int) -> list[str]:
     def runs():
         return api.read_task_runs(flow_run_filter=FlowRunFilter(id=FlowRunFilterId(any_=[flow_run_id])), limit=200)
 
-    wait_for(lambda: sum(r.state is not None and r.state.is_final() for r in runs()) >= expected, 60,
-             f"{expected} task runs")
+    wait_for(
+        lambda: sum(r.state is not None and r.state.is_final() for r in runs()) >= expected, 60, f"{expected} task runs"
+    )
     return sorted(r.name for r in runs())
 
 
@@ -86,8 +104,9 @@ def test_a_campaign_is_named_tagged_logged_summarised_and_announced(prefect_serv
     run = noisebo_run(prefect_server, write_config(tmp_path / "tiny.yaml", tiny_config), tmp_path / "runs", 4)
     assert run.returncode == 0, run.stdout + run.stderr
     path = tmp_path / "runs" / "tiny_reward_s0004.h5"
-    assert [line.split(":")[0] for line in run.stdout.splitlines() if line.startswith(("seed point", "step "))] == \
-        ["seed point"] * 3 + [f"step {k}/4" for k in range(1, 5)]  # the terminal's lines as before
+    assert [line.split(":")[0] for line in run.stdout.splitlines() if line.startswith(("seed point", "step "))] == [
+        "seed point"
+    ] * 3 + [f"step {k}/4" for k in range(1, 5)]  # the terminal's lines as before
 
     flow_run = flow_run_named(api, "tiny-reward-s4")
     assert flow_run.state.is_completed()
@@ -98,8 +117,9 @@ def test_a_campaign_is_named_tagged_logged_summarised_and_announced(prefect_serv
     assert count(names, "measure x=") == 7 and sum("(seed point " in name for name in names) == 3
     assert [name for name in names if name.startswith("fit GP")] == [f"fit GP n={n}" for n in range(3, 7)]
     assert count(names, "fit noise model n=") == 4 and count(names, "fit SHO") == 0  # scalar readings
-    assert sorted(name.split(" -> ")[0] for name in names if name.startswith("acquire")) == \
-        [f"acquire step {k}/4" for k in range(1, 5)]
+    assert sorted(name.split(" -> ")[0] for name in names if name.startswith("acquire")) == [
+        f"acquire step {k}/4" for k in range(1, 5)
+    ]
     assert all(" -> x=" in name for name in names if name.startswith("acquire"))  # renamed by what it chose
 
     wanted = lambda: len([log for log in logs_of(api, flow_run.id) if log.name == "noisebo.campaign"]) >= 9  # noqa: E731
@@ -110,7 +130,9 @@ def test_a_campaign_is_named_tagged_logged_summarised_and_announced(prefect_serv
     assert "campaign completed" in lines
     assert sum("the first decision in a process compiles the models" in line for line in lines) == 1
 
-    artifacts = api.read_artifacts(artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[flow_run.id])))
+    artifacts = api.read_artifacts(
+        artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[flow_run.id]))
+    )
     by_key = {a.key: a for a in artifacts if a.key}
     assert set(by_key) == {"tiny-reward-s4-progress", "tiny-reward-s4-summary", "tiny-reward-s4-points"}
     assert by_key["tiny-reward-s4-progress"].type == "progress" and float(by_key["tiny-reward-s4-progress"].data) == 100
@@ -133,7 +155,8 @@ def test_a_spectra_campaign_fits_each_points_sweeps_in_a_task(prefect_server, ap
 
     root = Path(__file__).resolve().parents[2]
     config = load_config(root / "data" / "configs" / "pfm.yaml").with_overrides(
-        name="pfm_small", space={"n_x": 40, "n_t": 30}, schedule={"n_seed": 3, "n_steps": 1, "shots_before": 4})
+        name="pfm_small", space={"n_x": 40, "n_t": 30}, schedule={"n_seed": 3, "n_steps": 1, "shots_before": 4}
+    )
     run = noisebo_run(prefect_server, write_config(tmp_path / "pfm_small.yaml", config), tmp_path / "runs", 0)
     assert run.returncode == 0, run.stdout + run.stderr
     flow_run = flow_run_named(api, "pfm_small-double-s0")
@@ -150,8 +173,9 @@ def test_a_failed_campaign_says_why_and_an_automation_reacts(prefect_server, api
 
     from noisebo.flows.reporting import failed_campaign_trigger
 
-    automation = Automation(name="tiny campaign failed", trigger=failed_campaign_trigger("tiny"),
-                            actions=[DoNothing()]).create()
+    automation = Automation(
+        name="tiny campaign failed", trigger=failed_campaign_trigger("tiny"), actions=[DoNothing()]
+    ).create()
     failing = tiny_config.with_overrides(instrument={"kind": "forrester", "faults": {"exception": 1.0}})
     run = noisebo_run(prefect_server, write_config(tmp_path / "tiny.yaml", failing), tmp_path / "runs", 6)
     assert run.returncode == 3, run.stdout + run.stderr

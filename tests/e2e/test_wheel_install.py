@@ -42,8 +42,9 @@ class Installed:
 
     def command(self, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
         """``args`` run in the installed environment (its bin/ first on PATH), from ``work``."""
-        done = subprocess.run(list(args), cwd=self.work, env=self.env, capture_output=True, text=True,
-                              timeout=timeout, check=False)
+        done = subprocess.run(
+            list(args), cwd=self.work, env=self.env, capture_output=True, text=True, timeout=timeout, check=False
+        )
         assert done.returncode == 0, f"{args} exited {done.returncode}\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
         return done
 
@@ -62,11 +63,19 @@ def isolated_environment(venv: Path, home: Path) -> dict[str, str]:
     noisebo's own variables, any variable naming the checkout), with the new environment's bin/ first on PATH and a home of its own,
     so that the installed noisebo keeps its state under HOME/.noisebo."""
     dropped = ("PYTHONPATH", "PYTHONHOME", "PYTHONSTARTUP", "PYTHONUSERBASE", "VIRTUAL_ENV", "CONDA_PREFIX")
-    env = {k: v for k, v in os.environ.items()
-           if k not in dropped and not k.startswith(("PREFECT_", "NOISEBO_", "PYTEST_")) and str(ROOT) not in v}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in dropped and not k.startswith(("PREFECT_", "NOISEBO_", "PYTEST_")) and str(ROOT) not in v
+    }
     path = [p for p in env.get("PATH", "").split(os.pathsep) if p and outside_the_checkout(Path(p))]
-    env.update(PATH=os.pathsep.join([str(venv / "bin"), *path]), HOME=str(home), PYTHONNOUSERSITE="1",
-               TQDM_DISABLE="1", DO_NOT_TRACK="1")
+    env.update(
+        PATH=os.pathsep.join([str(venv / "bin"), *path]),
+        HOME=str(home),
+        PYTHONNOUSERSITE="1",
+        TQDM_DISABLE="1",
+        DO_NOT_TRACK="1",
+    )
     return env
 
 
@@ -87,9 +96,15 @@ def installed(tmp_path_factory) -> Iterator[Installed]:
     subprocess.run([base_python, "-m", "venv", str(venv)], check=True, capture_output=True, timeout=300, cwd=work)
     env = isolated_environment(venv, home)
     pip_env = {**env, "HOME": os.environ.get("HOME", str(home))}  # pip's own cache and settings
-    done = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "-q", "--disable-pip-version-check",
-                           str(wheel)], cwd=work, env=pip_env, capture_output=True, text=True,
-                          timeout=INSTALL_TIMEOUT_S, check=False)
+    done = subprocess.run(
+        [str(venv / "bin" / "python"), "-m", "pip", "install", "-q", "--disable-pip-version-check", str(wheel)],
+        cwd=work,
+        env=pip_env,
+        capture_output=True,
+        text=True,
+        timeout=INSTALL_TIMEOUT_S,
+        check=False,
+    )
     assert done.returncode == 0, f"pip install of {wheel.name} failed\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
     yield Installed(wheel, venv, work, env)
     shutil.rmtree(venv, ignore_errors=True)
@@ -111,8 +126,12 @@ def test_nothing_in_the_environment_leads_to_the_checkout(installed):
     assert outside_the_checkout(installed.venv) and outside_the_checkout(installed.work)
     assert "PYTHONPATH" not in installed.env and not any(str(ROOT) in value for value in installed.env.values())
     site = next((installed.venv / "lib").glob("python3*/site-packages"))
-    texts = [installed.venv / "pyvenv.cfg", *site.glob("*.pth"), *site.glob("noisebo-*.dist-info/*"),
-             *(p for p in installed.bin.iterdir() if p.is_file() and not p.is_symlink())]
+    texts = [
+        installed.venv / "pyvenv.cfg",
+        *site.glob("*.pth"),
+        *site.glob("noisebo-*.dist-info/*"),
+        *(p for p in installed.bin.iterdir() if p.is_file() and not p.is_symlink()),
+    ]
     for path in texts:
         assert str(ROOT) not in path.read_text(errors="replace"), f"{path} names the checkout {ROOT}"
     done = installed.command("python", "-c", "import json, sys; print(json.dumps(sys.path))")
@@ -148,7 +167,8 @@ def test_the_shipped_forrester_campaign_runs_from_the_wheel(installed):
     assert re.match(rf"  {n_points} points, \d+ shots, [\d.]+ s of measurement;", third), shown
     lines = shown.splitlines()
     header = next(i for i, line in enumerate(lines) if line.split()[:2] == ["step", "x"])
-    rows = lines[header + 1:lines.index("  * noise from the noise model")]
+    rows = lines[header + 1 : lines.index("  * noise from the noise model")]
     assert [row.split()[0] for row in rows] == ["seed"] * schedule["n_seed"] + [
-        str(step) for step in range(1, schedule["n_steps"] + 1)], shown
+        str(step) for step in range(1, schedule["n_steps"] + 1)
+    ], shown
     assert (Path(installed.env["HOME"]) / ".noisebo").is_dir()  # Prefect's home and the JAX cache: not the checkout's

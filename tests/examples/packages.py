@@ -11,8 +11,24 @@ import yaml
 def install(example: Path, folder: Path) -> Path:
     """``example`` installed with pip into ``folder``, which only PYTHONPATH is to point at."""
     isolation = [] if importlib.util.find_spec("setuptools") is None else ["--no-build-isolation"]
-    subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--disable-pip-version-check", "--no-deps",
-                    *isolation, "--target", str(folder), str(example)], check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "-q",
+            "--disable-pip-version-check",
+            "--no-deps",
+            *isolation,
+            "--target",
+            str(folder),
+            str(example),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
     return folder
 
 

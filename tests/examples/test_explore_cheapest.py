@@ -36,7 +36,9 @@ def config_path(tmp_path):
 
 
 def noisebo(args, env):
-    return subprocess.run([sys.executable, "-m", "noisebo.cli", *args], env=env, capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "noisebo.cli", *args], env=env, capture_output=True, text=True, timeout=300
+    )
 
 
 def environment(target=None, prefect=None):
@@ -57,8 +59,10 @@ def test_the_installed_example_is_listed_and_refused_where_it_is_not(target, con
 
     refused = noisebo(["run", str(config_path)], environment())
     assert refused.returncode == 2
-    assert ("acquisition.policy: no installed policy 'explore-cheapest'; installed: double, info_rate, reward"
-            in refused.stderr)
+    assert (
+        "acquisition.policy: no installed policy 'explore-cheapest'; installed: double, info_rate, reward"
+        in refused.stderr
+    )
     assert len(refused.stderr.strip().splitlines()) == 1
 
 
@@ -79,8 +83,9 @@ def test_a_campaign_under_the_example_policy_runs_at_the_cheapest_t(target, conf
 @pytest.mark.e2e  # a Prefect flow run through the CLI (about a minute; CI runs it)
 def test_noisebo_run_under_the_example_policy_writes_its_campaign(target, config_path, tmp_path, prefect_harness):
     out = tmp_path / "runs"
-    done = noisebo(["run", str(config_path), "--seed", str(SEED), "--out", str(out)],
-                   environment(target, prefect_harness))
+    done = noisebo(
+        ["run", str(config_path), "--seed", str(SEED), "--out", str(out)], environment(target, prefect_harness)
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     data = read_record(Path(done.stdout.strip().splitlines()[-1]))
     assert data.status == "completed"

@@ -39,8 +39,9 @@ def config_path(tmp_path):
 
 
 def noisebo(args, env, **kwargs):
-    return subprocess.run([sys.executable, "-m", "noisebo.cli", *args], env=env, capture_output=True, text=True, timeout=300,
-                          **kwargs)
+    return subprocess.run(
+        [sys.executable, "-m", "noisebo.cli", *args], env=env, capture_output=True, text=True, timeout=300, **kwargs
+    )
 
 
 def environment(prefect_harness, target=None):
@@ -60,13 +61,19 @@ def test_the_installed_example_is_listed(target, prefect_harness):
 
 
 @pytest.mark.e2e  # about 90 s: run, kill, resume and report through the CLI (CI runs it)
-def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(target, config_path, tmp_path, prefect_harness,
-                                                                         monkeypatch):
+def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(
+    target, config_path, tmp_path, prefect_harness, monkeypatch
+):
     env = environment(prefect_harness, target)
     out = tmp_path / "runs"
     path = out / f"gramacy-lee_reward_s{SEED:04d}.h5"
-    run = subprocess.Popen([sys.executable, "-m", "noisebo.cli", "run", str(config_path), "--seed", str(SEED), "--out", str(out)],
-                           env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    run = subprocess.Popen(
+        [sys.executable, "-m", "noisebo.cli", "run", str(config_path), "--seed", str(SEED), "--out", str(out)],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and run.poll() is None:
         if path.with_suffix(".journal").exists() and len(journal.read(path.with_suffix(".journal"))[0]) >= 40:

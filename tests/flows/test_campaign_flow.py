@@ -52,9 +52,19 @@ def test_each_step_records_the_inputs_its_models_saw(finished):
 def test_file_layout_is_readable_with_plain_h5py(finished):
     with h5py.File(finished, "r") as f:
         assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 4
-        assert json.loads(f.attrs["driver_json"]) == {"name": "forrester", "version": "0.1.0",
-                                                      "settings": {"a0": 0.1, "a1": 2.0, "law": "inv_sqrt", "patch_a0": 0.0,
-                                                                   "patch_x": 0.5, "patch_width": 0.05, "seed": 0}}
+        assert json.loads(f.attrs["driver_json"]) == {
+            "name": "forrester",
+            "version": "0.1.0",
+            "settings": {
+                "a0": 0.1,
+                "a1": 2.0,
+                "law": "inv_sqrt",
+                "patch_a0": 0.0,
+                "patch_x": 0.5,
+                "patch_width": 0.05,
+                "seed": 0,
+            },
+        }
         assert f["steps/acq_map"].shape == (4, 40, 30)
         assert f["steps/t_opt"].attrs["units"] == "s"
         assert set(json.loads(f.attrs["versions_json"])) >= {"python", "jax", "numpyro", "h5py", "prefect"}
@@ -113,7 +123,9 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
     from prefect.client.schemas.filters import ArtifactFilter, ArtifactFilterKey
 
     with get_client(sync_client=True) as client:  # the sweep's summary as an artifact of its flow run
-        artifact = client.read_artifacts(artifact_filter=ArtifactFilter(key=ArtifactFilterKey(any_=["sweep-tiny-summary"])))[-1]
+        artifact = client.read_artifacts(
+            artifact_filter=ArtifactFilter(key=ArtifactFilterKey(any_=["sweep-tiny-summary"]))
+        )[-1]
     assert artifact.data.startswith(f"# sweep tiny\n\n6 of 6 campaigns finished; files in `{tmp_path}`\n")
     assert "| reward | 3 |" in artifact.data
     assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000

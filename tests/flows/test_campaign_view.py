@@ -15,10 +15,27 @@ from noisebo.view.frames import frame_at
 from noisebo.view.recording import replay
 from noisebo.view.rerun_view import RerunView
 
-ENTITIES = {"/acquisition/map", "/acquisition/points", "/f/mean", "/f/band", "/f/truth", "/f/points",
-            "/noise/mean", "/noise/band", "/noise/law", "/noise/points", "/reward/curve", "/reward/t_opt",
-            "/traces/t_opt_s", "/traces/a0", "/traces/a1", "/traces/latency_s", "/traces/measurement_time_s",
-            "/log", "/campaign/points"}
+ENTITIES = {
+    "/acquisition/map",
+    "/acquisition/points",
+    "/f/mean",
+    "/f/band",
+    "/f/truth",
+    "/f/points",
+    "/noise/mean",
+    "/noise/band",
+    "/noise/law",
+    "/noise/points",
+    "/reward/curve",
+    "/reward/t_opt",
+    "/traces/t_opt_s",
+    "/traces/a0",
+    "/traces/a1",
+    "/traces/latency_s",
+    "/traces/measurement_time_s",
+    "/log",
+    "/campaign/points",
+}
 RAW = ("Scalars:scalars", "TextLog:text", "x", "t", "value", "noise", "from_step")
 
 
@@ -75,8 +92,12 @@ def test_replay_from_the_file_alone_equals_the_live_recording(recorded, tmp_path
 
 def _datasets(path) -> dict:
     with h5py.File(path, "r") as f:
-        return {g + "/" + k: v[()] for g in ("points", "shots", "steps") for k, v in f[g].items()
-                if isinstance(v, h5py.Dataset) and k != "latency_s"}
+        return {
+            g + "/" + k: v[()]
+            for g in ("points", "shots", "steps")
+            for k, v in f[g].items()
+            if isinstance(v, h5py.Dataset) and k != "latency_s"
+        }
 
 
 def test_an_absent_live_viewer_changes_nothing(tiny_config, prefect_harness, tmp_path, capsys):

@@ -30,7 +30,9 @@ def cli_env(prefect_harness, crash=None):
 
 
 def noisebo(args, env, timeout=300):
-    return subprocess.run([sys.executable, "-m", "noisebo.cli.main", *args], env=env, capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "noisebo.cli.main", *args], env=env, capture_output=True, text=True, timeout=timeout
+    )
 
 
 @pytest.fixture(scope="module")
@@ -102,8 +104,12 @@ def test_external_kill_at_a_random_moment_then_resume(tiny_yaml, tmp_path, prefe
     path = out / f"tiny_reward_s{SEED:04d}.h5"
     jpath = path.with_suffix(".journal")
     env = cli_env(prefect_harness)
-    proc = subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)],
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and proc.poll() is None:
         if jpath.exists() and len(journal.read(jpath)[0]) >= 40:  # into the BO steps
@@ -121,8 +127,12 @@ def test_external_kill_at_a_random_moment_then_resume(tiny_yaml, tmp_path, prefe
 def test_another_process_reads_the_file_while_the_campaign_runs(tiny_yaml, tmp_path, prefect_harness, reference):
     out = tmp_path / "runs"
     path = out / f"tiny_reward_s{SEED:04d}.h5"
-    proc = subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)],
-                            env=cli_env(prefect_harness), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)],
+        env=cli_env(prefect_harness),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     seen, deadline = [], time.monotonic() + 240
     while proc.poll() is None and time.monotonic() < deadline:
         if path.exists():
@@ -140,14 +150,20 @@ def test_another_process_reads_the_file_while_the_campaign_runs(tiny_yaml, tmp_p
 
 
 @pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)], ids=["SIGTERM", "SIGINT"])
-def test_a_signal_aborts_cleanly_and_resume_finishes_the_same_campaign(signum, code, tiny_yaml, tmp_path,
-                                                                       prefect_harness, reference):
+def test_a_signal_aborts_cleanly_and_resume_finishes_the_same_campaign(
+    signum, code, tiny_yaml, tmp_path, prefect_harness, reference
+):
     out = tmp_path / "runs"
     path = out / f"tiny_reward_s{SEED:04d}.h5"
     jpath = path.with_suffix(".journal")
     env = cli_env(prefect_harness)
-    proc = subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--seed", str(SEED), "--out", str(out)],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and proc.poll() is None:
         if jpath.exists() and len(journal.read(jpath)[0]) >= 40:  # into the BO steps

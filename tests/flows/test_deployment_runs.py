@@ -31,6 +31,7 @@ def test_the_same_seed_twice_through_the_deployment_gets_two_folders(tiny_yaml, 
             flow_run = client.read_flow_run(state.state_details.flow_run_id)
             assert flow_run.name == "tiny-reward-s1"
             artifacts = client.read_artifacts(
-                artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[flow_run.id])))
+                artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[flow_run.id]))
+            )
             summary = next(a for a in artifacts if a.key == "tiny-reward-s1-summary")
             assert f"| file | `{path}` |" in summary.data

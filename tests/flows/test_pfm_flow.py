@@ -53,7 +53,9 @@ def test_resumed_pfm_campaign_refits_journaled_sweeps_identically(pfm_file, tmp_
     from noisebo.storage import journal
 
     records, _ = journal.read(Path(pfm_file).with_suffix(".journal"))
-    cut = next(i for i, r in enumerate(records) if r.type == "shot" and r.fields["point"] == 1 and r.fields["shot"] == 3)
+    cut = next(
+        i for i, r in enumerate(records) if r.type == "shot" and r.fields["point"] == 1 and r.fields["shot"] == 3
+    )
     path = tmp_path / "cut.h5"
     writer = journal.JournalWriter.create(path.with_suffix(".journal"), records[0])
     for record in records[1:cut]:

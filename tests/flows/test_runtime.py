@@ -10,27 +10,31 @@ from noisebo.flows import runtime
 def test_importing_flows_sets_the_temporary_servers_defaults_and_keeps_what_is_set():
     env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_")}
     env["PREFECT_LOGGING_LEVEL"] = "DEBUG"
-    code = ("import os, flows.campaign\n"
-            "print(os.environ['PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS'], os.environ['PREFECT_LOGGING_LEVEL'],"
-            " os.environ['PREFECT_HOME'].endswith('.prefect'))")
+    code = (
+        "import os, flows.campaign\n"
+        "print(os.environ['PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS'], os.environ['PREFECT_LOGGING_LEVEL'],"
+        " os.environ['PREFECT_HOME'].endswith('.prefect'))"
+    )
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120)
     assert out.stdout.split() == ["120", "DEBUG", "True"]
 
 
 def test_failure_reports_go_to_the_failure_log_and_other_records_stay_on_the_terminal(tmp_path):
-    code = ("import logging, sys\n"
-            "from flows import runtime\n"
-            "logging.getLogger().addHandler(logging.StreamHandler(sys.stderr))\n"
-            "runtime.divert_failure_reports()\n"
-            "log = logging.getLogger('prefect.flow_runs')\n"
-            "log.error('Crash detected! Execution was aborted by a termination signal.')\n"
-            "log.warning('a warning')\n"
-            "logging.getLogger('prefect.client').error('a plain error')\n"
-            "try:\n"
-            "    1 / 0\n"
-            "except ZeroDivisionError:\n"
-            "    log.error('Encountered exception during execution', exc_info=True)\n"
-            "print(runtime.failure_log().report(KeyError('missing')))\n")
+    code = (
+        "import logging, sys\n"
+        "from flows import runtime\n"
+        "logging.getLogger().addHandler(logging.StreamHandler(sys.stderr))\n"
+        "runtime.divert_failure_reports()\n"
+        "log = logging.getLogger('prefect.flow_runs')\n"
+        "log.error('Crash detected! Execution was aborted by a termination signal.')\n"
+        "log.warning('a warning')\n"
+        "logging.getLogger('prefect.client').error('a plain error')\n"
+        "try:\n"
+        "    1 / 0\n"
+        "except ZeroDivisionError:\n"
+        "    log.error('Encountered exception during execution', exc_info=True)\n"
+        "print(runtime.failure_log().report(KeyError('missing')))\n"
+    )
     env = dict(os.environ, NOISEBO_LOG_DIR=str(tmp_path / "logs"), NOISEBO_JAX_CACHE="")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120)
     assert out.stderr.splitlines() == ["a warning", "a plain error"]
@@ -74,7 +78,8 @@ def test_the_pool_warning_at_exit_is_dropped_and_other_warnings_are_not():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         runtime.quiet_pool_at_exit()
-        warnings.warn(f"{runtime.POOL_AT_EXIT} <AdaptedConnection>, which will be terminated.", UserWarning,
-                      stacklevel=1)
+        warnings.warn(
+            f"{runtime.POOL_AT_EXIT} <AdaptedConnection>, which will be terminated.", UserWarning, stacklevel=1
+        )
         warnings.warn("another warning", UserWarning, stacklevel=1)
     assert [str(w.message) for w in caught] == ["another warning"]

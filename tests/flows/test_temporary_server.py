@@ -45,21 +45,29 @@ def spawn_and_vanish(code: str, env: dict[str, str], folder) -> list[tuple[int, 
     ``shown(pid)``, as (pid, start time). Output goes through files: the processes it leaves
     behind would hold a pipe open."""
     shown, errors = folder / "shown.txt", folder / "stderr.txt"
-    code = f"import os, signal\nfrom flows import processes\nshown_to = open({str(shown)!r}, 'w')\n" \
-           "def shown(pid): print(pid, processes.started_ticks(pid), file=shown_to, flush=True)\n" + \
-           textwrap.dedent(code) + "\nos.kill(os.getpid(), signal.SIGKILL)"
+    code = (
+        f"import os, signal\nfrom flows import processes\nshown_to = open({str(shown)!r}, 'w')\n"
+        "def shown(pid): print(pid, processes.started_ticks(pid), file=shown_to, flush=True)\n"
+        + textwrap.dedent(code)
+        + "\nos.kill(os.getpid(), signal.SIGKILL)"
+    )
     with errors.open("w") as stderr:
-        parent = subprocess.run([sys.executable, "-c", code], env=env, stdout=subprocess.DEVNULL, stderr=stderr,
-                                timeout=120, check=False)
+        parent = subprocess.run(
+            [sys.executable, "-c", code], env=env, stdout=subprocess.DEVNULL, stderr=stderr, timeout=120, check=False
+        )
     assert parent.returncode == -signal.SIGKILL, errors.read_text()[-3000:]
     return [(int(pid), int(started)) for pid, started in (line.split() for line in shown.read_text().splitlines())]
 
 
 @pytest.mark.e2e
 def test_kill_9_of_noisebo_run_takes_its_temporary_server_with_it(tmp_path, tiny_yaml):
-    run = subprocess.Popen([sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs"),
-                            "--no-rrd"], env=run_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                           text=True)
+    run = subprocess.Popen(
+        [sys.executable, "-m", "noisebo.cli.main", "run", str(tiny_yaml), "--out", str(tmp_path / "runs"), "--no-rrd"],
+        env=run_env(tmp_path),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         for line in run.stdout:  # the first point measured: the flow run is using the server
             if line.startswith("seed point"):
@@ -82,7 +90,8 @@ def test_the_guard_stops_the_server_when_the_parent_goes_without_a_death_signal(
     """The watch thread alone (as where PR_SET_PDEATHSIG is not available, or a thread that is
     not the main one started the server): the parent is killed once the server answers."""
     port = processes.free_port()
-    [(server, started)] = spawn_and_vanish(f"""
+    [(server, started)] = spawn_and_vanish(
+        f"""
         import subprocess, sys, time
         import httpx
         from noisebo.flows import temporary_server as temporary
@@ -95,7 +104,10 @@ def test_the_guard_stops_the_server_when_the_parent_goes_without_a_death_signal(
             except httpx.HTTPError:
                 time.sleep(0.1)
         shown(server.pid)
-        """, run_env(tmp_path), tmp_path)
+        """,
+        run_env(tmp_path),
+        tmp_path,
+    )
     took = gone_within(server, started, 5.0)
     assert took is not None, "the server outlived its parent by 5 s"
     with pytest.raises(httpx.ConnectError):
@@ -114,7 +126,8 @@ def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path)
     PREFECT_HOME stay; so does a live process that is no server, named by a stale record."""
     env = run_env(tmp_path)
     home = tmp_path / "home"
-    (recorded, recorded_at), (unrecorded, unrecorded_at) = spawn_and_vanish(f"""
+    (recorded, recorded_at), (unrecorded, unrecorded_at) = spawn_and_vanish(
+        f"""
         from prefect.server.api.server import SubprocessASGIServer
         from noisebo.flows import temporary_server as temporary
         server = SubprocessASGIServer()
@@ -125,26 +138,44 @@ def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path)
             if record:
                 temporary.record_server(temporary.prefect_home(), pid)
             shown(pid)
-        """, env, tmp_path)
+        """,
+        env,
+        tmp_path,
+    )
     (tmp_path / "other").mkdir()
-    [(elsewhere, elsewhere_at)] = spawn_and_vanish("""
+    [(elsewhere, elsewhere_at)] = spawn_and_vanish(
+        """
         from prefect.server.api.server import SubprocessASGIServer
         server = SubprocessASGIServer()
         server.port = server.find_available_port()
         shown(server._run_uvicorn_command().pid)
-        """, run_env(tmp_path / "other"), tmp_path)
-    ours = subprocess.Popen([sys.executable, "-P", str(temporary.GUARD), str(os.getpid()), "watch",
-                             str(processes.free_port())],
-                            env=env | {"PREFECT__SERVER_EPHEMERAL": "1",
-                                       "PREFECT_API_DATABASE_CONNECTION_URL": database(tmp_path, "ours")})
+        """,
+        run_env(tmp_path / "other"),
+        tmp_path,
+    )
+    ours = subprocess.Popen(
+        [sys.executable, "-P", str(temporary.GUARD), str(os.getpid()), "watch", str(processes.free_port())],
+        env=env | {"PREFECT__SERVER_EPHEMERAL": "1", "PREFECT_API_DATABASE_CONNECTION_URL": database(tmp_path, "ours")},
+    )
     bystander = subprocess.Popen(["sleep", "60"])
     try:
-        started = {recorded: recorded_at, unrecorded: unrecorded_at, elsewhere: elsewhere_at,
-                   ours.pid: processes.started_ticks(ours.pid)}
+        started = {
+            recorded: recorded_at,
+            unrecorded: unrecorded_at,
+            elsewhere: elsewhere_at,
+            ours.pid: processes.started_ticks(ours.pid),
+        }
         temporary.record_server(home, ours.pid)
-        (temporary.records(home) / f"{bystander.pid}.json").write_text(json.dumps({
-            "server": bystander.pid, "server_started": processes.started_ticks(bystander.pid),
-            "parent": recorded, "parent_started": 1}))  # a parent long gone
+        (temporary.records(home) / f"{bystander.pid}.json").write_text(
+            json.dumps(
+                {
+                    "server": bystander.pid,
+                    "server_started": processes.started_ticks(bystander.pid),
+                    "parent": recorded,
+                    "parent_started": 1,
+                }
+            )
+        )  # a parent long gone
 
         assert temporary.stop_recorded_orphans(home) == [recorded]
         assert gone_within(recorded, started[recorded], 5.0) is not None
@@ -176,8 +207,14 @@ def test_a_port_taken_meanwhile_is_retried_on_another_without_a_word(tmp_path):
             print(server.port != {port}, httpx.get(server.api_url + "/health").status_code)
             server.stop()
             """)
-        done = subprocess.run([sys.executable, "-c", code], env=run_env(tmp_path), capture_output=True, text=True,
-                              timeout=300, check=False)
+        done = subprocess.run(
+            [sys.executable, "-c", code],
+            env=run_env(tmp_path),
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
     assert (done.returncode, done.stdout.split(), done.stderr) == (0, ["True", "200"], "")
 
 
@@ -206,9 +243,16 @@ else:
 def test_a_successful_flow_on_the_guarded_server_prints_no_shutdown_traceback(tmp_path):
     """400 tasks on Prefect's temporary server as Prefect starts it end with the task-run
     recorder's cancelled flushes (tracebacks on stderr, exit 0); on noisebo's, with nothing."""
+
     def run(mode: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-c", FOUR_HUNDRED_TASKS, mode], env=run_env(tmp_path),
-                              capture_output=True, text=True, timeout=300, check=False)
+        return subprocess.run(
+            [sys.executable, "-c", FOUR_HUNDRED_TASKS, mode],
+            env=run_env(tmp_path),
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
 
     plain = run("plain")
     assert plain.returncode == 0 and "Error flushing" in plain.stderr, plain.stderr[-3000:]

@@ -48,28 +48,36 @@ def test_shots_have_the_configured_mean_and_noise():
     shots = np.array([inst.simulate(np.array([np.pi, 2.275]), 1.0, rng).value for _ in range(4000)])
     assert shots.mean() == pytest.approx(5 / (4 * np.pi), abs=4 * 2.1 / np.sqrt(4000))
     assert shots.std(ddof=1) == pytest.approx(2.1, rel=0.05)
-    assert BraninInstrument().measure(np.array([1.0, 1.0]), 1.0) == BraninInstrument().measure(np.array([1.0, 1.0]), 1.0)
+    assert BraninInstrument().measure(np.array([1.0, 1.0]), 1.0) == BraninInstrument().measure(
+        np.array([1.0, 1.0]), 1.0
+    )
 
 
-@pytest.mark.parametrize("x, t, message", [
-    ([1.0, 1.0], 0.0, "two finite coordinates and t > 0"),
-    ([1.0], 1.0, "two finite coordinates"),
-    ([1.0, float("nan")], 1.0, "two finite coordinates"),
-    ([1.0, 2.0, 3.0], 1.0, "two finite coordinates"),
-    ([10.5, 1.0], 1.0, r"x=\(10.5, 1.0\) lies outside the Branin domain \[-5, 10\] x \[0, 15\]"),
-    ([0.0, -0.1], 1.0, "outside the Branin domain"),
-])
+@pytest.mark.parametrize(
+    "x, t, message",
+    [
+        ([1.0, 1.0], 0.0, "two finite coordinates and t > 0"),
+        ([1.0], 1.0, "two finite coordinates"),
+        ([1.0, float("nan")], 1.0, "two finite coordinates"),
+        ([1.0, 2.0, 3.0], 1.0, "two finite coordinates"),
+        ([10.5, 1.0], 1.0, r"x=\(10.5, 1.0\) lies outside the Branin domain \[-5, 10\] x \[0, 15\]"),
+        ([0.0, -0.1], 1.0, "outside the Branin domain"),
+    ],
+)
 def test_bad_shots_are_rejected(x, t, message):
     with pytest.raises(ValueError, match=message):
         BraninInstrument().measure(np.array(x), t)
 
 
-@pytest.mark.parametrize("settings, field", [
-    ({"a0": -1}, "instrument.settings.a0"),
-    ({"a1": "loud"}, "instrument.settings.a1"),
-    ({"seed": -2}, "instrument.settings.seed"),
-    ({"scale": 2}, "instrument.settings.scale: Extra inputs are not permitted"),
-])
+@pytest.mark.parametrize(
+    "settings, field",
+    [
+        ({"a0": -1}, "instrument.settings.a0"),
+        ({"a1": "loud"}, "instrument.settings.a1"),
+        ({"seed": -2}, "instrument.settings.seed"),
+        ({"scale": 2}, "instrument.settings.scale: Extra inputs are not permitted"),
+    ],
+)
 def test_bad_settings_name_the_field(settings, field):
     config = CampaignConfig().with_overrides(instrument={"kind": "branin", "settings": settings})
     with pytest.raises(ConfigError, match=field):

@@ -37,7 +37,9 @@ def test_the_ledger_counts_every_fault_and_rates_hold():
         truth = float(inst.truth(np.array([[0.5]]))[0])
         outcomes["nan" if np.isnan(value) else "outlier" if abs(value - truth) > 30 else "ok"] += 1
     counts = inst.counts()
-    assert {k: counts[k] for k in ("exception", "nan", "outlier")} == {k: outcomes[k] for k in ("exception", "nan", "outlier")}
+    assert {k: counts[k] for k in ("exception", "nan", "outlier")} == {
+        k: outcomes[k] for k in ("exception", "nan", "outlier")
+    }
     assert 0.17 < counts["exception"] / 2000 < 0.23 and 0.07 < counts["nan"] / 2000 < 0.13
     assert len(inst.ledger) == sum(counts.values()) and set(counts) == set(FAULT_KINDS)
 
@@ -86,8 +88,12 @@ def run_flow(config, seed, path, instrument):
 def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tiny_config, prefect_harness, tmp_path):
     from noisebo.campaign.driver import run_campaign
 
-    config = tiny_config.with_overrides(instrument={"timeout_s": 0.2, "faults": {
-        "seed": 5, "timeout": 0.05, "exception": 0.15, "nan": 0.05, "inf": 0.05}})
+    config = tiny_config.with_overrides(
+        instrument={
+            "timeout_s": 0.2,
+            "faults": {"seed": 5, "timeout": 0.05, "exception": 0.15, "nan": 0.05, "inf": 0.05},
+        }
+    )
     inst = build(config.instrument)
     path = run_flow(config, 2, tmp_path / "faulty.h5", inst)
     data, counts = read_record(path), inst.counts()
@@ -108,8 +114,9 @@ def test_a_campaign_survives_faults_and_its_file_counts_them_like_the_ledger(tin
 def test_a_campaign_past_its_failure_budget_stops_with_status_failed(tiny_config, prefect_harness, tmp_path):
     from noisebo.flows.campaign import campaign, resume
 
-    config = tiny_config.with_overrides(instrument={"faults": {"seed": 1, "exception": 0.9}},
-                                        schedule={"min_failed": 5, "tolerated_rate": 0.5})
+    config = tiny_config.with_overrides(
+        instrument={"faults": {"seed": 1, "exception": 0.9}}, schedule={"min_failed": 5, "tolerated_rate": 0.5}
+    )
     with pytest.raises(FailureBudgetExceeded):
         campaign(config, seed=0, out_dir=str(tmp_path), show_progress=False, record_rrd=False)
     data = read_record(tmp_path / "tiny_reward_s0000.h5")
@@ -129,8 +136,11 @@ def test_spectrum_faults_never_give_a_usable_wrong_value_silently(kind, reason):
     from noisebo.config import ReductionConfig
     from noisebo.reduction import shot_value
 
-    config = InstrumentConfig(kind="pfm", settings={"profile": {"source": "synthetic", "length_um": 1.0, "n_domains": 3}},
-                              faults={kind: 1.0, "outlier_sd": 20.0})
+    config = InstrumentConfig(
+        kind="pfm",
+        settings={"profile": {"source": "synthetic", "length_um": 1.0, "n_domains": 3}},
+        faults={kind: 1.0, "outlier_sd": 20.0},
+    )
     inst = build(config)
     reading = inst.simulate(np.array([0.4]), 0.2, np.random.default_rng(0))
     shot = shot_value(reading, ReductionConfig(sho={"nominal_resonance_hz": 372_000.0, "nominal_q": 250.0}))
@@ -147,8 +157,9 @@ def test_a_point_short_of_usable_shots_takes_more_and_flow_equals_pure_loop(tiny
     from noisebo.campaign.driver import run_campaign
 
     # 70 % of the readings NaN: some points get too few usable shots and must take more
-    config = tiny_config.with_overrides(instrument={"faults": {"seed": 4, "nan": 0.7}},
-                                        schedule={"n_steps": 6, "min_failed": 1000})
+    config = tiny_config.with_overrides(
+        instrument={"faults": {"seed": 4, "nan": 0.7}}, schedule={"n_steps": 6, "min_failed": 1000}
+    )
     path = campaign(config, seed=1, out_dir=str(tmp_path), show_progress=False, record_rrd=False)
     data = read_record(path)
     n_shots = np.asarray(data.points.n_shots)
@@ -168,8 +179,18 @@ def test_a_200_step_campaign_with_a_quarter_of_faults(prefect_harness, tmp_path)
 
     config = CampaignConfig().with_overrides(
         name="faulty200",
-        instrument={"timeout_s": 0.05, "faults": {"seed": 7, "timeout": 0.03, "exception": 0.07, "nan": 0.05,
-                                                  "inf": 0.05, "outlier": 0.05, "hang_s": 0.2}},
+        instrument={
+            "timeout_s": 0.05,
+            "faults": {
+                "seed": 7,
+                "timeout": 0.03,
+                "exception": 0.07,
+                "nan": 0.05,
+                "inf": 0.05,
+                "outlier": 0.05,
+                "hang_s": 0.2,
+            },
+        },
         schedule={"n_steps": 200, "clip_sd": 4.0},
     )
     inst = build(config.instrument)
@@ -189,6 +210,7 @@ def test_a_200_step_campaign_with_a_quarter_of_faults(prefect_harness, tmp_path)
     assert reasons.count("non-finite reading") == counts["nan"] + counts["inf"]
     assert sum(counts.values()) / inst.calls == pytest.approx(0.25, abs=0.03)
     assert np.all(np.isfinite(data.points.value)) and np.all(np.isfinite(data.points.noise))
-    t_star = true_optimal_t(inst.noise_law, config.space.t_min, config.space.t_max, config.reward.alpha,
-                            config.reward.beta)
+    t_star = true_optimal_t(
+        inst.noise_law, config.space.t_min, config.space.t_max, config.reward.alpha, config.reward.beta
+    )
     assert abs(data.summary.t_opt - t_star) / t_star < 0.10

@@ -11,7 +11,9 @@ X = np.array([0.5])
 
 def test_forrester_values_by_hand():
     # f(0) = 4 sin(-4), f(1) = 16 sin(8), f(1/3) = 0
-    np.testing.assert_allclose(forrester(np.array([0.0, 1.0, 1 / 3])), [4 * np.sin(-4), 16 * np.sin(8), 0.0], atol=1e-12)
+    np.testing.assert_allclose(
+        forrester(np.array([0.0, 1.0, 1 / 3])), [4 * np.sin(-4), 16 * np.sin(8), 0.0], atol=1e-12
+    )
 
 
 def test_driver_satisfies_the_protocol_and_is_built_from_config():
@@ -38,11 +40,14 @@ def test_same_key_same_shot():
 
 
 def test_truth_takes_positions_as_rows_of_coordinates():
-    np.testing.assert_allclose(ForresterInstrument().truth(np.array([[0.0], [1 / 3]])), [4 * np.sin(-4), 0.0], atol=1e-12)
+    np.testing.assert_allclose(
+        ForresterInstrument().truth(np.array([[0.0], [1 / 3]])), [4 * np.sin(-4), 0.0], atol=1e-12
+    )
 
 
-@pytest.mark.parametrize("x, t", [([0.5], 0.0), ([0.5], -1.0), ([float("nan")], 1.0), ([0.5], float("inf")),
-                                  ([0.5, 0.5], 1.0)])
+@pytest.mark.parametrize(
+    "x, t", [([0.5], 0.0), ([0.5], -1.0), ([float("nan")], 1.0), ([0.5], float("inf")), ([0.5, 0.5], 1.0)]
+)
 def test_bad_coordinates_are_rejected(x, t):
     with pytest.raises(ValueError, match="Forrester shot"):
         ForresterInstrument().measure(np.array(x), t)

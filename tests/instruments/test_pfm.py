@@ -3,7 +3,13 @@ import pytest
 
 from noisebo.instruments import Instrument, build
 from noisebo.instruments.pfm import PFMInstrument, PFMSettings
-from noisebo.instruments.pfm_profile import ProfileError, ScanProfileConfig, SyntheticProfileConfig, scan_profile, synthetic_profile
+from noisebo.instruments.pfm_profile import (
+    ProfileError,
+    ScanProfileConfig,
+    SyntheticProfileConfig,
+    scan_profile,
+    synthetic_profile,
+)
 from noisebo.instruments.registry import validated
 from noisebo.config import ConfigError, InstrumentConfig, ReductionConfig, parse_config
 from noisebo.reduction import shot_value
@@ -39,7 +45,9 @@ def test_fitted_sweep_measures_the_local_response():
     rng = np.random.default_rng(0)
     for x in (0.25, 0.75):
         values = [shot_value(inst.simulate(np.array([x]), 1.0, rng), TUNED).value for _ in range(20)]
-        assert np.mean(values) == pytest.approx(inst.truth(np.array([[x]]))[0], abs=3 * inst.noise_law(np.array([1.0]))[0])
+        assert np.mean(values) == pytest.approx(
+            inst.truth(np.array([[x]]))[0], abs=3 * inst.noise_law(np.array([1.0]))[0]
+        )
 
 
 def test_noise_law_falls_with_sweep_time_towards_the_time_independent_floor():
@@ -54,7 +62,9 @@ def test_noise_law_falls_with_sweep_time_towards_the_time_independent_floor():
 
 def test_time_independent_noise_by_hand_and_at_the_walls():
     # Without landing error: sd = sqrt(g^2 r(x)^2 + b^2) exactly (the quadrature of a constant).
-    still = PFMInstrument(SYNTH.model_copy(update={"position_jitter_um": 0.0, "gain_jitter": 0.01, "background_pm": 0.5}))
+    still = PFMInstrument(
+        SYNTH.model_copy(update={"position_jitter_um": 0.0, "gain_jitter": 0.01, "background_pm": 0.5})
+    )
     x = np.array([0.1, 0.25, 0.5])
     np.testing.assert_allclose(still.static_sd(x), np.sqrt((0.01 * still.truth(x[:, None])) ** 2 + 0.25), rtol=1e-9)
     # With it, a domain wall (x = 0.5) is noisier than a domain's middle.

@@ -32,7 +32,7 @@ DRIVERS = {
             def measure(self, x, t):
                 return Reading(self.settings.watts * float(x[0]))
         ''',
-    "jammed": '''
+    "jammed": """
         from pydantic import BaseModel
 
         class Jammed:
@@ -49,7 +49,7 @@ DRIVERS = {
 
             def measure(self, x, t):
                 raise AssertionError("never measured")
-        ''',
+        """,
     "counter": '''
         import numpy as np
         from pydantic import BaseModel
@@ -76,13 +76,13 @@ DRIVERS = {
                 trace = np.stack([np.linspace(0.0, t, 11), counts] + [np.zeros(11)] * (self.rows - 2))
                 return Reading(None, trace, "rate")
         ''',
-    "halfdone": '''
+    "halfdone": """
         class HalfDone:
             name = "halfdone"
-        ''',
-    "typo": '''
+        """,
+    "typo": """
         import a_module_that_is_not_there
-        ''',
+        """,
 }
 TARGETS = {"lamp": "Lamp", "jammed": "Jammed", "counter": "Counter", "halfdone": "HalfDone", "typo": "Typo"}
 
@@ -121,17 +121,39 @@ def config_of(kind, **settings):
     return CampaignConfig().with_overrides(instrument={"kind": kind, "settings": settings})
 
 
-@pytest.mark.parametrize("config, error, message", [
-    (config_of("laser"), registry.DriverNotInstalled, "no installed instrument driver 'laser'; installed: branin, counter, forrester, halfdone, "),
-    (config_of("lamp", watts=-1), ConfigError, "instrument.settings.watts: Input should be greater than 0"),
-    (config_of("lamp", colour="red"), ConfigError, "instrument.settings.colour: Extra inputs are not permitted"),
-    (config_of("forrester", a1="loud"), ConfigError, "instrument.settings.a1: expected a number, got the string 'loud'"),
-    (config_of("halfdone"), registry.DriverBroken, "lacks Settings, version, measure"),
-    (config_of("typo"), registry.DriverBroken, "could not be loaded: ModuleNotFoundError"),
-    (CampaignConfig().with_overrides(instrument={"kind": "forrester", "faults": {"corrupt_spectrum": 0.1}}),
-     ConfigError, "corrupt_spectrum needs an instrument that returns spectra"),
-], ids=["unknown kind", "refused value", "unknown setting", "wrong type", "incomplete driver", "import error",
-        "fault it cannot have"])
+@pytest.mark.parametrize(
+    "config, error, message",
+    [
+        (
+            config_of("laser"),
+            registry.DriverNotInstalled,
+            "no installed instrument driver 'laser'; installed: branin, counter, forrester, halfdone, ",
+        ),
+        (config_of("lamp", watts=-1), ConfigError, "instrument.settings.watts: Input should be greater than 0"),
+        (config_of("lamp", colour="red"), ConfigError, "instrument.settings.colour: Extra inputs are not permitted"),
+        (
+            config_of("forrester", a1="loud"),
+            ConfigError,
+            "instrument.settings.a1: expected a number, got the string 'loud'",
+        ),
+        (config_of("halfdone"), registry.DriverBroken, "lacks Settings, version, measure"),
+        (config_of("typo"), registry.DriverBroken, "could not be loaded: ModuleNotFoundError"),
+        (
+            CampaignConfig().with_overrides(instrument={"kind": "forrester", "faults": {"corrupt_spectrum": 0.1}}),
+            ConfigError,
+            "corrupt_spectrum needs an instrument that returns spectra",
+        ),
+    ],
+    ids=[
+        "unknown kind",
+        "refused value",
+        "unknown setting",
+        "wrong type",
+        "incomplete driver",
+        "import error",
+        "fault it cannot have",
+    ],
+)
 def test_driver_configuration_errors_name_the_problem(drivers, config, error, message):
     with pytest.raises(error, match=message):
         registry.validated(config, "my.yaml")
@@ -166,8 +188,9 @@ def test_a_driver_brings_its_own_named_reduction(drivers):
     from noisebo.campaign import driver
     from noisebo.events import Status
 
-    config = registry.validated(config_of("counter").with_overrides(schedule={"n_seed": 2, "n_steps": 0,
-                                                                                "shots_before": 2}))
+    config = registry.validated(
+        config_of("counter").with_overrides(schedule={"n_seed": 2, "n_steps": 0, "shots_before": 2})
+    )
     run = driver.run_campaign(config, registry.build(config.instrument), 1).final
     assert run.status is Status.COMPLETED
     for entry in run.points:
@@ -181,13 +204,23 @@ def test_a_driver_brings_its_own_named_reduction(drivers):
     assert not value.ok and value.reason == "rate: expected rows (time, counts), got 3 rows"
 
 
-@pytest.mark.parametrize("overrides, message", [
-    ({"instrument": {"kind": "branin"}}, "space.axes: the branin instrument measures over 2 axis(es), the space has 1"),
-    ({"space": {"x_min": 0.0, "x_max": 1.5}}, "space.axes.0 (x): [0, 1.5] leaves the instrument's extent [0, 1]"),
-    ({"instrument": {"kind": "branin"}, "space": {"axes": [{"name": "a", "low": -5, "high": 10},
-                                                           {"name": "b", "low": -1, "high": 15}]}},
-     "space.axes.1 (b): [-1, 15] leaves the instrument's extent [0, 15]"),
-])
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (
+            {"instrument": {"kind": "branin"}},
+            "space.axes: the branin instrument measures over 2 axis(es), the space has 1",
+        ),
+        ({"space": {"x_min": 0.0, "x_max": 1.5}}, "space.axes.0 (x): [0, 1.5] leaves the instrument's extent [0, 1]"),
+        (
+            {
+                "instrument": {"kind": "branin"},
+                "space": {"axes": [{"name": "a", "low": -5, "high": 10}, {"name": "b", "low": -1, "high": 15}]},
+            },
+            "space.axes.1 (b): [-1, 15] leaves the instrument's extent [0, 15]",
+        ),
+    ],
+)
 def test_a_space_the_simulator_cannot_measure_is_a_config_error(overrides, message):
     from noisebo.config import CampaignConfig
 

@@ -39,19 +39,47 @@ BAD = [
     ("pfm", {"gain_jitter": True}, "gain_jitter: expected a number, got the boolean true"),
     ("pfm", {"sample_noise_pm": INF}, "sample_noise_pm: must be a finite number, got inf"),
     ("pfm", {"seed": "0"}, "seed: expected a whole number, got the string '0'"),
-    ("pfm", {"profile": SCAN | {"start_px": [20, "120"]}}, "profile.scan.start_px.1: expected a number, got the string '120'"),
+    (
+        "pfm",
+        {"profile": SCAN | {"start_px": [20, "120"]}},
+        "profile.scan.start_px.1: expected a number, got the string '120'",
+    ),
     ("pfm", {"profile": SCAN | {"smooth_px": NAN}}, "profile.scan.smooth_px: must be a finite number, got nan"),
-    ("pfm", {"profile": SCAN | {"amplitude_channel": "0"}},
-     "profile.scan.amplitude_channel: expected a whole number, got the string '0'"),
-    ("pfm", {"profile": SYNTHETIC | {"length_um": "1"}},
-     "profile.synthetic.length_um: expected a number, got the string '1'"),
-    ("pfm", {"profile": SYNTHETIC | {"n_domains": True}},
-     "profile.synthetic.n_domains: expected a whole number, got the boolean true"),
-    ("pfm", {"profile": SCAN_AREA | {"rows_px": ["0", 10]}},
-     "profile.scan_area.rows_px.0: expected a whole number, got the string '0'"),
-    ("pfm", {"profile": AREA | {"size_um": [1, INF]}}, "profile.synthetic_area.size_um.1: must be a finite number, got inf"),
-    ("pfm", {"profile": AREA | {"angle_deg": "30"}}, "profile.synthetic_area.angle_deg: expected a number, got the string '30'"),
-    ("pfm", {"profile": AREA | {"seed": True}}, "profile.synthetic_area.seed: expected a whole number, got the boolean true"),
+    (
+        "pfm",
+        {"profile": SCAN | {"amplitude_channel": "0"}},
+        "profile.scan.amplitude_channel: expected a whole number, got the string '0'",
+    ),
+    (
+        "pfm",
+        {"profile": SYNTHETIC | {"length_um": "1"}},
+        "profile.synthetic.length_um: expected a number, got the string '1'",
+    ),
+    (
+        "pfm",
+        {"profile": SYNTHETIC | {"n_domains": True}},
+        "profile.synthetic.n_domains: expected a whole number, got the boolean true",
+    ),
+    (
+        "pfm",
+        {"profile": SCAN_AREA | {"rows_px": ["0", 10]}},
+        "profile.scan_area.rows_px.0: expected a whole number, got the string '0'",
+    ),
+    (
+        "pfm",
+        {"profile": AREA | {"size_um": [1, INF]}},
+        "profile.synthetic_area.size_um.1: must be a finite number, got inf",
+    ),
+    (
+        "pfm",
+        {"profile": AREA | {"angle_deg": "30"}},
+        "profile.synthetic_area.angle_deg: expected a number, got the string '30'",
+    ),
+    (
+        "pfm",
+        {"profile": AREA | {"seed": True}},
+        "profile.synthetic_area.seed: expected a whole number, got the boolean true",
+    ),
 ]
 
 
@@ -86,7 +114,15 @@ def test_ints_for_floats_and_lists_for_pairs_are_numbers(tmp_path):
     path = tmp_path / "good.yaml"
     path.write_text("instrument:\n  kind: forrester\n  settings:\n    a0: 0\n    a1: 2\n    seed: 3.0\n")
     assert validated(load_config(path)).instrument.settings == {
-        "a0": 0.0, "a1": 2.0, "law": "inv_sqrt", "patch_a0": 0.0, "patch_x": 0.5, "patch_width": 0.05, "seed": 3}
+        "a0": 0.0,
+        "a1": 2.0,
+        "law": "inv_sqrt",
+        "patch_a0": 0.0,
+        "patch_x": 0.5,
+        "patch_width": 0.05,
+        "seed": 3,
+    }
     area = config_of("pfm", profile=AREA | {"size_um": [2, 1], "n_domains": 2}).with_overrides(
-        space={"axes": [{"name": "x", "low": 0, "high": 2}, {"name": "y", "low": 0, "high": 1}]})
+        space={"axes": [{"name": "x", "low": 0, "high": 2}, {"name": "y", "low": 0, "high": 1}]}
+    )
     assert validated(area).instrument.settings["profile"]["size_um"] == [2.0, 1.0]

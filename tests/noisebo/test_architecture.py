@@ -26,10 +26,13 @@ FORBIDDEN = "The core imports no adapter, orchestration, storage, view or networ
 
 def lint(cwd: Path) -> subprocess.CompletedProcess:
     """`lint-imports` on the pyproject.toml in cwd, in a fresh interpreter (it puts cwd on sys.path)."""
-    code = ("import sys\nfrom importlinter.cli import lint_imports\n"
-            "sys.exit(lint_imports(config_filename='pyproject.toml', no_cache=True, no_logo=True))")
-    return subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=120,
-                          check=False)
+    code = (
+        "import sys\nfrom importlinter.cli import lint_imports\n"
+        "sys.exit(lint_imports(config_filename='pyproject.toml', no_cache=True, no_logo=True))"
+    )
+    return subprocess.run(
+        [sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=120, check=False
+    )
 
 
 def test_the_contracts_are_the_documented_ones():
@@ -37,8 +40,11 @@ def test_the_contracts_are_the_documented_ones():
     assert contracts[LAYERS]["type"] == "layers"
     assert contracts[LAYERS]["layers"] == ["noisebo.campaign", "noisebo.acquisition", "noisebo.models"]
     assert contracts[FORBIDDEN]["type"] == "forbidden"
-    core = sorted(f"noisebo.{p.stem}" for p in (ROOT / "noisebo").iterdir()
-                  if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").exists())
+    core = sorted(
+        f"noisebo.{p.stem}"
+        for p in (ROOT / "noisebo").iterdir()
+        if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").exists()
+    )
     assert sorted(contracts[FORBIDDEN]["source_modules"]) == core  # a new core module is covered too
     assert set(ADAPTERS + EXTERNAL) <= set(contracts[FORBIDDEN]["forbidden_modules"])
     assert "ignore_imports" not in contracts[FORBIDDEN] and "ignore_imports" not in contracts[LAYERS]
@@ -68,14 +74,17 @@ def test_the_copy_of_the_core_keeps_the_contracts(core_copy):
     assert out.returncode == 0, out.stdout + out.stderr
 
 
-@pytest.mark.parametrize(("where", "source", "broken"), [
-    ("models", "from noisebo.acquisition import records\n", LAYERS),
-    ("models", "def f():\n    from noisebo.campaign import engine\n", LAYERS),
-    ("acquisition", "import noisebo.campaign.driver\n", LAYERS),
-    ("models", "def f():\n    import h5py\n", FORBIDDEN),
-    ("acquisition", "from prefect import flow\n", FORBIDDEN),
-    ("campaign", "import noisebo.storage\n", FORBIDDEN),
-])
+@pytest.mark.parametrize(
+    ("where", "source", "broken"),
+    [
+        ("models", "from noisebo.acquisition import records\n", LAYERS),
+        ("models", "def f():\n    from noisebo.campaign import engine\n", LAYERS),
+        ("acquisition", "import noisebo.campaign.driver\n", LAYERS),
+        ("models", "def f():\n    import h5py\n", FORBIDDEN),
+        ("acquisition", "from prefect import flow\n", FORBIDDEN),
+        ("campaign", "import noisebo.storage\n", FORBIDDEN),
+    ],
+)
 def test_a_violating_module_breaks_a_contract(core_copy, where, source, broken):
     (core_copy / "noisebo" / where / "violation.py").write_text(source)
     out = lint(core_copy)

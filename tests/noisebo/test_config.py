@@ -37,7 +37,9 @@ def test_a_schema_1_config_is_migrated():
     cfg = parse_config(v1)
     assert cfg.schema_version == 2 and cfg.instrument.settings == {"q": 300.0} and cfg.instrument.timeout_s == 5.0
     assert cfg.reduction.sho.q_bounds == (10, 1000) and cfg.reduction.sho.nominal_q == 300.0
-    assert parse_config({"schema_version": 1, "instrument": {"kind": "forrester", "a0": 0.3}}).instrument.settings == {"a0": 0.3}
+    assert parse_config({"schema_version": 1, "instrument": {"kind": "forrester", "a0": 0.3}}).instrument.settings == {
+        "a0": 0.3
+    }
 
 
 def test_a_config_that_is_not_text_is_one_clear_error(tmp_path):
@@ -70,8 +72,14 @@ BAD = [
     ({"space": {"axes": [{"name": "x", "low": 1, "high": 1}]}}, "space.axes.0: Value error, low (1.0) must be below"),
     ({"space": {"axes": [{"name": "x", "low": 0, "high": float("nan")}]}}, "space.axes.0.high"),
     ({"space": {"axes": [{"name": "x", "low": 0, "high": 1, "n": 1}]}}, "space.axes.0.n"),
-    ({"space": {"axes": [{"name": "x", "low": 0, "high": 1, "n": 200}, {"name": "y", "low": 0, "high": 1, "n": 200}]}},
-     "more than 20000 points"),
+    (
+        {
+            "space": {
+                "axes": [{"name": "x", "low": 0, "high": 1, "n": 200}, {"name": "y", "low": 0, "high": 1, "n": 200}]
+            }
+        },
+        "more than 20000 points",
+    ),
     ({"space": {"axes": [{"name": "x", "low": 0, "high": 1, "colour": 1}]}}, "space.axes.0.colour"),
     ({"schedule": {"shots_before": -3}}, "schedule.shots_before"),
     ({"schedule": {"shots_after": 0}}, "schedule.shots_after"),
@@ -136,33 +144,67 @@ STRICT = [
     ({"space": {"x_max": True}}, "space.x_max: expected a number, got the boolean true"),
     ({"space": {"x_max": -INF}}, "space.x_max: must be a finite number, got -inf"),
     ({"space": {"n_x": "40"}}, "space.n_x: expected a whole number, got the string '40'"),
-    ({"space": {"axes": [{"name": "x", "low": "0", "high": 1}]}}, "space.axes.0.low: expected a number, got the string '0'"),
-    ({"space": {"axes": [{"name": "x", "low": 0, "high": 1, "n": True}]}},
-     "space.axes.0.n: expected a whole number, got the boolean true"),
+    (
+        {"space": {"axes": [{"name": "x", "low": "0", "high": 1}]}},
+        "space.axes.0.low: expected a number, got the string '0'",
+    ),
+    (
+        {"space": {"axes": [{"name": "x", "low": 0, "high": 1, "n": True}]}},
+        "space.axes.0.n: expected a whole number, got the boolean true",
+    ),
     ({"acquisition": {"maximize": "yes"}}, "acquisition.maximize: expected true or false, got the string 'yes'"),
     ({"acquisition": {"maximize": 1}}, "acquisition.maximize: expected true or false, got 1"),
     ({"acquisition": {"fixed_t": "2"}}, "acquisition.fixed_t: expected a number, got the string '2'"),
     ({"acquisition": {"ucb_kappa": NAN}}, "acquisition.ucb_kappa: must be a finite number, got nan"),
-    ({"noise_model": {"learn_after_convergence": 0}}, "noise_model.learn_after_convergence: expected true or false, got 0"),
-    ({"noise_model": {"a0_prior": {"high": "15"}}}, "noise_model.a0_prior.high: expected a number, got the string '15'"),
-    ({"noise_model": {"field": {"boundary_factor": NAN}}}, "noise_model.field.boundary_factor: must be a finite number, got nan"),
-    ({"noise_model": {"field": {"basis_per_axis": "32"}}},
-     "noise_model.field.basis_per_axis: expected a whole number, got the string '32'"),
+    (
+        {"noise_model": {"learn_after_convergence": 0}},
+        "noise_model.learn_after_convergence: expected true or false, got 0",
+    ),
+    (
+        {"noise_model": {"a0_prior": {"high": "15"}}},
+        "noise_model.a0_prior.high: expected a number, got the string '15'",
+    ),
+    (
+        {"noise_model": {"field": {"boundary_factor": NAN}}},
+        "noise_model.field.boundary_factor: must be a finite number, got nan",
+    ),
+    (
+        {"noise_model": {"field": {"basis_per_axis": "32"}}},
+        "noise_model.field.basis_per_axis: expected a whole number, got the string '32'",
+    ),
     ({"inference": {"restarts": True}}, "inference.restarts: expected a whole number, got the boolean true"),
-    ({"inference": {"laplace_samples": "32"}}, "inference.laplace_samples: expected a whole number, got the string '32'"),
+    (
+        {"inference": {"laplace_samples": "32"}},
+        "inference.laplace_samples: expected a whole number, got the string '32'",
+    ),
     ({"schedule": {"n_steps": "15"}}, "schedule.n_steps: expected a whole number, got the string '15'"),
-    ({"schedule": {"adaptive_shots": "false"}}, "schedule.adaptive_shots: expected true or false, got the string 'false'"),
+    (
+        {"schedule": {"adaptive_shots": "false"}},
+        "schedule.adaptive_shots: expected true or false, got the string 'false'",
+    ),
     ({"schedule": {"threshold": INF}}, "schedule.threshold: must be a finite number, got inf"),
     ({"schedule": {"budget_s": "300"}}, "schedule.budget_s: expected a number, got the string '300'"),
     ({"schedule": {"tolerated_rate": True}}, "schedule.tolerated_rate: expected a number, got the boolean true"),
-    ({"reduction": {"sho": {"q_bounds": [5, "5000"]}}}, "reduction.sho.q_bounds.1: expected a number, got the string '5000'"),
-    ({"reduction": {"sho": {"nominal_q": INF, "nominal_resonance_hz": 1e5}}},
-     "reduction.sho.nominal_q: must be a finite number, got inf"),
-    ({"instrument": {"kind": "forrester", "timeout_s": "5"}}, "instrument.timeout_s: expected a number, got the string '5'"),
-    ({"instrument": {"kind": "forrester", "faults": {"nan": "0.1"}}},
-     "instrument.faults.nan: expected a number, got the string '0.1'"),
-    ({"instrument": {"kind": "forrester", "faults": {"seed": False}}},
-     "instrument.faults.seed: expected a whole number, got the boolean false"),
+    (
+        {"reduction": {"sho": {"q_bounds": [5, "5000"]}}},
+        "reduction.sho.q_bounds.1: expected a number, got the string '5000'",
+    ),
+    (
+        {"reduction": {"sho": {"nominal_q": INF, "nominal_resonance_hz": 1e5}}},
+        "reduction.sho.nominal_q: must be a finite number, got inf",
+    ),
+    (
+        {"instrument": {"kind": "forrester", "timeout_s": "5"}},
+        "instrument.timeout_s: expected a number, got the string '5'",
+    ),
+    (
+        {"instrument": {"kind": "forrester", "faults": {"nan": "0.1"}}},
+        "instrument.faults.nan: expected a number, got the string '0.1'",
+    ),
+    (
+        {"instrument": {"kind": "forrester", "faults": {"seed": False}}},
+        "instrument.faults.seed: expected a whole number, got the boolean false",
+    ),
     ({"schema_version": True}, "schema_version: expected a whole number, got the boolean true"),
     ({"schema_version": "2"}, "schema_version: expected a whole number, got the string '2'"),
     ({"reward": {"beta": np.True_}}, "reward.beta: expected a number, got the boolean true"),
@@ -201,9 +243,17 @@ def test_lax_fields_names_the_numbers_and_flags_a_plain_model_lets_through():
 
 
 def test_ints_for_numbers_whole_numbers_for_counts_and_lists_for_pairs_are_accepted():
-    assert parse_config({"schedule": {"n_steps": np.int64(4), "adaptive_shots": np.True_}}).schedule.adaptive_shots is True
-    cfg = parse_config({"reward": {"alpha": 1}, "schedule": {"n_steps": 4.0, "adaptive_shots": True},
-                        "reduction": {"sho": {"q_bounds": [5, 50]}}, "space": {"x_min": 0, "x_max": 1, "n_x": 50}})
+    assert (
+        parse_config({"schedule": {"n_steps": np.int64(4), "adaptive_shots": np.True_}}).schedule.adaptive_shots is True
+    )
+    cfg = parse_config(
+        {
+            "reward": {"alpha": 1},
+            "schedule": {"n_steps": 4.0, "adaptive_shots": True},
+            "reduction": {"sho": {"q_bounds": [5, 50]}},
+            "space": {"x_min": 0, "x_max": 1, "n_x": 50},
+        }
+    )
     assert cfg.reward.alpha == 1.0 and isinstance(cfg.reward.alpha, float)
     assert cfg.schedule.n_steps == 4 and isinstance(cfg.schedule.n_steps, int) and cfg.schedule.adaptive_shots is True
     assert cfg.reduction.sho.q_bounds == (5.0, 50.0) and cfg.space.n_x == 50

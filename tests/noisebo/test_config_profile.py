@@ -10,10 +10,15 @@ from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, load_c
 
 SETTINGS = driver_info(InstrumentConfig(kind="forrester", settings={"a0": 0.1, "a1": 2.0})).settings  # complete
 PROFILE = {
-    "kind": "noisebo.noise_profile", "schema_version": 1,
+    "kind": "noisebo.noise_profile",
+    "schema_version": 1,
     "driver": {"name": "forrester", "version": "1", "settings": SETTINGS},
-    "law": "inv_sqrt", "parameters": {"a0": {"mean": 0.1, "sd": 0.01}, "a1": {"mean": 2.0, "sd": 0.05}},
-    "t_range_s": [0.2, 10.0], "noise_points": 40, "campaigns": [], "made_utc": "2026-11-25T00:00:00+00:00",
+    "law": "inv_sqrt",
+    "parameters": {"a0": {"mean": 0.1, "sd": 0.01}, "a1": {"mean": 2.0, "sd": 0.05}},
+    "t_range_s": [0.2, 10.0],
+    "noise_points": 40,
+    "campaigns": [],
+    "made_utc": "2026-11-25T00:00:00+00:00",
 }
 
 
@@ -44,12 +49,18 @@ def test_a_profile_path_is_read_relative_to_the_config_and_carried_inline(tmp_pa
     [
         ({"law": "power"}, "it describes the law 'power', the config's noise_model.mean is 'inv_sqrt'"),
         ({"parameters": {"a1": {"mean": 2.0, "sd": 0.1}}}, "needs the parameter(s) a0"),
-        ({"parameters": {"a0": {"mean": 20.0, "sd": 0.1}, "a1": {"mean": 2.0, "sd": 0.1}}},
-         "its a0 = 20 lies outside noise_model.a0_prior [0, 15]"),
-        ({"parameters": {"a0": {"mean": 0.1, "sd": -1.0}, "a1": {"mean": 2.0, "sd": 0.1}}},
-         "noise_model.profile.parameters.a0.sd"),
-        ({"parameters": {"a0": {"mean": "0.1", "sd": 0.1}, "a1": {"mean": 2.0, "sd": 0.1}}},
-         "expected a number, got the string '0.1'"),
+        (
+            {"parameters": {"a0": {"mean": 20.0, "sd": 0.1}, "a1": {"mean": 2.0, "sd": 0.1}}},
+            "its a0 = 20 lies outside noise_model.a0_prior [0, 15]",
+        ),
+        (
+            {"parameters": {"a0": {"mean": 0.1, "sd": -1.0}, "a1": {"mean": 2.0, "sd": 0.1}}},
+            "noise_model.profile.parameters.a0.sd",
+        ),
+        (
+            {"parameters": {"a0": {"mean": "0.1", "sd": 0.1}, "a1": {"mean": 2.0, "sd": 0.1}}},
+            "expected a number, got the string '0.1'",
+        ),
         ({"schema_version": 2}, "noise_model.profile.schema_version"),
     ],
 )
@@ -71,9 +82,16 @@ def test_a_noise_field_takes_no_profile():
 @pytest.mark.parametrize(
     ("instrument", "check", "message"),
     [
-        ({"kind": "branin", "settings": {}}, True, "it was made with the driver 'forrester', the campaign uses 'branin'"),
-        ({"kind": "forrester", "settings": {"a0": 0.5, "a1": 1.0}}, True,
-         "it was made with other instrument settings (a0: 0.1 in the profile, 0.5 here; a1: 2.0 in the profile, 1.0 here"),
+        (
+            {"kind": "branin", "settings": {}},
+            True,
+            "it was made with the driver 'forrester', the campaign uses 'branin'",
+        ),
+        (
+            {"kind": "forrester", "settings": {"a0": 0.5, "a1": 1.0}},
+            True,
+            "it was made with other instrument settings (a0: 0.1 in the profile, 0.5 here; a1: 2.0 in the profile, 1.0 here",
+        ),
         ({"kind": "forrester", "settings": {"a0": 0.5, "a1": 1.0}}, False, None),
         ({"kind": "forrester", "settings": {"a0": 0.1, "a1": 2.0}}, True, None),
     ],
@@ -83,8 +101,12 @@ def test_a_profile_of_another_driver_or_settings_is_refused_unless_the_check_is_
     data["noise_model"] |= {"profile": PROFILE, "profile_check": check}
     data["instrument"] = instrument
     if instrument["kind"] == "branin":
-        data["space"] = {"axes": [{"name": "x1", "low": -5, "high": 10, "n": 10},
-                                  {"name": "x2", "low": 0, "high": 15, "n": 10}], "t_min": 0.2, "t_max": 10, "n_t": 20}
+        data["space"] = {
+            "axes": [{"name": "x1", "low": -5, "high": 10, "n": 10}, {"name": "x2", "low": 0, "high": 15, "n": 10}],
+            "t_min": 0.2,
+            "t_max": 10,
+            "n_t": 20,
+        }
     config = parse_config(data)
     if message is None:
         assert validated(config).noise_model.profile.law == "inv_sqrt"
@@ -95,22 +117,37 @@ def test_a_profile_of_another_driver_or_settings_is_refused_unless_the_check_is_
 
 
 BAD_PROFILES = [  # file name, its content (None: no file), what the one line says
-    ("absent.yaml", None, "noise_model.profile: {dir}/absent.yaml: cannot read noise profile (No such file or directory)"),
+    (
+        "absent.yaml",
+        None,
+        "noise_model.profile: {dir}/absent.yaml: cannot read noise profile (No such file or directory)",
+    ),
     ("empty.yaml", "", "noise_model.profile: {dir}/empty.yaml: the file is empty"),
-    ("corrupt.yaml", "kind: noisebo.noise_profile\nparameters: [1, 2\n", "noise_model.profile: {dir}/corrupt.yaml: not valid YAML at line"),
+    (
+        "corrupt.yaml",
+        "kind: noisebo.noise_profile\nparameters: [1, 2\n",
+        "noise_model.profile: {dir}/corrupt.yaml: not valid YAML at line",
+    ),
     ("binary.yaml", b"\x89HDF\r\n\x1a\n\x00\xff", "not a text (UTF-8) file"),
-    ("campaign.yaml", "name: another\nschedule: {n_steps: 2}\n",
-     "is not a noise profile (no kind 'noisebo.noise_profile'; `noisebo noise-profile` writes one)"),
+    (
+        "campaign.yaml",
+        "name: another\nschedule: {n_steps: 2}\n",
+        "is not a noise profile (no kind 'noisebo.noise_profile'; `noisebo noise-profile` writes one)",
+    ),
     ("foreign.yaml", "kind: bluesky.plan\n", "is not a noise profile (kind 'bluesky.plan'"),
     ("list.yaml", "- 1\n- 2\n", "is not a noise profile"),
-    ("missing_law.yaml", yaml.safe_dump({k: v for k, v in PROFILE.items() if k != "law"}),
-     "noise_model.profile.law: Field required"),
+    (
+        "missing_law.yaml",
+        yaml.safe_dump({k: v for k, v in PROFILE.items() if k != "law"}),
+        "noise_model.profile.law: Field required",
+    ),
 ]
 
 
 @pytest.mark.parametrize(("name", "content", "message"), BAD_PROFILES, ids=[b[0] for b in BAD_PROFILES])
-def test_a_bad_profile_file_is_one_line_exit_2_and_creates_nothing(name, content, message, tmp_path, monkeypatch,
-                                                                  capsys):
+def test_a_bad_profile_file_is_one_line_exit_2_and_creates_nothing(
+    name, content, message, tmp_path, monkeypatch, capsys
+):
     monkeypatch.chdir(tmp_path)
     if isinstance(content, bytes):
         (tmp_path / name).write_bytes(content)

@@ -9,8 +9,18 @@ import pytest
 from installed_layout import adapters
 
 CORE = Path(__file__).resolve().parents[2] / "noisebo"
-FORBIDDEN = set(adapters()) | {"prefect", "h5py", "rerun", "fastapi", "uvicorn", "starlette", "matplotlib", "httpx",
-                        "prefect_dask", "dask"}
+FORBIDDEN = set(adapters()) | {
+    "prefect",
+    "h5py",
+    "rerun",
+    "fastapi",
+    "uvicorn",
+    "starlette",
+    "matplotlib",
+    "httpx",
+    "prefect_dask",
+    "dask",
+}
 
 
 def forbidden_in(name: str) -> set[str]:
@@ -40,16 +50,22 @@ def test_no_core_module_imports_an_adapter(module):
 
 
 def test_importing_the_whole_core_loads_no_adapter():
-    modules = [".".join(("noisebo", *p.relative_to(CORE).with_suffix("").parts)).removesuffix(".__init__")
-               for p in CORE.rglob("*.py")]
-    code = (f"import importlib, sys\nfor m in {modules!r}: importlib.import_module(m)\n"
-            f"print(sorted(m for m in sys.modules if any(m == f or m.startswith(f + '.') for f in {sorted(FORBIDDEN)!r})))")
+    modules = [
+        ".".join(("noisebo", *p.relative_to(CORE).with_suffix("").parts)).removesuffix(".__init__")
+        for p in CORE.rglob("*.py")
+    ]
+    code = (
+        f"import importlib, sys\nfor m in {modules!r}: importlib.import_module(m)\n"
+        f"print(sorted(m for m in sys.modules if any(m == f or m.startswith(f + '.') for f in {sorted(FORBIDDEN)!r})))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
 
 def test_the_checker_sees_an_import_inside_a_function(tmp_path):
     module = tmp_path / "m.py"
-    module.write_text("def f():\n    import h5py.h5f\n    from prefect import flow\n    from noisebo import storage\n"
-                      "    from noisebo import config\n")
+    module.write_text(
+        "def f():\n    import h5py.h5f\n    from prefect import flow\n    from noisebo import storage\n"
+        "    from noisebo import config\n"
+    )
     assert forbidden_imports(module) == {"h5py", "prefect", "noisebo.storage"}

@@ -13,10 +13,13 @@ from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig, ConfigError
 from noisebo.models.grids import grids
 
-TINY = CampaignConfig().with_overrides(name="tiny", space={"n_x": 30, "n_t": 20},
-                                       schedule={"n_steps": 2, "shots_before": 6, "shots_after": 3})
-BUILT_IN = {registry.POLICIES: {"reward", "double", "info_rate"},
-            registry.NOISE_LAWS: {"inv_sqrt", "power", "quadrature"}}
+TINY = CampaignConfig().with_overrides(
+    name="tiny", space={"n_x": 30, "n_t": 20}, schedule={"n_steps": 2, "shots_before": 6, "shots_after": 3}
+)
+BUILT_IN = {
+    registry.POLICIES: {"reward", "double", "info_rate"},
+    registry.NOISE_LAWS: {"inv_sqrt", "power", "quadrature"},
+}
 
 
 def test_the_built_ins_are_registered_by_entry_point():
@@ -62,12 +65,15 @@ def test_every_installed_noise_law_validates_runs_and_is_listed(name, listed):
     config = TINY.with_overrides(noise_model={"mean": name})
     assert config.noise_model.mean == name
     run = _run(config)
-    assert any(key.endswith("p") for key in run.decisions[-1].hyperparameters) == registry.noise_law(name).infers_exponent
+    assert (
+        any(key.endswith("p") for key in run.decisions[-1].hyperparameters) == registry.noise_law(name).infers_exponent
+    )
     assert any(line.split()[:1] == [name] for line in listed.splitlines())
 
 
-@pytest.mark.parametrize("section, key, kind", [("acquisition", "policy", "policy"),
-                                                ("noise_model", "mean", "noise law")])
+@pytest.mark.parametrize(
+    "section, key, kind", [("acquisition", "policy", "policy"), ("noise_model", "mean", "noise law")]
+)
 def test_an_unknown_name_is_one_line_listing_what_is_installed(section, key, kind):
     with pytest.raises(ConfigError) as info:
         TINY.with_overrides(**{section: {key: "greedy"}})
@@ -89,7 +95,8 @@ def test_old_configs_with_the_names_as_strings_still_load():
 def broken_plugins(tmp_path, monkeypatch):
     """Three plug-ins installed into a folder on sys.path: one that cannot be imported, one
     without ``point_scores``, and a noise law without ``share``."""
-    (tmp_path / "broken_plugins.py").write_text(textwrap.dedent("""
+    (tmp_path / "broken_plugins.py").write_text(
+        textwrap.dedent("""
         class NoScores:
             uses_spread = chooses_shots = False
             paper = 0
@@ -106,18 +113,21 @@ def broken_plugins(tmp_path, monkeypatch):
 
             def combine(self, shot, a0):
                 return shot + a0
-        """))
+        """)
+    )
     dist = tmp_path / "noisebo_broken_plugins-0.0.1.dist-info"
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: noisebo-broken-plugins\nVersion: 0.0.1\n")
-    (dist / "entry_points.txt").write_text(textwrap.dedent("""
+    (dist / "entry_points.txt").write_text(
+        textwrap.dedent("""
         [noisebo.policies]
         missing-module = no_such_module_anywhere:Policy
         no-scores = broken_plugins:NoScores
 
         [noisebo.noise_laws]
         no-share = broken_plugins:NoShare
-        """))
+        """)
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     return tmp_path
 
@@ -125,10 +135,14 @@ def broken_plugins(tmp_path, monkeypatch):
 def test_a_broken_plugin_is_named_in_one_line_and_the_others_still_load(broken_plugins, capsys):
     with pytest.raises(registry.PluginBroken) as info:
         registry.policy("missing-module")
-    assert str(info.value).startswith("policy 'missing-module' (no_such_module_anywhere:Policy) could not be "
-                                      "loaded: ModuleNotFoundError")
-    with pytest.raises(registry.PluginBroken, match=r"^policy 'no-scores' \(broken_plugins:NoScores\) lacks "
-                                                    r"point_scores$"):
+    assert str(info.value).startswith(
+        "policy 'missing-module' (no_such_module_anywhere:Policy) could not be loaded: ModuleNotFoundError"
+    )
+    with pytest.raises(
+        registry.PluginBroken,
+        match=r"^policy 'no-scores' \(broken_plugins:NoScores\) lacks "
+        r"point_scores$",
+    ):
         registry.policy("no-scores")
     with pytest.raises(registry.PluginBroken, match=r"^noise law 'no-share' .* lacks share$"):
         registry.noise_law("no-share")

@@ -144,13 +144,18 @@ def test_a_damaged_file_with_its_journal_says_how_to_rebuild_it_and_rebuild_make
     whole = everything(path, False)
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
-    with pytest.raises(CampaignFileError, match=rf"truncated: {len(data) // 2} of its {len(data)} bytes .*"
-                                                rf"`noisebo rebuild {path}`"):
+    with pytest.raises(
+        CampaignFileError,
+        match=rf"truncated: {len(data) // 2} of its {len(data)} bytes .*"
+        rf"`noisebo rebuild {path}`",
+    ):
         read_campaign(path)
     journal_before = path.with_suffix(".journal").read_bytes()
     said = rebuild_file(path)
-    assert said == [f"wrote {path} anew from its journal: 12 points, {whole['campaign']['attrs']['n_shots']} "
-                    "shots, status completed"]
+    assert said == [
+        f"wrote {path} anew from its journal: 12 points, {whole['campaign']['attrs']['n_shots']} "
+        "shots, status completed"
+    ]
     assert_same(everything(path, False), whole)
     assert path.with_suffix(".journal").read_bytes() == journal_before
 
@@ -166,12 +171,15 @@ def test_a_killed_file_rebuilt_reads_as_before_and_stays_running(tmp_path):
     assert read_campaign(path)["attrs"]["status"] == "running"
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda p: p.write_bytes(b""), "empty file (0 bytes)"),
-    (lambda p: p.mkdir(), "not a file"),
-    (lambda p: p.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 40), "not an HDF5 file, so not a noisebo"),
-    (lambda p: h5py.File(p, "w").close(), "an HDF5 file but not a noisebo campaign"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda p: p.write_bytes(b""), "empty file (0 bytes)"),
+        (lambda p: p.mkdir(), "not a file"),
+        (lambda p: p.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 40), "not an HDF5 file, so not a noisebo"),
+        (lambda p: h5py.File(p, "w").close(), "an HDF5 file but not a noisebo campaign"),
+    ],
+)
 def test_what_is_not_a_campaign_file_says_so(make, message, tmp_path):
     path = tmp_path / "x.h5"
     make(path)
@@ -183,9 +191,11 @@ def test_a_file_a_live_writer_holds_reads_within_5_s(tmp_path):
     """A writer process still running (it holds the file open for SWMR writing) while it is read."""
     path = tmp_path / "live.h5"
     code = KILLED_WRITER.format(root=str(ROOT), path=str(path), n=6, spectra=False).replace(
-        "os.kill(os.getpid(), 9)", "print('ready', flush=True); sys.stdin.read()")
-    with subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                          text=True) as writer:
+        "os.kill(os.getpid(), 9)", "print('ready', flush=True); sys.stdin.read()"
+    )
+    with subprocess.Popen(
+        [sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    ) as writer:
         try:
             assert writer.stdout.readline().strip() == "ready"
             began = time.perf_counter()

@@ -30,7 +30,8 @@ from noisebo.storage.recorder import Recorder
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = CampaignConfig().with_overrides(
-    name="small", space={"n_x": 40, "n_t": 30}, schedule={"n_steps": 500, "shots_before": 5, "shots_after": 2})
+    name="small", space={"n_x": 40, "n_t": 30}, schedule={"n_steps": 500, "shots_before": 5, "shots_after": 2}
+)
 FAIL_EVERY, REJECT_EVERY = 7, 4  # a failed attempt at points 6, 13, ...; every 4th shot rejected
 
 
@@ -148,13 +149,20 @@ print("not killed")
 """
 
 
-@pytest.mark.parametrize("at", [1, 2, 3, 4, 5], ids=["after-points", "after-steps", "after-failures", "after-shots",
-                                                     "before-counters"])
+@pytest.mark.parametrize(
+    "at", [1, 2, 3, 4, 5], ids=["after-points", "after-steps", "after-failures", "after-shots", "before-counters"]
+)
 def test_a_file_killed_mid_append_opens_with_exactly_the_committed_rows(at, tmp_path):
     # Point 6 has a failed attempt, rejected shots and spectra: every table gets rows in the killed append.
     path, n = tmp_path / "c.h5", 6
-    killed = subprocess.run([sys.executable, "-c", CHILD, str(path), str(n), f"append:{at}"], cwd=ROOT,
-                            env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
+    killed = subprocess.run(
+        [sys.executable, "-c", CHILD, str(path), str(n), f"append:{at}"],
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert killed.returncode == -signal.SIGKILL, killed.stdout + killed.stderr[-2000:]
     with pytest.raises(OSError, match="already open for write"):
         h5py.File(path, "r")  # plain h5py refuses a file killed while open for SWMR writing ...
@@ -171,8 +179,9 @@ def test_a_file_killed_mid_append_opens_with_exactly_the_committed_rows(at, tmp_
 def test_bytes_per_point_do_not_grow_with_n(tmp_path):
     """File growth per point over points 10..59 and 200..249 against the bytes of one point's
     rows (an acquisition map of 200 x 100 float32 dominates): flat, and close to the rows."""
-    config = CampaignConfig().with_overrides(name="grid",
-                                             schedule={"n_steps": 500, "shots_before": 5, "shots_after": 3})
+    config = CampaignConfig().with_overrides(
+        name="grid", schedule={"n_steps": 500, "shots_before": 5, "shots_after": 3}
+    )
     path, sizes = tmp_path / "c.h5", {}
     with Recorder.create(path, started(config)) as recorder:
         for i in range(250):
@@ -197,10 +206,12 @@ def row_bytes(path: Path, shots: int) -> int:
     (with its arrays and hyperparameters), ``shots`` rows of /shots (with fits and text ends)."""
     total = 0
     with h5py.File(path, "r", swmr=True) as f:
+
         def add(name, obj):
             nonlocal total
             if isinstance(obj, h5py.Dataset) and obj.maxshape[0] is None and not name.endswith("/utf8"):
                 rows = shots if name.startswith("shots/") else 1 if name.split("/")[0] in ("points", "steps") else 0
                 total += rows * obj.dtype.itemsize * int(np.prod(obj.shape[1:], dtype=np.int64))
+
         f.visititems(add)
     return total

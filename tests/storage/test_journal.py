@@ -54,8 +54,11 @@ def test_a_corrupt_byte_before_the_end_is_an_error_naming_the_record_not_a_short
     first = len(journal.encode(records()[0]))
     data[first + 30] ^= 0xFF  # inside the second record; the third still reads
     path.write_bytes(bytes(data))
-    with pytest.raises(journal.JournalDamaged, match=rf"record 1 \(at byte {first}\) is damaged and 1 intact records "
-                                                    rf"follow it; records 0-0 \(bytes 0-{first - 1}\) are intact"):
+    with pytest.raises(
+        journal.JournalDamaged,
+        match=rf"record 1 \(at byte {first}\) is damaged and 1 intact records "
+        rf"follow it; records 0-0 \(bytes 0-{first - 1}\) are intact",
+    ):
         journal.read(path)
     found, length, damage = journal.scan(path)
     assert [r.type for r in found] == ["campaign"] and length == first

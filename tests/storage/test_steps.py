@@ -33,12 +33,15 @@ def test_the_converged_step_attribute(index, attr):
     assert steps.converged_attr(index) == attr
 
 
-@pytest.mark.parametrize("version, points, decided, converged", [
-    (1, [0, 0, 1], [1, 2], 2),
-    (2, [0, 0, 1], [1, 2], 2),
-    (3, [0, 0, 1], [1, 2], 2),
-    (4, [-1, -1, 0], [0, 1], 1),  # already shown steps: left alone
-])
+@pytest.mark.parametrize(
+    "version, points, decided, converged",
+    [
+        (1, [0, 0, 1], [1, 2], 2),
+        (2, [0, 0, 1], [1, 2], 2),
+        (3, [0, 0, 1], [1, 2], 2),
+        (4, [-1, -1, 0], [0, 1], 1),  # already shown steps: left alone
+    ],
+)
 def test_old_schemas_are_converted_and_new_ones_left_alone(version, points, decided, converged):
     tables = {"points": {"step": np.array([-1, -1, 0])}, "steps": {"step": np.array([0, 1])}}
     attrs = {"converged_step": 1}
@@ -49,8 +52,10 @@ def test_old_schemas_are_converted_and_new_ones_left_alone(version, points, deci
 
 @pytest.mark.parametrize("version", [1, 2, 3])
 def test_an_old_file_that_never_converged_still_says_so(version):
-    tables, attrs = {"points": {"step": np.array([-1])}, "steps": {"step": np.array([], dtype=np.int32)}}, {
-        "converged_step": -1}
+    tables, attrs = (
+        {"points": {"step": np.array([-1])}, "steps": {"step": np.array([], dtype=np.int32)}},
+        {"converged_step": -1},
+    )
     steps.from_schema(version, tables, attrs)
     assert attrs["converged_step"] == -1 and tables["points"]["step"].tolist() == [0]
 
@@ -73,7 +78,12 @@ def test_files_store_their_own_numbering(old_and_new):
     old, new = old_and_new
     with h5py.File(old, "r") as f:
         assert f.attrs["schema_version"] == 3 and f.attrs["converged_step"] == 2
-        assert f["points/step"][()].tolist() == [-1, -1, -1, 0, 1, 2, 3] and f["steps/step"][()].tolist() == [0, 1, 2, 3]
+        assert f["points/step"][()].tolist() == [-1, -1, -1, 0, 1, 2, 3] and f["steps/step"][()].tolist() == [
+            0,
+            1,
+            2,
+            3,
+        ]
     with h5py.File(new, "r") as f:
         assert f.attrs["schema_version"] == SCHEMA_VERSION == 4 and f.attrs["converged_step"] == CONVERGED
         assert f["points/step"][()].tolist() == POINT_STEPS and f["steps/step"][()].tolist() == STEP_STEPS

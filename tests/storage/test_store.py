@@ -26,6 +26,7 @@ def recorded(config, path, store=None) -> tuple[CampaignRecord, CampaignRecord]:
     early = []
 
     with Recorder.create(path, started, store) as recorder:
+
         def commit(state, events):
             new = recorder.commit(state, events)
             if not early and new.points:

@@ -175,8 +175,9 @@ def test_measure_without_reduction_leaves_the_point_to_the_reduce_stage(tiny_con
         (4, 0.2, 2, "measure x=0.3 t=2 s 5 shots (noise model converged, from shot 3)"),
     ],
 )
-def test_a_measure_task_is_named_by_where_how_long_and_why(tiny_config, monkeypatch, step, model_noise, taken,
-                                                            expected):
+def test_a_measure_task_is_named_by_where_how_long_and_why(
+    tiny_config, monkeypatch, step, model_noise, taken, expected
+):
     request = Request(point=2, step=step, x=(0.3,), t=2.0, wanted=5, taken=taken, model_noise=model_noise)
     monkeypatch.setattr(engine, "ask", lambda state: request)
     assert ops.measure_name(started(tiny_config)) == expected

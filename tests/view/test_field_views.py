@@ -30,8 +30,9 @@ CONFIG = CampaignConfig(
 def field_file(tmp_path_factory):
     events = []
     run_campaign(CONFIG, ForresterInstrument(SETTINGS), 1, on_commit=lambda state, new: events.extend(new))
-    started = engine.new_campaign(CONFIG, 1, DriverInfo("forrester", "0.1.0", SETTINGS.model_dump()), {},
-                                  "2026-11-24T00:00:00+00:00")
+    started = engine.new_campaign(
+        CONFIG, 1, DriverInfo("forrester", "0.1.0", SETTINGS.model_dump()), {}, "2026-11-24T00:00:00+00:00"
+    )
     path = tmp_path_factory.mktemp("field") / "patch.h5"
     write_snapshot(path, rebuild([encode(e) for e in [started, *events]]))
     return path

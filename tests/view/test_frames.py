@@ -11,8 +11,9 @@ from noisebo.storage.layout import STEP_COLUMNS
 from noisebo.storage.record import Points, Shots, Steps, Summary
 from noisebo.view.frames import frame_at, frames, n_frames, normalised_reward
 
-CONFIG = CampaignConfig().with_overrides(space={"n_x": 3, "n_t": 2, "t_min": 1.0, "t_max": 2.0},
-                                         schedule={"n_seed": 2, "n_steps": 2})
+CONFIG = CampaignConfig().with_overrides(
+    space={"n_x": 3, "n_t": 2, "t_min": 1.0, "t_max": 2.0}, schedule={"n_seed": 2, "n_steps": 2}
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -25,25 +26,53 @@ class Tables:
 
 
 def tables(with_summary: bool) -> Tables:
-    points = {"x": np.array([0.1, 0.9, 0.5]), "t": np.array([1.0, 2.0, 1.5]), "value": np.array([1.0, 2.0, 3.0]),
-              "noise": np.array([0.3, 0.2, 0.25]), "shot_std": np.array([0.3, 0.2, 0.25]),
-              "n_shots": np.array([2, 2, 1]), "noise_measured": np.array([True, True, False]),
-              "step": np.array([0, 0, 1])}  # two seed points (step 0), then BO step 1's point
-    steps = {"step": np.array([1, 2]), "x": np.array([0.5, 0.0]), "t": np.array([1.5, 1.0]),
-             "shots": np.array([1, 1]), "t_opt": np.array([1.2, 1.3]), "latency_s": np.array([0.5, 0.1]),
-             "converged": np.array([False, True])}
-    arrays = {"acq_map": np.zeros((2, 3, 2)), "f_mean": np.array([[0.0, 1.0, 2.0]] * 2),
-              "f_var": np.array([[4.0, 1.0, 0.0]] * 2), "noise_mean": np.array([[0.4, 0.2]] * 2),
-              "noise_var": np.array([[0.01, 0.04]] * 2)}
+    points = {
+        "x": np.array([0.1, 0.9, 0.5]),
+        "t": np.array([1.0, 2.0, 1.5]),
+        "value": np.array([1.0, 2.0, 3.0]),
+        "noise": np.array([0.3, 0.2, 0.25]),
+        "shot_std": np.array([0.3, 0.2, 0.25]),
+        "n_shots": np.array([2, 2, 1]),
+        "noise_measured": np.array([True, True, False]),
+        "step": np.array([0, 0, 1]),
+    }  # two seed points (step 0), then BO step 1's point
+    steps = {
+        "step": np.array([1, 2]),
+        "x": np.array([0.5, 0.0]),
+        "t": np.array([1.5, 1.0]),
+        "shots": np.array([1, 1]),
+        "t_opt": np.array([1.2, 1.3]),
+        "latency_s": np.array([0.5, 0.1]),
+        "converged": np.array([False, True]),
+    }
+    arrays = {
+        "acq_map": np.zeros((2, 3, 2)),
+        "f_mean": np.array([[0.0, 1.0, 2.0]] * 2),
+        "f_var": np.array([[4.0, 1.0, 0.0]] * 2),
+        "noise_mean": np.array([[0.4, 0.2]] * 2),
+        "noise_var": np.array([[0.01, 0.04]] * 2),
+    }
     hyper = {"noise.a0": np.array([0.1, 0.2]), "noise.a1": np.array([1.0, 2.0])}
     unused = {name: np.zeros(2) for name in STEP_COLUMNS if name not in steps}  # columns frames do not read
     point, t = np.array([0, 0, 1, 1, 2]), np.array([1.0, 1.0, 2.0, 2.0, 1.5])
     shots = Shots(point=point, shot=np.zeros(5), t=t, value=np.zeros(5), ok=np.ones(5, dtype=bool))
-    summary = Summary(f_mean=np.zeros(3), f_var=np.ones(3), noise_fine=np.array([0.5, 0.4]), t_opt=1.25,
-                      hyperparameters={"noise.a0": 0.3}, t_opt_map=np.zeros(0), noise_map=np.zeros(0))
+    summary = Summary(
+        f_mean=np.zeros(3),
+        f_var=np.ones(3),
+        noise_fine=np.array([0.5, 0.4]),
+        t_opt=1.25,
+        hyperparameters={"noise.a0": 0.3},
+        t_opt_map=np.zeros(0),
+        noise_map=np.zeros(0),
+    )
     grid = {"x": np.array([0.0, 0.5, 1.0]), "t": np.array([1.0, 2.0]), "t_fine": np.array([1.0, 2.0])}
-    return Tables(grid, Points(**points), Steps(**steps, **unused, hyperparameters=hyper, arrays=arrays), shots,
-                  summary if with_summary else None)
+    return Tables(
+        grid,
+        Points(**points),
+        Steps(**steps, **unused, hyperparameters=hyper, arrays=arrays),
+        shots,
+        summary if with_summary else None,
+    )
 
 
 def test_seed_frame_has_the_seed_points_and_no_model():
@@ -79,5 +108,6 @@ def test_final_frame_uses_the_summary():
 
 def test_normalised_reward_by_hand():
     # alpha 1, beta 2: R(1, 0.5) = -2, R(2, 0) = -4, R(3, 0) = -9 -> (1, 5/7, 0)
-    np.testing.assert_allclose(normalised_reward(np.array([1.0, 2.0, 3.0]), np.array([0.5, 0.0, 0.0]), 1.0, 2.0),
-                               [1.0, 5 / 7, 0.0])
+    np.testing.assert_allclose(
+        normalised_reward(np.array([1.0, 2.0, 3.0]), np.array([0.5, 0.0, 0.0]), 1.0, 2.0), [1.0, 5 / 7, 0.0]
+    )

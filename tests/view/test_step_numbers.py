@@ -33,12 +33,15 @@ def old_and_new(tmp_path_factory):
     return old, new
 
 
-@pytest.mark.parametrize("converged, first", [
-    ([False, False, True, True], 3),
-    ([True, True], 1),
-    ([False, False], None),
-    ([], None),
-])
+@pytest.mark.parametrize(
+    "converged, first",
+    [
+        ([False, False, True, True], 3),
+        ([True, True], 1),
+        ([False, False], None),
+        ([], None),
+    ],
+)
 def test_the_first_converged_step_counts_from_1(converged, first):
     steps = SimpleNamespace(step=np.arange(1, len(converged) + 1), converged=np.asarray(converged))
     assert _first_converged(steps) == first

@@ -50,9 +50,18 @@ def test_shot_options():
 
 
 def post_of(noise):
-    return Posterior(f_mean=jnp.zeros(2), f_var=jnp.array([1.0, 0.5]), noise_mean=noise, noise_var=jnp.zeros(3),
-                     t=jnp.array([0.5, 1.0, 2.0]), t_opt=jnp.asarray(1.0), noise_at_t_opt=jnp.asarray(1.0),
-                     f_best=jnp.asarray(0.0), reward_best=jnp.asarray(0.5), f_spread=jnp.array([2.0, 1.0]))
+    return Posterior(
+        f_mean=jnp.zeros(2),
+        f_var=jnp.array([1.0, 0.5]),
+        noise_mean=noise,
+        noise_var=jnp.zeros(3),
+        t=jnp.array([0.5, 1.0, 2.0]),
+        t_opt=jnp.asarray(1.0),
+        noise_at_t_opt=jnp.asarray(1.0),
+        f_best=jnp.asarray(0.0),
+        reward_best=jnp.asarray(0.5),
+        f_spread=jnp.array([2.0, 1.0]),
+    )
 
 
 def test_pure_shot_noise_prefers_no_time_over_another_but_overhead_prefers_long_points():
@@ -71,8 +80,17 @@ def test_info_rate_point_scores_at_grid_points_equal_the_map():
     post = post_of(jnp.array([2.0, 1.5, 1.2]))
     values = np.asarray(acquisition_map(post, 3, acq, RewardConfig(), 0.5))
     i, j = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
-    scores = point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, RewardConfig(),
-                          spread=post.f_spread[i], overhead_s=0.5)
+    scores = point_scores(
+        post,
+        post.f_mean[i],
+        post.f_var[i],
+        jnp.asarray(j),
+        3,
+        acq,
+        RewardConfig(),
+        spread=post.f_spread[i],
+        overhead_s=0.5,
+    )
     np.testing.assert_allclose(np.asarray(scores), values, rtol=1e-12)
 
 
@@ -83,8 +101,9 @@ def test_integration_points():
 
 
 def test_a_budgeted_info_rate_campaign_spends_its_budget_on_its_own_shot_counts(tiny_config):
-    config = tiny_config.with_overrides(acquisition={"policy": "info_rate"},
-                                        schedule={"budget_s": 150.0, "point_overhead_s": 1.0, "n_steps": 400})
+    config = tiny_config.with_overrides(
+        acquisition={"policy": "info_rate"}, schedule={"budget_s": 150.0, "point_overhead_s": 1.0, "n_steps": 400}
+    )
     final = run_campaign(config, ForresterInstrument(), 2).final
     assert final.status is Status.BUDGET_SPENT and final.spent_s <= 150.0
     after = [d for d in final.decisions if d.converged]

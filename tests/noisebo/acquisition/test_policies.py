@@ -69,8 +69,9 @@ def test_argmax_2d_takes_the_first_of_ties():
     assert tuple(int(v) for v in argmax_2d(jnp.array([[0.0, 2.0], [2.0, 1.0]]))) == (0, 1)
 
 
-@pytest.mark.parametrize("policy, f_acquisition", [("reward", "ue"), ("reward", "ucb"), ("double", "ue"),
-                                                   ("double", "ei")])
+@pytest.mark.parametrize(
+    "policy, f_acquisition", [("reward", "ue"), ("reward", "ucb"), ("double", "ue"), ("double", "ei")]
+)
 def test_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
     from noisebo.acquisition.policies import point_scores
 
@@ -82,25 +83,35 @@ def test_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
     np.testing.assert_allclose(np.asarray(scores), values, rtol=1e-12, atol=1e-15)
     # off the grid: a larger f variance scores higher under UE at every t
     if f_acquisition == "ue":
-        assert np.all(np.asarray(point_scores(post, jnp.zeros(3), jnp.full(3, 5.0), jnp.arange(3), 3, acq, REWARD))
-                      >= values[1] - 1e-12)
+        assert np.all(
+            np.asarray(point_scores(post, jnp.zeros(3), jnp.full(3, 5.0), jnp.arange(3), 3, acq, REWARD))
+            >= values[1] - 1e-12
+        )
 
 
 # --- a noise field: a noise curve per position ------------------------------------------------
 
-FIELD_POST = POST._replace(noise_mean=jnp.array([[3.0, 1.0, 2.0], [1.0, 1.0, 1.0]]),
-                           noise_var=jnp.array([[0.0, 0.0, 4.0], [1.0, 1.0, 1.0]]),
-                           noise_at_t_opt=jnp.array([1.5, 0.5]), t_opt_map=jnp.array([1.0, 0.5]))
+FIELD_POST = POST._replace(
+    noise_mean=jnp.array([[3.0, 1.0, 2.0], [1.0, 1.0, 1.0]]),
+    noise_var=jnp.array([[0.0, 0.0, 4.0], [1.0, 1.0, 1.0]]),
+    noise_at_t_opt=jnp.array([1.5, 0.5]),
+    t_opt_map=jnp.array([1.0, 0.5]),
+)
 
 
 @pytest.mark.parametrize("policy", ["reward", "double"])
 @pytest.mark.parametrize("f_acq", ["ue", "ei", "ucb"])
 def test_the_same_curve_at_every_position_gives_the_papers_map(policy, f_acq):
     acq = AcquisitionConfig(policy=policy, f_acquisition=f_acq)
-    rows = POST._replace(noise_mean=jnp.stack([POST.noise_mean] * 2), noise_var=jnp.stack([POST.noise_var] * 2),
-                         noise_at_t_opt=jnp.full(2, POST.noise_at_t_opt), t_opt_map=jnp.full(2, 1.0))
-    np.testing.assert_allclose(np.asarray(acquisition_map(rows, 3, acq, REWARD)),
-                               np.asarray(acquisition_map(POST, 3, acq, REWARD)), rtol=1e-12)
+    rows = POST._replace(
+        noise_mean=jnp.stack([POST.noise_mean] * 2),
+        noise_var=jnp.stack([POST.noise_var] * 2),
+        noise_at_t_opt=jnp.full(2, POST.noise_at_t_opt),
+        t_opt_map=jnp.full(2, 1.0),
+    )
+    np.testing.assert_allclose(
+        np.asarray(acquisition_map(rows, 3, acq, REWARD)), np.asarray(acquisition_map(POST, 3, acq, REWARD)), rtol=1e-12
+    )
 
 
 def test_reward_driven_field_by_hand():
@@ -129,8 +140,9 @@ def test_double_field_by_hand():
     np.testing.assert_allclose(values, 0.5 * (np.array([0.0, 1.0])[:, None] + acq_t), atol=1e-6)
 
 
-@pytest.mark.parametrize("policy, f_acquisition", [("reward", "ue"), ("reward", "ucb"), ("double", "ue"),
-                                                   ("double", "ei")])
+@pytest.mark.parametrize(
+    "policy, f_acquisition", [("reward", "ue"), ("reward", "ucb"), ("double", "ue"), ("double", "ei")]
+)
 def test_field_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
     from noisebo.acquisition.policies import point_scores
     from noisebo.models.prediction import NoiseRows
@@ -151,7 +163,10 @@ def test_a_noisy_position_is_not_chosen_for_its_noise_alone(policy):
     # Position 0 is ten times noisier, position 1 has the larger f variance: UE on the position's
     # own measurement variance would pick 0 (100 / 3 + 1 against 1 / 3 + 2); where to measure is
     # chosen by f, so 1.
-    post = FIELD_POST._replace(noise_mean=jnp.array([[10.0, 10.0, 10.0], [1.0, 1.2, 1.5]]),
-                               noise_var=jnp.zeros((2, 3)), noise_at_t_opt=jnp.array([10.0, 1.0]))
+    post = FIELD_POST._replace(
+        noise_mean=jnp.array([[10.0, 10.0, 10.0], [1.0, 1.2, 1.5]]),
+        noise_var=jnp.zeros((2, 3)),
+        noise_at_t_opt=jnp.array([10.0, 1.0]),
+    )
     values = acquisition_map(post, 3, AcquisitionConfig(policy=policy), REWARD)
     assert int(argmax_2d(values)[0]) == 1

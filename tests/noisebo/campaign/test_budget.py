@@ -18,8 +18,9 @@ from noisebo.storage.records import decode, encode, rebuild
 
 
 def budgeted(tiny_config, budget_s, overhead_s=2.0, n_steps=100):
-    return tiny_config.with_overrides(schedule={"budget_s": budget_s, "point_overhead_s": overhead_s,
-                                                "n_steps": n_steps})
+    return tiny_config.with_overrides(
+        schedule={"budget_s": budget_s, "point_overhead_s": overhead_s, "n_steps": n_steps}
+    )
 
 
 def spent_by_hand(final) -> float:
@@ -86,24 +87,31 @@ def test_the_budget_travels_through_the_journal(spent, tiny_config):
 
 
 # (shots wanted, seconds left) -> (allowed t, shots) on a grid of t = 1, 2, ..., 5 s, overhead 1 s
-@pytest.mark.parametrize("shots, left, allowed, used", [
-    (3, None, [1, 2, 3, 4, 5], 3),
-    (3, 100.0, [1, 2, 3, 4, 5], 3),
-    (3, 10.0, [1, 2, 3], 3),  # 1 + 3 t <= 10
-    (3, 4.0, [1], 3),
-    (30, 10.0, [1], 9),  # 30 shots fit at no t: as many as fit at 1 s
-    (30, 5.5, [1], 4),
-])
+@pytest.mark.parametrize(
+    "shots, left, allowed, used",
+    [
+        (3, None, [1, 2, 3, 4, 5], 3),
+        (3, 100.0, [1, 2, 3, 4, 5], 3),
+        (3, 10.0, [1, 2, 3], 3),  # 1 + 3 t <= 10
+        (3, 4.0, [1], 3),
+        (30, 10.0, [1], 9),  # 30 shots fit at no t: as many as fit at 1 s
+        (30, 5.5, [1], 4),
+    ],
+)
 def test_affordable_by_hand(shots, left, allowed, used):
-    config = CampaignConfig(space={"t_min": 1.0, "t_max": 5.0, "n_t": 5},
-                            schedule={"point_overhead_s": 1.0, "shots_after": 2})
+    config = CampaignConfig(
+        space={"t_min": 1.0, "t_max": 5.0, "n_t": 5}, schedule={"point_overhead_s": 1.0, "shots_after": 2}
+    )
     mask, got = affordable(config, shots, left)
     assert grids(config).t[mask].tolist() == allowed and got == used
 
 
 def test_bad_budgets_name_the_field():
-    for schedule, field in (({"budget_s": 0}, "schedule.budget_s"), ({"budget_s": float("inf")}, "schedule.budget_s"),
-                            ({"point_overhead_s": -1}, "schedule.point_overhead_s")):
+    for schedule, field in (
+        ({"budget_s": 0}, "schedule.budget_s"),
+        ({"budget_s": float("inf")}, "schedule.budget_s"),
+        ({"point_overhead_s": -1}, "schedule.point_overhead_s"),
+    ):
         with pytest.raises(ConfigError, match=field):
             parse_config({"schedule": schedule})
 
@@ -140,9 +148,17 @@ def test_adaptive_noise_point_shots_by_hand(rel_sd, expected):
     from noisebo.models.prediction import Posterior
 
     sched = ScheduleConfig(shots_before=20, shots_after=3)
-    post = Posterior(f_mean=jnp.zeros(3), f_var=jnp.ones(3), noise_mean=jnp.full(4, 2.0),
-                     noise_var=jnp.full(4, (2.0 * rel_sd) ** 2), t=jnp.arange(1.0, 5.0), t_opt=jnp.asarray(2.0),
-                     noise_at_t_opt=jnp.asarray(2.0), f_best=jnp.asarray(0.0), reward_best=jnp.asarray(0.5))
+    post = Posterior(
+        f_mean=jnp.zeros(3),
+        f_var=jnp.ones(3),
+        noise_mean=jnp.full(4, 2.0),
+        noise_var=jnp.full(4, (2.0 * rel_sd) ** 2),
+        t=jnp.arange(1.0, 5.0),
+        t_opt=jnp.asarray(2.0),
+        noise_at_t_opt=jnp.asarray(2.0),
+        f_best=jnp.asarray(0.0),
+        reward_best=jnp.asarray(0.5),
+    )
     assert noise_point_shots(post, 1, (0.5,), space_grids(CampaignConfig().space), sched) == expected
 
 
@@ -150,10 +166,17 @@ def test_adaptive_noise_point_shots_by_hand(rel_sd, expected):
     "overrides, message",
     [
         ({"schedule": {"noise_t": "informative"}}, "set schedule.convergence: posterior"),
-        ({"schedule": {"noise_t": "informative", "convergence": "posterior"}, "acquisition": {"fixed_t": 1.0}},
-         "acquisition.fixed_t fixes"),
-        ({"schedule": {"noise_t": "informative", "convergence": "posterior"},
-          "noise_model": {"field": {"length_loc": -1.0}}}, "without noise_model.field"),
+        (
+            {"schedule": {"noise_t": "informative", "convergence": "posterior"}, "acquisition": {"fixed_t": 1.0}},
+            "acquisition.fixed_t fixes",
+        ),
+        (
+            {
+                "schedule": {"noise_t": "informative", "convergence": "posterior"},
+                "noise_model": {"field": {"length_loc": -1.0}},
+            },
+            "without noise_model.field",
+        ),
         ({"schedule": {"noise_t": "often"}}, "schedule.noise_t"),
     ],
 )
@@ -168,16 +191,20 @@ def test_an_informative_noise_point_measures_where_the_rate_on_t_star_peaks(tiny
     from noisebo.models.fitting import fit_key, fit_models
     from noisebo.models.prediction import predict
 
-    config = tiny_config.with_overrides(schedule={"convergence": "posterior", "t_interval_rel": 1e-6,
-                                                  "noise_t": "informative", "n_steps": 1})
+    config = tiny_config.with_overrides(
+        schedule={"convergence": "posterior", "t_interval_rel": 1e-6, "noise_t": "informative", "n_steps": 1}
+    )
     seeds = run_campaign(config.with_overrides(schedule={"n_steps": 0}), ForresterInstrument(), 1).state
     fitted = fit_models(config, seeds, fit_key(1, 0))
     chosen, _ = decide_on(config, fitted, seeds, 0)
     prediction = predict(config, fitted, seeds)
     shots = config.schedule.shots_before
     c4 = noise_model.c4(shots)
-    rate = np.asarray(information.t_opt_rate(prediction.t_draws, prediction.noise_draws,
-                                             jnp.asarray(grids(config).t), (1 - c4**2) / c4**2, shots, 0.0))
+    rate = np.asarray(
+        information.t_opt_rate(
+            prediction.t_draws, prediction.noise_draws, jnp.asarray(grids(config).t), (1 - c4**2) / c4**2, shots, 0.0
+        )
+    )
     assert not chosen.converged and chosen.measure_noise and chosen.shots == shots
     assert chosen.t == grids(config).t[int(np.argmax(rate))] and rate.max() > 0
     policy, _ = decide_on(config.with_overrides(schedule={"noise_t": "policy"}), fitted, seeds, 0)

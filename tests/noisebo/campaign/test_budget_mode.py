@@ -23,7 +23,7 @@ def test_every_point_takes_the_few_shots_and_only_seeds_measure_their_noise(fina
     sched = config.schedule
     points = state.data.points
     assert all(p.n_shots == sched.shots_after for p in points)
-    seeds, bo = points[: sched.n_seed], points[sched.n_seed:]
+    seeds, bo = points[: sched.n_seed], points[sched.n_seed :]
     assert all(p.noise_measured for p in seeds) and bo and not any(p.noise_measured for p in bo)
     assert all(d.shots == sched.shots_after and not d.measure_noise for d in state.decisions)
     for point, decision in zip(bo, state.decisions):
@@ -52,7 +52,9 @@ def test_few_shot_points_enter_the_noise_model_with_their_sampling_error(tiny_co
     config = tiny_config.with_overrides(schedule={"mode": "budget"})
     ts = np.array([0.3] * 4 + [6.0] * 4 + [1.0] * 2 + [2.0] * 2)
     sd = (2.0 / np.sqrt(ts) + 0.1) * c4(np.array([3.0]))[0]
-    points = tuple(Point((0.1 * i,), float(t), 0.0, float(s), 3, float(s), False) for i, (t, s) in enumerate(zip(ts, sd)))
+    points = tuple(
+        Point((0.1 * i,), float(t), 0.0, float(s), 3, float(s), False) for i, (t, s) in enumerate(zip(ts, sd))
+    )
     noise = fit_noise_model(config, CampaignState(points=points), fit_key(0, 0))
     data = noise.data
     real = np.asarray(data.mask)

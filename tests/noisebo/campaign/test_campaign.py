@@ -62,8 +62,12 @@ def test_campaign_shape_and_bookkeeping(short_run):
 
 def test_no_recompilation_after_the_first_step(short_run):
     marks = []
-    run_campaign(SHORT, build(SHORT.instrument), seed=5,
-                 on_commit=lambda state, events: marks.append(compile_count()) if state.decisions else None)
+    run_campaign(
+        SHORT,
+        build(SHORT.instrument),
+        seed=5,
+        on_commit=lambda state, events: marks.append(compile_count()) if state.decisions else None,
+    )
     assert marks[-1] == marks[0]
 
 
@@ -85,14 +89,17 @@ def _shots(values, ok=None):
     return [ShotValue(v, o, "" if o else "bad", None) for v, o in zip(values, ok)]
 
 
-@pytest.mark.parametrize("values, clip, rejected", [
-    # median 10.5, MAD 0.5 -> robust sd 0.7413; 3 sd = 2.224: 16 (5.5 away) is out, 9.5 (1 away) in
-    ([9.5, 10.0, 10.5, 11.0, 16.0], 3.0, [4]),
-    ([9.5, 10.0, 10.5, 11.0, 16.0], 10.0, []),  # 10 sd = 7.41
-    ([9.5, 10.0, 10.5, 11.0, 16.0], None, []),
-    ([1.0, 50.0], 3.0, []),  # fewer than three: nothing to judge by
-    ([2.0, 2.0, 2.0, 9.0], 3.0, []),  # MAD 0: left alone
-])
+@pytest.mark.parametrize(
+    "values, clip, rejected",
+    [
+        # median 10.5, MAD 0.5 -> robust sd 0.7413; 3 sd = 2.224: 16 (5.5 away) is out, 9.5 (1 away) in
+        ([9.5, 10.0, 10.5, 11.0, 16.0], 3.0, [4]),
+        ([9.5, 10.0, 10.5, 11.0, 16.0], 10.0, []),  # 10 sd = 7.41
+        ([9.5, 10.0, 10.5, 11.0, 16.0], None, []),
+        ([1.0, 50.0], 3.0, []),  # fewer than three: nothing to judge by
+        ([2.0, 2.0, 2.0, 9.0], 3.0, []),  # MAD 0: left alone
+    ],
+)
 def test_outlier_clipping_by_hand(values, clip, rejected):
     from noisebo.reduction import clip_outliers
 

@@ -64,16 +64,36 @@ def test_beyond_max_inputs_the_decision_says_it_binned(crossing):
     assert d.binned and d.primary_inputs <= 16 and d.noise_inputs <= 16
 
 
-@pytest.mark.parametrize("inputs, ahead", [
-    ((20, 20), None),                  # 20 of 32: not close yet
-    ((24, 20), (64, 32)),              # 24 = 0.75 * 32: compile 64 for the primary GP
-    ((24, 90), (64, 128)),             # 90 of 128 is not close (< 96)
-    ((24, 100), (64, 256)),            # 100 of 128 is
-    ((200, 250), None),                # both at the largest capacity max_inputs = 256 needs
-])
+@pytest.mark.parametrize(
+    "inputs, ahead",
+    [
+        ((20, 20), None),  # 20 of 32: not close yet
+        ((24, 20), (64, 32)),  # 24 = 0.75 * 32: compile 64 for the primary GP
+        ((24, 90), (64, 128)),  # 90 of 128 is not close (< 96)
+        ((24, 100), (64, 256)),  # 100 of 128 is
+        ((200, 250), None),  # both at the largest capacity max_inputs = 256 needs
+    ],
+)
 def test_capacities_ahead(inputs, ahead):
-    d = Decision(0, 0.5, 1.0, 0.0, 3, True, 0.1, 1.0, False, {}, np.zeros((1, 1)), np.zeros(1),
-                          np.zeros(1), np.zeros(1), np.zeros(1), primary_inputs=inputs[0], noise_inputs=inputs[1])
+    d = Decision(
+        0,
+        0.5,
+        1.0,
+        0.0,
+        3,
+        True,
+        0.1,
+        1.0,
+        False,
+        {},
+        np.zeros((1, 1)),
+        np.zeros(1),
+        np.zeros(1),
+        np.zeros(1),
+        np.zeros(1),
+        primary_inputs=inputs[0],
+        noise_inputs=inputs[1],
+    )
     assert capacities_ahead(CONFIG, d) == ahead
 
 
@@ -96,9 +116,13 @@ def test_compiled_ahead_the_crossing_compiles_nothing():
 
 def test_two_axes_compiled_ahead_the_first_decision_compiles_nothing():
     """The refinement over the area is compiled ahead too (with the fits and the prediction)."""
-    config = CampaignConfig(space={"axes": [{"name": "u", "low": 0, "high": 1, "n": 10},
-                                            {"name": "v", "low": -1, "high": 1, "n": 8}], "n_t": 12},
-                            primary_model={"length_scale": 0.55})
+    config = CampaignConfig(
+        space={
+            "axes": [{"name": "u", "low": 0, "high": 1, "n": 10}, {"name": "v", "low": -1, "high": 1, "n": 8}],
+            "n_t": 12,
+        },
+        primary_model={"length_scale": 0.55},
+    )
     rng = np.random.default_rng(2)
     state = CampaignState()
     for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(grids(config).t, 5)):

@@ -107,13 +107,16 @@ def test_an_x_independent_campaign_records_no_maps(tiny_config):
     assert result.state.t_opt_maps == ()
 
 
-@pytest.mark.parametrize("window, maps, expected", [
-    (3, [[1.0, 2.0]] * 2, False),  # fewer maps than the window
-    (3, [[1.0, 2.0]] * 3, True),
-    # population variance per position, then the mean: (1, 1.1, 1.2) -> 0.00667 and (2, 2, 2) -> 0
-    (3, [[1.0, 2.0], [1.1, 2.0], [1.2, 2.0]], False),  # mean 0.00333 > 5e-4
-    (3, [[1.0, 2.0], [1.01, 2.0], [1.02, 2.0]], True),  # mean 3.3e-5
-])
+@pytest.mark.parametrize(
+    "window, maps, expected",
+    [
+        (3, [[1.0, 2.0]] * 2, False),  # fewer maps than the window
+        (3, [[1.0, 2.0]] * 3, True),
+        # population variance per position, then the mean: (1, 1.1, 1.2) -> 0.00667 and (2, 2, 2) -> 0
+        (3, [[1.0, 2.0], [1.1, 2.0], [1.2, 2.0]], False),  # mean 0.00333 > 5e-4
+        (3, [[1.0, 2.0], [1.01, 2.0], [1.02, 2.0]], True),  # mean 3.3e-5
+    ],
+)
 def test_converged_map_by_hand(window, maps, expected):
     assert converged_map([np.asarray(m) for m in maps], window, 5e-4) is expected
 

@@ -32,8 +32,9 @@ class Bumps:
 
 def config_of(d: int, **schedule) -> CampaignConfig:
     axes = [{"name": f"x{k}", "low": -1.0 - k, "high": 1.0 + k, "n": 16} for k in range(d)]
-    return CampaignConfig(space={"axes": axes, "n_t": 20, "n_candidates": 128},
-                          schedule={"n_steps": 3, "n_seed": 4, **schedule})
+    return CampaignConfig(
+        space={"axes": axes, "n_t": 20, "n_candidates": 128}, schedule={"n_steps": 3, "n_seed": 4, **schedule}
+    )
 
 
 def test_seed_points_stratify_every_axis_and_t():
@@ -83,9 +84,13 @@ def test_a_proposal_scores_at_least_the_best_reference_point(runs):
 
 
 def test_the_branin_driver_runs_a_campaign_over_its_domain():
-    config = CampaignConfig(instrument={"kind": "branin"},
-                            space={"axes": [{"name": "x1", "low": -5, "high": 10, "n": 12},
-                                            {"name": "x2", "low": 0, "high": 15, "n": 12}], "n_t": 20},
-                            schedule={"n_steps": 2})
+    config = CampaignConfig(
+        instrument={"kind": "branin"},
+        space={
+            "axes": [{"name": "x1", "low": -5, "high": 10, "n": 12}, {"name": "x2", "low": 0, "high": 15, "n": 12}],
+            "n_t": 20,
+        },
+        schedule={"n_steps": 2},
+    )
     run = run_campaign(config, build(config.instrument), seed=0)
     assert len(run.state.points) == 5 and all(len(p.x) == 2 for p in run.state.points)

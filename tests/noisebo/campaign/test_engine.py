@@ -25,8 +25,9 @@ from noisebo.events import (
 )
 from noisebo.reduction import Reading
 
-SMALL = CampaignConfig().with_overrides(space={"n_x": 40, "n_t": 30},
-                                        schedule={"n_seed": 2, "n_steps": 2, "shots_before": 3, "shots_after": 2})
+SMALL = CampaignConfig().with_overrides(
+    space={"n_x": 40, "n_t": 30}, schedule={"n_seed": 2, "n_steps": 2, "shots_before": 3, "shots_after": 2}
+)
 INFO = DriverInfo("forrester", "test", {})
 
 
@@ -55,11 +56,17 @@ def test_shots_one_by_one_then_the_point_is_committed_from_their_mean_and_sd():
     assert engine.ask(state).point == 1
 
 
-@pytest.mark.parametrize("shots, message", [
-    ({1: Reading(1.0)}, "shot 1 of point 0 is not wanted now; shot 0 is next"),
-    ({0: Reading(1.0), 1: Reading(1.0), 2: Reading(1.0), 3: Reading(1.0)}, "point 0 is not being measured now .point 1 is."),
-    ({0: 1.5}, "a shot's outcome is a Reading or a ShotError, not float"),
-])
+@pytest.mark.parametrize(
+    "shots, message",
+    [
+        ({1: Reading(1.0)}, "shot 1 of point 0 is not wanted now; shot 0 is next"),
+        (
+            {0: Reading(1.0), 1: Reading(1.0), 2: Reading(1.0), 3: Reading(1.0)},
+            "point 0 is not being measured now .point 1 is.",
+        ),
+        ({0: 1.5}, "a shot's outcome is a Reading or a ShotError, not float"),
+    ],
+)
 def test_readings_that_do_not_fit_are_refused(shots, message):
     state = fresh()
     with pytest.raises(EngineError, match=message):

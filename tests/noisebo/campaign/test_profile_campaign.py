@@ -25,9 +25,13 @@ T_STAR_STALE = 1.9037  # s, A0 = 0.5, A1 = 1
 
 def profile_of(a0: float, a1: float, settings: dict) -> dict:
     return NoiseProfile(
-        driver=ProfileDriver(name="forrester", version="1", settings=settings), law="inv_sqrt",
+        driver=ProfileDriver(name="forrester", version="1", settings=settings),
+        law="inv_sqrt",
         parameters={"a0": ParameterPosterior(mean=a0, sd=0.01), "a1": ParameterPosterior(mean=a1, sd=0.05)},
-        t_range_s=(0.2, 10.0), noise_points=60, campaigns=(), made_utc="2026-11-25T00:00:00+00:00",
+        t_range_s=(0.2, 10.0),
+        noise_points=60,
+        campaigns=(),
+        made_utc="2026-11-25T00:00:00+00:00",
     ).model_dump(mode="json")
 
 
@@ -40,8 +44,10 @@ def base():
 def stale(base):
     """The issue's case: the profile of A0 = 0.1, A1 = 2 on an instrument of A0 = 0.5, A1 = 1
     (settings that differ: profile_check off, as after an unnoticed change of the instrument)."""
-    return base.with_overrides(instrument={"settings": {"a0": 0.5, "a1": 1.0}}, noise_model={
-        "profile": profile_of(0.1, 2.0, base.instrument.settings), "profile_check": False})
+    return base.with_overrides(
+        instrument={"settings": {"a0": 0.5, "a1": 1.0}},
+        noise_model={"profile": profile_of(0.1, 2.0, base.instrument.settings), "profile_check": False},
+    )
 
 
 def test_a_stale_profile_is_caught_early_and_t_still_found(stale):
@@ -76,8 +82,9 @@ def test_a_true_profile_is_kept_and_skips_the_noise_learning(base):
 
 
 def test_the_drop_is_said_in_the_progress_and_the_file(stale, tmp_path):
-    started = engine.new_campaign(stale.with_overrides(schedule={"n_steps": 2}), 0, driver_info(stale.instrument),
-                                  {}, "2026-11-25T00:00:00+00:00")
+    started = engine.new_campaign(
+        stale.with_overrides(schedule={"n_steps": 2}), 0, driver_info(stale.instrument), {}, "2026-11-25T00:00:00+00:00"
+    )
     said = []
 
     def commit(state, events):

@@ -55,9 +55,12 @@ def unmerged_primary(capacity=8):
     """The primary model's data with every point its own row (how it was before merging)."""
     mean, scale = VALUE.mean(), VALUE.std()
     pad = capacity - X.size
-    return primary.PrimaryData(jnp.asarray(np.pad(X, (0, pad))), jnp.asarray(np.pad((VALUE - mean) / scale, (0, pad))),
-                               jnp.asarray(np.pad(VAR / scale**2, (0, pad), constant_values=1.0)),
-                               jnp.asarray(np.arange(capacity) < X.size))
+    return primary.PrimaryData(
+        jnp.asarray(np.pad(X, (0, pad))),
+        jnp.asarray(np.pad((VALUE - mean) / scale, (0, pad))),
+        jnp.asarray(np.pad(VAR / scale**2, (0, pad), constant_values=1.0)),
+        jnp.asarray(np.arange(capacity) < X.size),
+    )
 
 
 def test_merged_primary_likelihood_differs_by_a_constant_and_predicts_the_same():
@@ -71,7 +74,9 @@ def test_merged_primary_likelihood_differs_by_a_constant_and_predicts_the_same()
         gaps.append(float(log_density(model, (merged,), {}, params)[0] - log_density(model, (raw,), {}, params)[0]))
         batch = {k: v[None] for k, v in params.items()}
         for a, b in zip(primary.predict_samples(batch, merged, xs), primary.predict_samples(batch, raw, xs)):
-            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7)  # up to the 1e-8 jitter per row
+            np.testing.assert_allclose(
+                np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7
+            )  # up to the 1e-8 jitter per row
     np.testing.assert_allclose(gaps, gaps[0], atol=1e-8)
 
 
@@ -84,9 +89,15 @@ def test_merged_noise_likelihood_differs_by_a_constant_and_predicts_the_same():
     assert groups.count.tolist() == [2, 3, 1]
     k = noise_model.c4(n_shots)
     raw = noise_model.NoiseData(
-        t=jnp.asarray(t), ts=jnp.asarray((t - 0.2) / 9.8), y=jnp.asarray(shot_std / k / scale),
-        rel_var=jnp.asarray((1 - k**2) / k**2), count=jnp.ones(6), scatter=jnp.zeros(6),
-        mask=jnp.ones(6, dtype=bool), bounds=merged.bounds)
+        t=jnp.asarray(t),
+        ts=jnp.asarray((t - 0.2) / 9.8),
+        y=jnp.asarray(shot_std / k / scale),
+        rel_var=jnp.asarray((1 - k**2) / k**2),
+        count=jnp.ones(6),
+        scatter=jnp.zeros(6),
+        mask=jnp.ones(6, dtype=bool),
+        bounds=merged.bounds,
+    )
     model = noise_model.make_model(cfg)
     gaps, tq = [], jnp.array([0.3, 2.0, 9.0])
     for a0, a1, amplitude, length in ((0.05, 1.1, 0.05, 0.3), (0.2, 0.6, 0.2, 0.1), (0.01, 2.0, 0.02, 0.8)):
@@ -94,9 +105,13 @@ def test_merged_noise_likelihood_differs_by_a_constant_and_predicts_the_same():
         params = {k_: jnp.asarray(v) for k_, v in params.items()}
         gaps.append(float(log_density(model, (merged,), {}, params)[0] - log_density(model, (raw,), {}, params)[0]))
         batch = {k_: v[None] for k_, v in params.items()}
-        for a, b in zip(noise_model.predict_samples("inv_sqrt", batch, merged, tq, (tq - 0.2) / 9.8),
-                        noise_model.predict_samples("inv_sqrt", batch, raw, tq, (tq - 0.2) / 9.8)):
-            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7)  # up to the 1e-8 jitter per row
+        for a, b in zip(
+            noise_model.predict_samples("inv_sqrt", batch, merged, tq, (tq - 0.2) / 9.8),
+            noise_model.predict_samples("inv_sqrt", batch, raw, tq, (tq - 0.2) / 9.8),
+        ):
+            np.testing.assert_allclose(
+                np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7
+            )  # up to the 1e-8 jitter per row
     np.testing.assert_allclose(gaps, gaps[0], atol=1e-8)
 
 

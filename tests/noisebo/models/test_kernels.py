@@ -18,8 +18,12 @@ def test_primary_kernel_ignores_t():
     b = jnp.array([[0.3, 5.0], [0.9, 0.2]])
     a_other_t = a.at[:, 1].set(jnp.array([4.0, 1.0]))
     b_other_t = b.at[:, 1].set(jnp.array([0.3, 7.7]))
-    np.testing.assert_array_equal(np.asarray(xt_matern52(a, b, 2.0, 0.3)), np.asarray(xt_matern52(a_other_t, b_other_t, 2.0, 0.3)))
-    np.testing.assert_allclose(np.asarray(xt_matern52(a, b, 2.0, 0.3)), np.asarray(matern52(a[:, 0], b[:, 0], 2.0, 0.3)))
+    np.testing.assert_array_equal(
+        np.asarray(xt_matern52(a, b, 2.0, 0.3)), np.asarray(xt_matern52(a_other_t, b_other_t, 2.0, 0.3))
+    )
+    np.testing.assert_allclose(
+        np.asarray(xt_matern52(a, b, 2.0, 0.3)), np.asarray(matern52(a[:, 0], b[:, 0], 2.0, 0.3))
+    )
 
 
 def test_masked_covariance_decouples_padding():

@@ -43,13 +43,18 @@ def fit(x, t, s, cfg=QUADRATURE, field=DEFAULT_FIELD, laplace=32, **kwargs):
 
 def predicted(samples, data, scale, kind, xq):
     """Posterior mean of Noise (value units) on T_FINE at xq (m, d), its t*(x), and A0(x) at the MAP."""
-    means, variances = noise_field.predict_samples(kind, samples.params, data, jnp.asarray(xq), jnp.asarray(T_FINE),
-                                                   jnp.asarray(scaled_t(T_FINE)))
+    means, variances = noise_field.predict_samples(
+        kind, samples.params, data, jnp.asarray(xq), jnp.asarray(T_FINE), jnp.asarray(scaled_t(T_FINE))
+    )
     mean, _ = inference.combine(means, variances, samples.map_first, samples.weights)
     mean = np.asarray(mean) * scale
     a0, a1 = noise_field.field_one({k: v[0] for k, v in samples.params.items()}, data, jnp.asarray(xq))
-    return mean, np.asarray(noise_field.optimal_t(jnp.asarray(T_FINE), jnp.asarray(mean), ALPHA, BETA)), \
-        np.asarray(a0) * scale, np.asarray(a1) * scale
+    return (
+        mean,
+        np.asarray(noise_field.optimal_t(jnp.asarray(T_FINE), jnp.asarray(mean), ALPHA, BETA)),
+        np.asarray(a0) * scale,
+        np.asarray(a1) * scale,
+    )
 
 
 # --- the basis -------------------------------------------------------------------------------
@@ -65,18 +70,26 @@ def test_spectral_density_at_zero_is_the_kernel_integral():
     assert float(s2[0]) ** 2 == pytest.approx(2 * math.pi * 0.1, rel=1e-12)
 
 
-@pytest.mark.parametrize("dims, lengths, tol", [
-    (1, (0.05,), 0.005), (1, (0.2,), 0.005), (1, (0.3,), 0.02),
-    (2, (0.1, 0.1), 0.05), (2, (0.2, 0.3), 0.02), (2, (0.3, 0.1), 0.05),
-])
+@pytest.mark.parametrize(
+    "dims, lengths, tol",
+    [
+        (1, (0.05,), 0.005),
+        (1, (0.2,), 0.005),
+        (1, (0.3,), 0.02),
+        (2, (0.1, 0.1), 0.05),
+        (2, (0.2, 0.3), 0.02),
+        (2, (0.3, 0.1), 0.05),
+    ],
+)
 def test_basis_covariance_approximates_the_ard_matern_kernel(dims, lengths, tol):
     # The defaults (96 and 24 functions per axis on a box twice the unit cube): the implied
     # covariance within tol * amplitude^2 of kernels.ard_matern52 over the unit cube, for the
     # lengths the default prior favours (they resolve down to ~0.05 in 1-D, ~0.1 in 2-D).
     x = np.random.default_rng(0).random((200, dims))
     freq, half = noise_field.basis(dims, noise_field.NoiseFieldConfig())
-    approx = noise_field.basis_covariance(jnp.asarray(x), jnp.asarray(x), jnp.asarray(freq), half, 1.0,
-                                          jnp.asarray(lengths))
+    approx = noise_field.basis_covariance(
+        jnp.asarray(x), jnp.asarray(x), jnp.asarray(freq), half, 1.0, jnp.asarray(lengths)
+    )
     exact = ard_matern52(jnp.asarray(x), jnp.asarray(x), 1.0, jnp.asarray(lengths))
     assert float(jnp.max(jnp.abs(approx - exact))) < tol
 
@@ -103,8 +116,9 @@ def x_independent_data(seed=3):
 def test_zero_field_amplitude_predicts_exactly_as_the_x_independent_model():
     x, t, s = x_independent_data()
     cfg = NoiseModelConfig()
-    data, scale, _ = noise_field.prepare(x, t, s, np.full(t.size, SHOTS), cfg, noise_field.NoiseFieldConfig(),
-                                         T_MIN, T_MAX, 256)
+    data, scale, _ = noise_field.prepare(
+        x, t, s, np.full(t.size, SHOTS), cfg, noise_field.NoiseFieldConfig(), T_MIN, T_MAX, 256
+    )
     ndata, nscale, _ = noise_model.prepare(t, s, np.full(t.size, SHOTS), cfg, T_MIN, T_MAX, 256)
     assert scale == nscale and int(data.mask.sum()) == 30 and int(ndata.mask.sum()) == 6
     data = noise_field.set_field(data, {"g0_amplitude": 0.0, "g0_length": 0.2})
@@ -126,8 +140,9 @@ def test_fitted_with_the_field_amplitude_pinned_near_zero_matches_the_fitted_x_i
     data = noise_field.set_field(data, {"g0_amplitude": 1e-6, "g0_length": 0.2})
     samples, data = noise_field.fit(data, cfg, field, jax.random.PRNGKey(0), 4, 0, estimate=False)
     ndata, _, _ = noise_model.prepare(t, s, np.full(t.size, SHOTS), cfg, T_MIN, T_MAX, 256)
-    nsamples = inference.fit_map(noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 4, 0,
-                                 noise_model.initial_guess(ndata, cfg))
+    nsamples = inference.fit_map(
+        noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 4, 0, noise_model.initial_guess(ndata, cfg)
+    )
     point = {k: v[0] for k, v in samples.params.items()}
     npoint = {k: v[0] for k, v in nsamples.params.items()}
     tq = jnp.asarray(T_FINE[::64])
@@ -147,8 +162,12 @@ def test_an_x_independent_noise_gives_a_flat_field():
     cfg = NoiseModelConfig()
     samples, data, scale = fit(x, t, s, cfg=cfg, laplace=0)
     ndata, _, _ = noise_model.prepare(t, s, np.full(t.size, SHOTS), cfg, T_MIN, T_MAX, 256)
-    npoint = {k: v[0] for k, v in inference.fit_map(noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 4, 0,
-                                                    noise_model.initial_guess(ndata, cfg)).params.items()}
+    npoint = {
+        k: v[0]
+        for k, v in inference.fit_map(
+            noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 4, 0, noise_model.initial_guess(ndata, cfg)
+        ).params.items()
+    }
     xq = np.linspace(0.0, 1.0, 11)[:, None]
     mean, _, a0, _ = predicted(samples, data, scale, "inv_sqrt", xq)
     n_mean, _ = noise_model.predict_one("inv_sqrt", npoint, ndata, jnp.asarray(T_FINE), scaled_t(T_FINE))
@@ -163,8 +182,9 @@ def test_residual_likelihood_is_the_dense_gaussian(amplitude, length, rel):
     # which an optimiser then exploits). There the dense Cholesky itself, at a condition number of
     # ~1e13, is good to ~1e-6 only.
     x, t, s = x_independent_data()
-    data, _, _ = noise_field.prepare(x, t, s, np.full(t.size, SHOTS), QUADRATURE, noise_field.NoiseFieldConfig(),
-                                     T_MIN, T_MAX, 256)
+    data, _, _ = noise_field.prepare(
+        x, t, s, np.full(t.size, SHOTS), QUADRATURE, noise_field.NoiseFieldConfig(), T_MIN, T_MAX, 256
+    )
     m = jnp.asarray(noise_model.mean_law("inv_sqrt", data.t, 0.05, 0.9))
     woodbury = noise_field._log_likelihood(noise_field._residual(m, amplitude, length, data))
     mask = np.asarray(data.mask)
@@ -201,8 +221,11 @@ def check_wall(samples, data, scale, kind, xq, a0_true, a1_true, noise_tol, t_to
     mean, t_opt, a0, a1 = predicted(samples, data, scale, kind, xq)
     inside = (T_FINE >= WALL_T[0]) & (T_FINE <= WALL_T[-1])
     for i in range(len(xq)):
-        law = (lambda t, i=i: noise_model.mean_law(kind, t, a0_true[i], a1_true[i])) if kind != "quadrature" \
+        law = (
+            (lambda t, i=i: noise_model.mean_law(kind, t, a0_true[i], a1_true[i]))
+            if kind != "quadrature"
             else quadrature_truth(a0_true[i], a1_true[i])
+        )
         err = np.max(np.abs(mean[i] / law(T_FINE) - 1)[inside])
         t_true = true_optimal_t(law, T_MIN, T_MAX, ALPHA, BETA)
         assert err < noise_tol, (xq[i], err)
@@ -304,14 +327,38 @@ def test_padding_changes_no_prediction(wall_1d):
     hyper = noise_field.field_hyperparameters(fitted)
     out = []
     for capacity, t_capacity in ((None, None), (256, 64)):
-        data, _, _ = noise_field.prepare(x[:, None], t, s, np.full(t.size, SHOTS), QUADRATURE,
-                                         noise_field.NoiseFieldConfig(), T_MIN, T_MAX, 256, capacity, t_capacity)
+        data, _, _ = noise_field.prepare(
+            x[:, None],
+            t,
+            s,
+            np.full(t.size, SHOTS),
+            QUADRATURE,
+            noise_field.NoiseFieldConfig(),
+            T_MIN,
+            T_MAX,
+            256,
+            capacity,
+            t_capacity,
+        )
         data = noise_field.set_field(data, hyper)
-        out.append([np.asarray(a) for a in noise_field.predict_samples(
-            "quadrature", samples.params, data, jnp.asarray([[0.1], [0.5]]), jnp.asarray(T_FINE[::32]),
-            jnp.asarray(scaled_t(T_FINE[::32])))])
-        out[-1].append(noise_field.estimate_field(data, QUADRATURE, noise_field.NoiseFieldConfig(),
-                                                  {k: v[0] for k, v in samples.params.items()}))
+        out.append(
+            [
+                np.asarray(a)
+                for a in noise_field.predict_samples(
+                    "quadrature",
+                    samples.params,
+                    data,
+                    jnp.asarray([[0.1], [0.5]]),
+                    jnp.asarray(T_FINE[::32]),
+                    jnp.asarray(scaled_t(T_FINE[::32])),
+                )
+            ]
+        )
+        out[-1].append(
+            noise_field.estimate_field(
+                data, QUADRATURE, noise_field.NoiseFieldConfig(), {k: v[0] for k, v in samples.params.items()}
+            )
+        )
     assert out[0][0].shape == (33, 2, 65)
     np.testing.assert_allclose(out[0][0], out[1][0], rtol=1e-10)
     np.testing.assert_allclose(out[0][1], out[1][1], rtol=1e-10)
@@ -321,18 +368,26 @@ def test_padding_changes_no_prediction(wall_1d):
 def test_capacity_too_small_is_an_error():
     x, t, s = x_independent_data()
     with pytest.raises(ValueError, match="do not fit a capacity of 16"):
-        noise_field.prepare(x, t, s, np.full(t.size, SHOTS), QUADRATURE, noise_field.NoiseFieldConfig(),
-                            T_MIN, T_MAX, 256, capacity=16)
+        noise_field.prepare(
+            x, t, s, np.full(t.size, SHOTS), QUADRATURE, noise_field.NoiseFieldConfig(), T_MIN, T_MAX, 256, capacity=16
+        )
     with pytest.raises(ValueError, match="t capacity of 4"):
-        noise_field.prepare(x, t, s, np.full(t.size, SHOTS), QUADRATURE, noise_field.NoiseFieldConfig(),
-                            T_MIN, T_MAX, 256, t_capacity=4)
+        noise_field.prepare(
+            x, t, s, np.full(t.size, SHOTS), QUADRATURE, noise_field.NoiseFieldConfig(), T_MIN, T_MAX, 256, t_capacity=4
+        )
 
 
-@pytest.mark.parametrize("settings, field", [
-    ({"varies": "a1"}, "varies"), ({"amplitude_scale": 0.0}, "amplitude_scale"),
-    ({"basis_per_axis": 1}, "basis_per_axis"), ({"boundary_factor": 1.0}, "boundary_factor"),
-    ({"length_loc": float("nan")}, "length_loc"), ({"extra": 1}, "extra"),
-])
+@pytest.mark.parametrize(
+    "settings, field",
+    [
+        ({"varies": "a1"}, "varies"),
+        ({"amplitude_scale": 0.0}, "amplitude_scale"),
+        ({"basis_per_axis": 1}, "basis_per_axis"),
+        ({"boundary_factor": 1.0}, "boundary_factor"),
+        ({"length_loc": float("nan")}, "length_loc"),
+        ({"extra": 1}, "extra"),
+    ],
+)
 def test_invalid_field_settings_name_the_field(settings, field):
     with pytest.raises(ValueError, match=field):
         noise_field.NoiseFieldConfig(**settings)
@@ -373,15 +428,18 @@ def test_fit_and_predict_time(positions):
     warm = []
     for rep in range(2):
         start = time.perf_counter()
-        data2, scale2, _ = noise_field.prepare(x2, t2, s2, np.full(positions + 1, SHOTS), QUADRATURE, field,
-                                               T_MIN, T_MAX, 256)
+        data2, scale2, _ = noise_field.prepare(
+            x2, t2, s2, np.full(positions + 1, SHOTS), QUADRATURE, field, T_MIN, T_MAX, 256
+        )
         data2 = noise_field.set_field(data2, noise_field.field_hyperparameters(data))
         point = {k: v[0] * (scale / scale2 if k in ("a0", "a1") else 1.0) for k, v in samples.params.items()}
         noise_field.fit(data2, QUADRATURE, field, jax.random.PRNGKey(rep), 2, 32, guesses=[point], draws=False)
         warm.append(time.perf_counter() - start)
-    print(f"\n{positions} positions (capacity {data.mask.shape[0]}): fit {times[1][0]:.3f} / {times[2][0]:.3f} s, "
-          f"predict 4096 x 100 x 33 + t* {times[1][1]:.3f} / {times[2][1]:.3f} s (first call with compiling: "
-          f"{times[0][0]:.1f} + {times[0][1]:.1f} s); a warm step's fit {warm[0]:.3f} / {warm[1]:.3f} s")
+    print(
+        f"\n{positions} positions (capacity {data.mask.shape[0]}): fit {times[1][0]:.3f} / {times[2][0]:.3f} s, "
+        f"predict 4096 x 100 x 33 + t* {times[1][1]:.3f} / {times[2][1]:.3f} s (first call with compiling: "
+        f"{times[0][0]:.1f} + {times[0][1]:.1f} s); a warm step's fit {warm[0]:.3f} / {warm[1]:.3f} s"
+    )
     assert t_opt.shape == (4096,)
 
 
@@ -395,8 +453,9 @@ def test_the_hessian_outside_the_laplace_basis_is_the_priors():
     # 8 positions x 2 t in 1-D: 16 groups (capacity 32) against 96 basis functions.
     rng = np.random.default_rng(2)
     x, t = np.repeat((np.arange(8) + 0.5) / 8, 2), np.tile([0.5, 5.0], 8)
-    samples, data, _ = fit(x[:, None], t, measure(x, t, np.sqrt(1 / t + np.where(x > 0.6, 1.0, 0.01)), rng),
-                           laplace=0, estimate=False)
+    samples, data, _ = fit(
+        x[:, None], t, measure(x, t, np.sqrt(1 / t + np.where(x > 0.6, 1.0, 0.01)), rng), laplace=0, estimate=False
+    )
     model = noise_field._cached_model(QUADRATURE, noise_field.NoiseFieldConfig(), 1)
     point = {k: v[0] for k, v in samples.params.items()}
     template = inference.unconstrain_fn(model, (data,), {}, point)

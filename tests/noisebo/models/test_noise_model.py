@@ -8,7 +8,9 @@ from noisebo.models import inference, noise_model
 
 def test_c4_known_values():
     # c4(2) = sqrt(2/pi); c4(30) = 0.99142 (standard tables)
-    np.testing.assert_allclose(noise_model.c4(np.array([2, 3, 30])), [np.sqrt(2 / np.pi), 0.886227, 0.991418], atol=1e-5)
+    np.testing.assert_allclose(
+        noise_model.c4(np.array([2, 3, 30])), [np.sqrt(2 / np.pi), 0.886227, 0.991418], atol=1e-5
+    )
 
 
 def synthetic(a0, a1, n_points=16, shots=30, seed=0, law="inv_sqrt"):

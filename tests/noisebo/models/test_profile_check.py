@@ -13,9 +13,14 @@ from noisebo.models.profile_check import NO_PROFILE, p_value, verdict
 
 def profile_config(a0=0.1, a1=2.0, sd0=1e-9, sd1=1e-9, **extra) -> NoiseModelConfig:
     profile = NoiseProfile(
-        driver=ProfileDriver(name="forrester", version="1", settings={}), law="inv_sqrt",
+        driver=ProfileDriver(name="forrester", version="1", settings={}),
+        law="inv_sqrt",
         parameters={"a0": ParameterPosterior(mean=a0, sd=sd0), "a1": ParameterPosterior(mean=a1, sd=sd1)},
-        t_range_s=(0.2, 10.0), noise_points=40, campaigns=(), made_utc="2026-11-25T00:00:00+00:00")
+        t_range_s=(0.2, 10.0),
+        noise_points=40,
+        campaigns=(),
+        made_utc="2026-11-25T00:00:00+00:00",
+    )
     return NoiseModelConfig(profile=profile, **extra)
 
 
