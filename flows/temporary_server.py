@@ -20,7 +20,7 @@ from pathlib import Path
 import prefect.settings as ps
 from prefect.server.api.server import SubprocessASGIServer
 
-from noisebo.flows import processes
+from noisebo.flows import processes, runtime
 
 SERVER_APP = "prefect.server.api.server:create_app"
 GUARD = Path(__file__).resolve().with_name("server_guard.py")
@@ -67,11 +67,17 @@ class GuardedServer(SubprocessASGIServer):
 
 
 def server_environment() -> dict[str, str]:
+    """The server process's environment: Prefect's settings, and the warning filter of
+    ``runtime.quiet_pool_at_exit`` (the server holds Prefect's database pool, and it imports
+    nothing of noisebo that would set the filter; its stderr is the command's)."""
+    quiet = f"ignore:{runtime.POOL_AT_EXIT}"
+    warnings = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), quiet)))
     return {
         **os.environ,
         "PREFECT_UI_ENABLED": "0",
         "PREFECT__SERVER_EPHEMERAL": "1",
         "PREFECT__SERVER_FINAL": "1",
+        "PYTHONWARNINGS": warnings,
         **ps.get_current_settings().to_environment_variables(exclude_unset=True),
     }
 

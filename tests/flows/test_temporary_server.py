@@ -258,3 +258,21 @@ def test_a_successful_flow_on_the_guarded_server_prints_no_shutdown_traceback(tm
     assert plain.returncode == 0 and "Error flushing" in plain.stderr, plain.stderr[-3000:]
     guarded = run("guarded")
     assert guarded.returncode == 0 and guarded.stderr == "" and guarded.stdout == ""
+
+
+def test_the_server_process_drops_the_pool_warning_at_exit_and_keeps_others(tmp_path, monkeypatch):
+    """The server holds Prefect's database pool and imports nothing of noisebo: its environment
+    carries the filter, beside any PYTHONWARNINGS of the user's."""
+    from noisebo.flows import runtime, temporary_server
+
+    monkeypatch.setenv("PYTHONWARNINGS", "default")
+    env = temporary_server.server_environment()
+    assert env["PYTHONWARNINGS"].split(",")[0] == "default"
+    code = (
+        "import warnings\n"
+        "class SAWarning(RuntimeWarning): pass\n"
+        f"warnings.warn({runtime.POOL_AT_EXIT!r} + ' <AdaptedConnection>, which will be terminated.', SAWarning)\n"
+        "warnings.warn('another warning')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert "another warning" in done.stderr and runtime.POOL_AT_EXIT not in done.stderr
