@@ -29,8 +29,6 @@ from __future__ import annotations
 import argparse
 import html
 import io
-import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -38,7 +36,9 @@ import tempfile
 import time
 from pathlib import Path
 
+import headless_chromium
 import httpx
+from headless_chromium import ChromiumMissing, find_chromium, stop_group
 from PIL import Image
 
 from noisebo.flows.processes import local_server, wait_for
@@ -47,7 +47,6 @@ ROOT = Path(__file__).resolve().parents[1]
 
 WINDOW = (1600, 1000)
 MAX_BYTES = 400_000
-CHROMIUMS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -68,14 +67,6 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="only the flow run page's Logs tab, not its Task Runs and Artifacts tabs",
     )
     return parser.parse_args(argv)
-
-
-def find_chromium() -> str:
-    for name in CHROMIUMS:
-        path = shutil.which(name)
-        if path:
-            return path
-    raise SystemExit("screenshot_flow_run: no Chromium found (Debian: apt-get install -y chromium)")
 
 
 def run_campaign(env: dict, config: str, seed: int, folder: Path) -> None:
@@ -168,44 +159,8 @@ def settled(api: Api, flow_run_id: str) -> tuple[dict, int]:
 
 
 def chromium_run(chromium: str, profile: Path, args: list[str], timeout_s: float) -> str:
-    """Run headless Chromium once (its own profile, its own process group, stopped on any exit);
-    its stdout."""
-    command = [
-        chromium,
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--hide-scrollbars",
-        "--no-first-run",
-        "--disable-extensions",
-        "--mute-audio",
-        f"--user-data-dir={profile}",
-        f"--window-size={WINDOW[0]},{WINDOW[1]}",
-        *args,
-    ]
-    process = subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True
-    )
-    try:
-        output, _ = process.communicate(timeout=timeout_s)
-    finally:
-        stop_group(process)
-    if process.returncode != 0:
-        raise RuntimeError(f"chromium exited with code {process.returncode}: {' '.join(command)}")
-    return output
-
-
-def stop_group(process: subprocess.Popen) -> None:
-    """SIGTERM to the process group, SIGKILL after 10 s (nothing if it has ended)."""
-    if process.poll() is None:
-        try:
-            os.killpg(process.pid, signal.SIGTERM)
-            process.wait(timeout=10)
-        except ProcessLookupError:
-            pass
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
+    """Headless Chromium once at WINDOW; its stdout."""
+    return headless_chromium.run(chromium, profile, args, WINDOW, timeout_s)
 
 
 def missing_from_page(
@@ -272,7 +227,10 @@ def on_sigterm(signum, frame) -> None:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    chromium = find_chromium()
+    try:
+        chromium = find_chromium()
+    except ChromiumMissing as error:
+        raise SystemExit(f"screenshot_flow_run: {error}") from None
     signal.signal(signal.SIGTERM, on_sigterm)
     written = []
     with tempfile.TemporaryDirectory(prefix="noisebo-screenshot-") as tmp:

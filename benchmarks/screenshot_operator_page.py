@@ -25,7 +25,6 @@ import json
 import os
 import re
 import secrets
-import shutil
 import signal
 import subprocess
 import sys
@@ -38,74 +37,22 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import headless_chromium
 import numpy as np
 import yaml
+from headless_chromium import ChromiumMissing, find_chromium
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "data" / "configs" / "forrester_remote.yaml"
 SIMULATED = ROOT / "data" / "configs" / "forrester.yaml"  # the instrument the client simulates
 WINDOW = (1280, 1000)
-CHROMIUMS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
-INSTALL_CHROMIUM = (
-    "headless Chromium is needed for the operator's page check and was not found on PATH "
-    f"(tried {', '.join(CHROMIUMS)}); on Debian or Ubuntu: sudo apt-get update && "
-    "sudo apt-get install -y chromium"
-)
 START_TIMEOUT_S = 300  # Prefect's temporary server, JAX's first compilations, the seed points
 SILENCE_S = 600  # the held shot must not time out while the page is shot
 
 
-class ChromiumMissing(RuntimeError):
-    pass
-
-
-def find_chromium() -> str:
-    """The path of a Chromium (or Chrome) binary; ``ChromiumMissing`` saying how to install one."""
-    for name in CHROMIUMS:
-        found = shutil.which(name)
-        if found:
-            return found
-    raise ChromiumMissing(INSTALL_CHROMIUM)
-
-
 def chromium_run(chromium: str, profile: Path, args: list[str], timeout_s: float = 120) -> str:
-    """Headless Chromium once (its own profile and process group, stopped on any exit); its stdout."""
-    command = [
-        chromium,
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--hide-scrollbars",
-        "--no-first-run",
-        "--disable-extensions",
-        "--mute-audio",
-        f"--user-data-dir={profile}",
-        f"--window-size={WINDOW[0]},{WINDOW[1]}",
-        *args,
-    ]
-    process = subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
-    )
-    try:
-        output, errors = process.communicate(timeout=timeout_s)
-    finally:
-        stop_group(process)
-    if process.returncode != 0:
-        raise RuntimeError(f"chromium exited with code {process.returncode}: {' '.join(command)}\n{errors[-2000:]}")
-    return output
-
-
-def stop_group(process: subprocess.Popen, grace_s: float = 10) -> None:
-    """SIGTERM to the process group, SIGKILL after ``grace_s`` (nothing if it has ended)."""
-    if process.poll() is None:
-        try:
-            os.killpg(process.pid, signal.SIGTERM)
-            process.wait(timeout=grace_s)
-        except ProcessLookupError:
-            pass
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
+    """Headless Chromium once at WINDOW; its stdout."""
+    return headless_chromium.run(chromium, profile, args, WINDOW, timeout_s)
 
 
 def page_text(dom: str) -> str:

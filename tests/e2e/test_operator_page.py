@@ -26,12 +26,11 @@ BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 if str(BENCHMARKS) not in sys.path:
     sys.path.append(str(BENCHMARKS))  # the screenshot script's campaign and Chromium helpers
 
+from headless_chromium import ChromiumMissing, find_chromium  # noqa: E402
 from screenshot_operator_page import (  # noqa: E402
     CONFIG,
     WINDOW,
-    ChromiumMissing,
     chromium_run,
-    find_chromium,
     page_text,
     rendered,
     running_campaign,
