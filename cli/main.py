@@ -829,6 +829,9 @@ def main(argv: list[str] | None = None) -> int:
         args.values = [*args.values, *extra]
     elif extra:
         parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    # Process settings before anything loads JAX: XLA reads its log level (and the cache's flags)
+    # when jaxlib loads, and reading a config already loads the policies' JAX code.
+    _runtime().configure()
     try:
         return args.handler(args)
     except (_loaded_error("noisebo.config", "ConfigError"), CampaignFileError, UsageError) as error:

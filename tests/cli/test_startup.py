@@ -3,6 +3,7 @@ uses when it runs (cli/main.py). Checked in fresh interpreters; benchmarks/cli.p
 
 import importlib.metadata
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -99,3 +100,36 @@ def test_version_is_the_installed_distributions():
         [sys.executable, "-m", "noisebo.cli", "--version"], capture_output=True, text=True, timeout=120, check=True
     )
     assert out.stdout.strip() == f"noisebo {importlib.metadata.version('noisebo')}"
+
+
+JAXLIB_SEES = """
+import json, os, sys
+seen = []
+class Watch:
+    def find_spec(self, name, path=None, target=None):
+        if name == "jaxlib" and not seen:
+            seen.append(os.environ.get("TF_CPP_MIN_LOG_LEVEL"))
+sys.meta_path.insert(0, Watch())
+from noisebo.cli.main import main
+code = main(sys.argv[1:])
+print(json.dumps({"code": code, "level": seen}))
+"""
+
+
+def test_xla_is_quiet_before_a_command_loads_jax(tiny_yaml, tmp_path):
+    """XLA reads its log level when jaxlib loads; reading a config loads JAX already, so the
+    process settings (XLA's log kept to fatal messages while the compilation cache is on, for its
+    harmless per-program error lines) come first."""
+    env = {k: v for k, v in os.environ.items() if k != "TF_CPP_MIN_LOG_LEVEL"} | {
+        "NOISEBO_JAX_CACHE": str(tmp_path / "cache")
+    }
+    out = subprocess.run(
+        [sys.executable, "-c", JAXLIB_SEES, "start", str(tiny_yaml), "--out", str(tmp_path / "out")],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == {"code": 0, "level": ["3"]}, out.stderr[-2000:]
