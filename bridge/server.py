@@ -81,6 +81,11 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
         if "token" in request.query_params:
             raise HTTPException(401, HEADER_ONLY, headers={"WWW-Authenticate": "Bearer"})
         check(bearer(request))
+
+    def instrument_pc(request: Request):
+        """An authorised call of the instrument PC's (a poll or a reading): it is heard from.
+        ``/status`` and the page are not: a monitoring script must not pass for the PC."""
+        authorised(request)
         exchange.contact()
 
     def page_authorised(request: Request, token_query: str | None = Query(None, alias="token")):
@@ -105,7 +110,7 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
 
     @app.get(
         "/next",
-        dependencies=[Depends(authorised)],
+        dependencies=[Depends(instrument_pc)],
         summary="The next wanted shot (long poll)",
         responses={
             200: {"model": NextAnswer, "description": "a shot to measure, nothing yet, or the end"},
@@ -125,7 +130,7 @@ def make_app(exchange: Exchange, token: str, max_body_bytes: int) -> FastAPI:
 
     @app.post(
         "/shots/{point}/{shot}",
-        dependencies=[Depends(authorised)],
+        dependencies=[Depends(instrument_pc)],
         summary="Post a shot's reading",
         responses={
             200: {"model": Recorded, "description": "journaled (or journaled before)"},

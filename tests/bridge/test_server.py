@@ -152,6 +152,16 @@ def test_every_call_needs_the_token_and_the_status_shows_progress(campaign):
     assert call(campaign.url, "GET", "/nowhere")[1] == {"error": "Not Found"}
 
 
+def test_only_the_instrument_pcs_own_calls_make_it_connected(tmp_path):
+    config = remote_config("data/configs/forrester.yaml", SMALL)
+    with served(config, tmp_path / "c.h5") as running:
+        for _ in range(2):  # a monitoring script, and a person at the page
+            assert call(running.url, "GET", "/status")[1]["instrument_pc"]["connected"] is False
+            assert "instrument PC: not connected" in call(running.url, "GET", f"/?token={TOKEN}", token=None)[1]
+        assert call(running.url, "GET", "/next?wait=5")[1]["kind"] == "shot"
+        assert call(running.url, "GET", "/status")[1]["instrument_pc"]["connected"] is True
+
+
 def test_the_campaign_completes_and_its_file_holds_each_reading_once(campaign):
     for shot in range(2):
         assert post_value(campaign.url, 1, shot, 3.0 + shot)[0] == 200
