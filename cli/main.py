@@ -79,14 +79,12 @@ def call_isolated(*args, **kwargs):
 
 
 def _prefect():
-    _runtime().configure()
     from noisebo.flows import campaign, sweep
 
     return campaign, sweep
 
 
 def flow_settings():
-    _runtime().configure()
     from noisebo.flows.local import flow_settings as settings
 
     return settings()
@@ -262,7 +260,6 @@ def _serve(args) -> int:
         raise UsageError("--interval must be a positive number of seconds")
     for path in args.config:
         _validated(path)  # every config validated before anything is registered
-    _runtime().configure()
     from noisebo.flows.deployments import deployments_for, serve_all
 
     deployments = [
@@ -280,7 +277,6 @@ def _deploy(args) -> int:
     _require_server("deploy needs a Prefect server")
     for path in args.config:
         _validated(path)
-    _runtime().configure()
     from noisebo.flows.workers import deploy_campaign
 
     for path in map(config_path, args.config):
@@ -564,8 +560,6 @@ def _start(args) -> int:
 def _ask(args) -> int:
     from noisebo.bridge import manual
 
-    _runtime().configure()  # a decision that is due loads its compiled programs from the cache
-
     state, step = _manually(lambda: manual.ask(Path(args.file), _warn, resume=args.resume))
     _show_next(args, state, step)
     return 0
@@ -575,7 +569,6 @@ def _tell(args) -> int:
     from noisebo.bridge import manual
     from noisebo.campaign.progress import progress_lines
 
-    _runtime().configure()  # a point completed here is decided with the compiled programs of the cache
     path = Path(args.file)
     given = sum(bool(v) for v in (args.values, args.spectrum, args.error))
     if given != 1:
@@ -829,8 +822,9 @@ def main(argv: list[str] | None = None) -> int:
         args.values = [*args.values, *extra]
     elif extra:
         parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    # Process settings before anything loads JAX: XLA reads its log level (and the cache's flags)
-    # when jaxlib loads, and reading a config already loads the policies' JAX code.
+    # Process settings (Prefect's home, JAX's compilation cache, which ask and tell use too) before
+    # anything loads JAX: XLA reads its log level when jaxlib loads, and reading a config already
+    # loads the policies' JAX code.
     _runtime().configure()
     try:
         return args.handler(args)

@@ -13,9 +13,10 @@ from installed_layout import assemble
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def ruff(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+def ruff(command: str = "check", *args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    """``ruff check`` (or ``ruff format --check``, with command "format") with pyproject's settings."""
     return subprocess.run(
-        [sys.executable, "-m", "ruff", "check", "--no-cache", *args],
+        [sys.executable, "-m", "ruff", command, *(["--check"] if command == "format" else []), "--no-cache", *args],
         cwd=cwd,
         capture_output=True,
         text=True,
@@ -30,28 +31,14 @@ def test_the_repository_keeps_its_lint_rules():
 
 
 def test_the_repository_keeps_its_format():
-    out = subprocess.run(
-        [sys.executable, "-m", "ruff", "format", "--check", "--no-cache"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    out = ruff("format")
     assert out.returncode == 0, "run `ruff format` to format:\n" + out.stdout + out.stderr
 
 
 def test_a_format_breach_is_caught(tmp_path):
     (tmp_path / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text())
     (tmp_path / "module.py").write_text("x = {  'a':1 }\n")
-    out = subprocess.run(
-        [sys.executable, "-m", "ruff", "format", "--check", "--no-cache"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    out = ruff("format", cwd=tmp_path)
     assert out.returncode == 1 and "module.py" in out.stdout
 
 
