@@ -49,7 +49,7 @@ def next_step(recorder: Recorder, say: Say, commit: Callable | None = None) -> R
             say(
                 "deciding the final summary"
                 if step.final
-                else f"deciding step {step.step + 1} (the first decision in a process compiles the models, about 10 s)"
+                else f"deciding step {step.step + 1} (the first decision on this machine compiles the models, about 10 s)"
             )
         commit(recorder.state, engine.advance(recorder.state))
 

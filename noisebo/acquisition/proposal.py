@@ -25,6 +25,7 @@ from noisebo.config import (
     ScheduleConfig,
     SpaceConfig,
 )
+from noisebo import registry
 from noisebo.keys import PROPOSE, jax_key
 from noisebo.models import inference, noise_model, primary
 from noisebo.models.convergence import Convergence
@@ -44,6 +45,7 @@ from noisebo.models.prediction import (
     field_rows,
     spread,
 )
+from noisebo.programs import persisted
 
 
 def shots_for(is_converged: bool, schedule: ScheduleConfig) -> int:
@@ -63,7 +65,8 @@ def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceCon
         i, j = argmax_2d(jnp.where(allowed[None, :], values, -jnp.inf))
         return values, i, j
 
-    return jax.jit(propose)
+    name = f"propose/{acq.model_dump_json()}/{rew.model_dump_json()}/{space.model_dump_json()}/{overhead_s!r}"
+    return persisted(name, propose, depends_on=(policy_of(acq),))
 
 
 @lru_cache(maxsize=None)
@@ -132,7 +135,12 @@ def _propose_nd_compiled(
             noise_at = noise_rows(best_x[best][None, :]).mean[0, j[best]]
         return jnp.max(values, axis=1), best_x[best], j[best], best_s[best], noise_at
 
-    return jax.jit(propose)
+    name = (
+        f"propose_nd/{acq.model_dump_json()}/{rew.model_dump_json()}/{space.model_dump_json()}/"
+        f"{primary_first}/{field_kind}/{overhead_s!r}"
+    )
+    laws = () if field_kind is None else (registry.noise_law(field_kind),)
+    return persisted(name, propose, depends_on=(policy_of(acq), *laws))
 
 
 def _allowed_t(acq: AcquisitionConfig, t_grid: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from noisebo.config import (
     PrimaryModelConfig,
     SpaceConfig,
 )
-from noisebo.keys import FIT, jax_key
+from noisebo.keys import FIT, jax_key, split_key
 from noisebo.models import field_fit, inference, noise_field, noise_model, primary, profile_check
 from noisebo.models.grids import scaled
 from noisebo.models.inputs import capacity_for, group_ids
@@ -58,12 +58,24 @@ def _models_for(primary_config: PrimaryModelConfig, noise_config: NoiseModelConf
 
 
 def _fit_one(
-    config: CampaignConfig, model, data, key, guesses: list, laplace: int, quadrature: int, warm: bool
+    config: CampaignConfig,
+    model,
+    named: tuple[str, tuple],
+    data,
+    key,
+    guesses: list,
+    laplace: int,
+    quadrature: int,
+    warm: bool,
 ) -> inference.Samples:
+    """``named``: the model's program name and the plugins it calls (``inference.fit_map``)."""
     inf = config.inference
     if inf.mode == "nuts":
         return inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.predict_samples)
-    return inference.fit_map(model, data, key, inf.restarts, laplace, guesses, quadrature, draws=not warm)
+    name, depends_on = named
+    return inference.fit_map(
+        model, data, key, inf.restarts, laplace, guesses, quadrature, not warm, None, name, depends_on
+    )
 
 
 def _previous_guesses(previous: dict | None, prefix: str, scale: float, bounds=None) -> list[dict]:
@@ -192,7 +204,8 @@ def fit_noise_model(
     n_warm = _previous_guesses(previous, "noise", scale, np.asarray(data.bounds))
     warm = warm and bool(n_warm)
     guesses = n_warm if warm else [noise_model.initial_guess(data, cfg)] + noise_model.profile_guess(data, cfg) + n_warm
-    samples = _fit_one(config, _models(config)[1], data, k_noise, guesses, inf.laplace_samples, 0, warm)
+    named = noise_model.program_name(cfg)
+    samples = _fit_one(config, _models(config)[1], named, data, k_noise, guesses, inf.laplace_samples, 0, warm)
     return NoiseFit(samples, data, scale, groups.count.size, groups.binned, warm, profile=check)
 
 
@@ -214,7 +227,10 @@ def fit_gp(
     k_primary = key
     p_warm = _previous_guesses(previous, "primary", 1.0)
     guesses = p_warm if noise.warm else [primary.prior_median(config.primary_model, s.dimensions)] + p_warm
-    samples = _fit_one(config, _models(config)[0], data, k_primary, guesses, 0, inf.primary_quadrature, noise.warm)
+    named = (primary.program_name(config.primary_model, s.dimensions), ())
+    samples = _fit_one(
+        config, _models(config)[0], named, data, k_primary, guesses, 0, inf.primary_quadrature, noise.warm
+    )
     return PrimaryFit(samples, data, std, groups.count.size, groups.binned)
 
 
@@ -236,8 +252,7 @@ def fit_models(
 
 def fit_keys(key: jax.Array) -> tuple[jax.Array, jax.Array]:
     """The (GP, noise model) keys of a step's fit key."""
-    k_primary, k_noise = jax.random.split(key)
-    return k_primary, k_noise
+    return split_key(key)
 
 
 def hyperparameters(fitted: Fitted) -> dict[str, float]:

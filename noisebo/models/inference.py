@@ -32,6 +32,9 @@ from numpyro.infer import MCMC, NUTS
 from numpyro.infer.util import constrain_fn, log_density, potential_energy, unconstrain_fn
 from scipy import optimize
 
+from noisebo.keys import split_key
+from noisebo.programs import persisted
+
 # numpyro's effect-handler stack is one module-level list, shared by all threads, so two threads
 # tracing a model at once corrupt each other's traces. Every function below that runs model code
 # under handlers holds this lock while its Python body runs: that is only while JAX traces it
@@ -147,9 +150,11 @@ def _map_program(
     laplace_samples: int,
     quadrature_nodes: int = 0,
     laplace_basis: Callable | None = None,
+    name: str | None = None,
+    depends_on: tuple = (),
 ) -> _MapProgram:
     """Jitted pieces of a MAP fit; compiled once per model and padded data shape.
-    ``laplace_basis``: see ``fit_map``."""
+    ``laplace_basis``, ``name``, ``depends_on``: see ``fit_map``."""
     unravel_for, objective = _unravel(model), negative_log_posterior(model)
 
     def starts(key, data):
@@ -189,12 +194,16 @@ def _map_program(
     def flatten(params, data):
         return ravel_pytree(unconstrain_fn(model, (data,), {}, params))[0]
 
+    pieces: tuple[Callable, ...] = (starts, flatten, jax.value_and_grad(objective), laplace, quadrature)
+    if name is None:
+        return _MapProgram(*(jax.jit(_traced(piece)) for piece in pieces))
+    basis = "" if laplace_basis is None else f"{laplace_basis.__module__}.{laplace_basis.__qualname__}"
+    prefix = f"map/{name}/{restarts}/{laplace_samples}/{quadrature_nodes}/{basis}"
     return _MapProgram(
-        jax.jit(_traced(starts)),
-        jax.jit(_traced(flatten)),
-        jax.jit(_traced(jax.value_and_grad(objective))),
-        jax.jit(_traced(laplace)),
-        jax.jit(_traced(quadrature)),
+        *(
+            persisted(f"{prefix}/{field}", _traced(piece), depends_on=depends_on)
+            for field, piece in zip(_MapProgram._fields, pieces)
+        )
     )
 
 
@@ -249,6 +258,8 @@ def fit_map(
     quadrature_nodes: int = 0,
     draws: bool = True,
     laplace_basis: Callable | None = None,
+    name: str | None = None,
+    depends_on: tuple = (),
 ) -> Samples:
     """MAP of ``model(data)``: L-BFGS-B from each ``guess`` (a dict of constrained values of every
     latent site, or a sequence of them, tried first) and, with ``draws``, from ``restarts``
@@ -260,12 +271,16 @@ def fit_map(
     see only through a few linear combinations), ``laplace_basis(data)`` gives {site: (size, k)
     orthonormal columns spanning those combinations}; the Hessian is then computed on that span
     alone (the prior's identity elsewhere), k + the other sites' sizes Hessian-vector products
-    instead of a full Hessian. A fixed (hashable) function: it keys the compiled programs."""
+    instead of a full Hessian. A fixed (hashable) function: it keys the compiled programs.
+
+    ``name``: what identifies ``model`` across processes (the configs it was made from), so its
+    programs are kept traced between them (``noisebo.programs``), with ``depends_on`` the plugin
+    classes it calls; None: kept in this process only."""
     guesses = [] if guess is None else [guess] if isinstance(guess, dict) else list(guess)
     if not guesses and not draws:
         raise ValueError("a MAP fit needs a guess or the prior draws")
-    program = _map_program(model, restarts, laplace_samples, quadrature_nodes, laplace_basis)
-    k_start, k_laplace = jax.random.split(key)
+    program = _map_program(model, restarts, laplace_samples, quadrature_nodes, laplace_basis, name, depends_on)
+    k_start, k_laplace = split_key(key)
     starts = [np.asarray(program.flatten({k: jnp.asarray(v) for k, v in g.items()}, data)) for g in guesses]
     if draws:
         starts += list(np.asarray(program.starts(k_start, data)))

@@ -780,6 +780,13 @@ def laplace_basis(data: FieldData) -> dict:
     return out
 
 
+def program_name(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int) -> tuple[str, tuple]:
+    """What identifies ``make_model(cfg, field, dimensions)``'s programs across processes
+    (``noisebo.programs``): a name and the noise law it calls."""
+    name = f"noise_field/{dimensions}/{cfg.model_dump_json()}/{field.model_dump_json()}"
+    return name, (registry.noise_law(cfg.mean),)
+
+
 @lru_cache(maxsize=None)
 def _cached_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
     """One model per configuration, so ``inference.fit_map`` compiles its programs once."""
@@ -818,6 +825,7 @@ def fit(
     Returns the samples (sample 0 the MAP point) and the data holding the hyperparameters used
     (predict with these data, not the ones passed in)."""
     model = _cached_model(cfg, field, data.freq.shape[1])
+    name, depends_on = program_name(cfg, field, data.freq.shape[1])
 
     def completed(guess: dict) -> dict:  # a law without its fields' weights gets them by ridge
         return guess if all(f"{p}_z" in guess for p in field_names(field)) else initial_guess(data, cfg, field, guess)
@@ -831,7 +839,16 @@ def fit(
         )
     starts = [*(completed(g) for g in guesses), initial_guess(data, cfg, field)]
     samples = inference.fit_map(
-        model, data, key, restarts, laplace_samples, starts, draws=draws, laplace_basis=laplace_basis
+        model,
+        data,
+        key,
+        restarts,
+        laplace_samples,
+        starts,
+        draws=draws,
+        laplace_basis=laplace_basis,
+        name=name,
+        depends_on=depends_on,
     )
     return samples, data
 

@@ -72,6 +72,12 @@ def mean_law(kind: str, t: jnp.ndarray, a0, a1, p=0.5) -> jnp.ndarray:
     return registry.noise_law(kind).mean(t, a0, a1, p)
 
 
+def program_name(cfg: NoiseModelConfig) -> tuple[str, tuple]:
+    """What identifies ``make_model(cfg)``'s programs across processes (``noisebo.programs``):
+    a name and the noise law it calls."""
+    return f"noise_model/{cfg.model_dump_json()}", (registry.noise_law(cfg.mean),)
+
+
 def make_model(cfg: NoiseModelConfig):
     """The numpyro noise model for this configuration: ``model(data: NoiseData)``."""
 

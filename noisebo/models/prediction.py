@@ -11,11 +11,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from noisebo import registry
 from noisebo.config import CampaignConfig, RewardConfig, SpaceConfig
 from noisebo.models import field_fit, inference, noise_field, noise_model, primary
 from noisebo.models.fitting import Fitted
 from noisebo.models.grids import N_FINE, integration_points, scaled, space_grids
 from noisebo.models.reward import optimal_index, reward
+from noisebo.programs import persisted
 from noisebo.state import CampaignState
 
 
@@ -244,7 +246,8 @@ def _predict_compiled(
         )
         return Prediction(post, fine_mean)
 
-    return jax.jit(predict, static_argnums=(1, 2))
+    name = f"predict/{s.model_dump_json()}/{rew.model_dump_json()}/{kind}/{has_field}/{info}/{draws}"
+    return persisted(name, predict, static_argnums=(1, 2), depends_on=(registry.noise_law(kind),))
 
 
 def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState, uses_spread: bool = False) -> Prediction:

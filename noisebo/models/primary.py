@@ -52,6 +52,12 @@ def length_names(dimensions: int) -> tuple[str, ...]:
     return ("length",) if dimensions == 1 else tuple(f"length_{k}" for k in range(dimensions))
 
 
+def program_name(prior: PrimaryModelConfig, dimensions: int = 1) -> str:
+    """What identifies ``make_model(prior, dimensions)``'s programs across processes
+    (``noisebo.programs``)."""
+    return f"primary_model/{dimensions}/{prior.model_dump_json()}"
+
+
 def make_model(prior: PrimaryModelConfig, dimensions: int = 1):
     """The numpyro model of f for these priors over x of ``dimensions`` axes:
     ``model(data: PrimaryData)``."""

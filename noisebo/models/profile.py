@@ -52,7 +52,8 @@ def distil(
     data, scale, _ = noise_model.prepare(t, shot_std, n_shots, own, t_min, t_max, inf.max_inputs)
     model = noise_model.make_model(own)
     guess = noise_model.initial_guess(data, own)
-    fitted = inference.fit_map(model, data, key, inf.restarts, LAPLACE_DRAWS, [guess])
+    name, depends_on = noise_model.program_name(own)
+    fitted = inference.fit_map(model, data, key, inf.restarts, LAPLACE_DRAWS, [guess], name=name, depends_on=depends_on)
     out = {}
     for name in ("a0", "a1", "p"):
         if name not in fitted.params:
