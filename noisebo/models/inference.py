@@ -21,19 +21,22 @@ from __future__ import annotations
 
 import threading
 from functools import lru_cache
-from typing import Callable, NamedTuple, Sequence
+from typing import TYPE_CHECKING, Callable, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
-from numpyro import handlers
-from numpyro.infer import MCMC, NUTS
-from numpyro.infer.util import constrain_fn, log_density, potential_energy, unconstrain_fn
 from scipy import optimize
 
 from noisebo.keys import split_key
 from noisebo.programs import persisted
+
+if TYPE_CHECKING:
+    from numpyro.infer import MCMC
+
+# numpyro is imported where a model is traced or sampled, not here: a process that loads its
+# programs kept from another (noisebo.programs) traces none and spares the import (0.15 s).
 
 # numpyro's effect-handler stack is one module-level list, shared by all threads, so two threads
 # tracing a model at once corrupt each other's traces. Every function below that runs model code
@@ -68,7 +71,27 @@ class Samples(NamedTuple):
     weights: jnp.ndarray | None = None
 
 
+def _constrained(model, data, unconstrained: dict) -> dict:
+    from numpyro.infer.util import constrain_fn
+
+    return constrain_fn(model, (data,), {}, unconstrained)
+
+
+def _unconstrained(model, data, params: dict) -> dict:
+    from numpyro.infer.util import unconstrain_fn
+
+    return unconstrain_fn(model, (data,), {}, params)
+
+
+def _potential_energy(model, data, unconstrained: dict):
+    from numpyro.infer.util import potential_energy
+
+    return potential_energy(model, (data,), {}, unconstrained)
+
+
 def _latent_prior_draw(model, key, data) -> dict:
+    from numpyro import handlers
+
     trace = handlers.trace(handlers.seed(model, key)).get_trace(data)
     return {name: site["value"] for name, site in trace.items() if site["type"] == "sample" and not site["is_observed"]}
 
@@ -124,7 +147,7 @@ def _unravel(model: Callable) -> Callable:
     """data -> the function from a flat unconstrained vector to the model's unconstrained sites."""
 
     def unravel_for(data):
-        template = unconstrain_fn(model, (data,), {}, _latent_prior_draw(model, jax.random.PRNGKey(0), data))
+        template = _unconstrained(model, data, _latent_prior_draw(model, jax.random.PRNGKey(0), data))
         return ravel_pytree(template)[1]
 
     return unravel_for
@@ -136,7 +159,9 @@ def negative_log_posterior(model: Callable) -> Callable:
     unravel_for = _unravel(model)
 
     def objective(flat, data):
-        params = constrain_fn(model, (data,), {}, unravel_for(data)(flat))
+        from numpyro.infer.util import log_density
+
+        params = _constrained(model, data, unravel_for(data)(flat))
         value = -log_density(model, (data,), {}, params)[0]
         return jnp.where(jnp.isfinite(value), value, 1e10)
 
@@ -159,7 +184,7 @@ def _map_program(
 
     def starts(key, data):
         def start(k):
-            return ravel_pytree(unconstrain_fn(model, (data,), {}, _latent_prior_draw(model, k, data)))[0]
+            return ravel_pytree(_unconstrained(model, data, _latent_prior_draw(model, k, data)))[0]
 
         return jax.vmap(start)(jax.random.split(key, restarts))
 
@@ -167,7 +192,7 @@ def _map_program(
         unravel = unravel_for(data)
         flats = best[None, :]
         if laplace_samples and laplace_basis is not None:
-            template = unconstrain_fn(model, (data,), {}, _latent_prior_draw(model, jax.random.PRNGKey(0), data))
+            template = _unconstrained(model, data, _latent_prior_draw(model, jax.random.PRNGKey(0), data))
             draws = _subspace_draws(
                 objective, best, data, key, laplace_samples, _block_basis(template, laplace_basis(data))
             )
@@ -176,7 +201,7 @@ def _map_program(
             evals, evecs = _eigen_curvature(objective, best, data)
             z = jax.random.normal(key, (laplace_samples, best.shape[0]))
             flats = jnp.concatenate([flats, best + (z / jnp.sqrt(evals)) @ evecs.T], axis=0)
-        return jax.vmap(lambda f: constrain_fn(model, (data,), {}, unravel(f)))(flats)
+        return jax.vmap(lambda f: _constrained(model, data, unravel(f)))(flats)
 
     def quadrature(best, data):
         # The integral over unconstrained space needs the transform's Jacobian: potential_energy
@@ -185,14 +210,14 @@ def _map_program(
         evals, evecs = _eigen_curvature(objective, best, data)
         u, log_w = _hermite_grid(quadrature_nodes, best.shape[0])
         flats = best + (QUADRATURE_WIDTH * jnp.asarray(u) / jnp.sqrt(evals)) @ evecs.T
-        energy = jax.vmap(lambda f: potential_energy(model, (data,), {}, unravel(f)))(flats)
+        energy = jax.vmap(lambda f: _potential_energy(model, data, unravel(f)))(flats)
         log_q = -0.5 * jnp.sum(jnp.asarray(u) ** 2, axis=1)  # the Gaussian the nodes stand for
         log_weights = jnp.asarray(log_w) - jnp.where(jnp.isfinite(energy), energy, jnp.inf) - log_q
-        params = jax.vmap(lambda f: constrain_fn(model, (data,), {}, unravel(f)))(flats)
+        params = jax.vmap(lambda f: _constrained(model, data, unravel(f)))(flats)
         return params, jax.nn.softmax(log_weights)
 
     def flatten(params, data):
-        return ravel_pytree(unconstrain_fn(model, (data,), {}, params))[0]
+        return ravel_pytree(_unconstrained(model, data, params))[0]
 
     pieces: tuple[Callable, ...] = (starts, flatten, jax.value_and_grad(objective), laplace, quadrature)
     if name is None:
@@ -245,6 +270,8 @@ def nuts_runner(model: Callable, warmup: int, samples: int, thread: int) -> MCMC
     """One MCMC object per model and thread (``run`` mutates it), reused so its compiled sampler
     is reused across steps."""
     # progress_bar=False makes numpyro 0.22 recompile on every run; silence the bar with TQDM_DISABLE=1.
+    from numpyro.infer import MCMC, NUTS
+
     return MCMC(NUTS(model), num_warmup=warmup, num_samples=samples, progress_bar=True, jit_model_args=True)
 
 

@@ -116,8 +116,6 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
-import numpyro
-import numpyro.distributions as dist
 from scipy import optimize
 
 from noisebo import registry
@@ -353,6 +351,10 @@ def make_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
     law = registry.noise_law(cfg.mean)
 
     def noise_field_model(data: FieldData) -> None:
+        # numpyro loads where a model is traced: a process that loads kept programs never pays for it.
+        import numpyro
+        import numpyro.distributions as dist
+
         if data.freq.shape[1] != dimensions or data.field_amplitude.shape[0] != len(prefixes):
             raise ValueError("noise-field data prepared for another dimension or field")
         a0 = numpyro.sample("a0", dist.Uniform(data.bounds[0, 0], data.bounds[0, 1]))

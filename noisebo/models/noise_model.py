@@ -17,8 +17,6 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
-import numpyro
-import numpyro.distributions as dist
 from scipy import optimize
 from scipy.special import gammaln
 
@@ -84,6 +82,10 @@ def make_model(cfg: NoiseModelConfig):
     law = registry.noise_law(cfg.mean)
 
     def noise_model(data: NoiseData) -> None:
+        # numpyro loads where a model is traced: a process that loads kept programs never pays for it.
+        import numpyro
+        import numpyro.distributions as dist
+
         a0 = numpyro.sample("a0", dist.Uniform(data.bounds[0, 0], data.bounds[0, 1]))
         a1 = numpyro.sample("a1", dist.Uniform(data.bounds[1, 0], data.bounds[1, 1]))
         p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if law.infers_exponent else 0.5

@@ -16,8 +16,6 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
-import numpyro
-import numpyro.distributions as dist
 
 from noisebo.config import PrimaryModelConfig
 from noisebo.models.inputs import Grouped, capacity_for, merge
@@ -63,6 +61,10 @@ def make_model(prior: PrimaryModelConfig, dimensions: int = 1):
     ``model(data: PrimaryData)``."""
 
     def primary_model(data: PrimaryData) -> None:
+        # numpyro loads where a model is traced: a process that loads kept programs never pays for it.
+        import numpyro
+        import numpyro.distributions as dist
+
         amplitude = numpyro.sample("amplitude", dist.LogNormal(prior.amplitude_loc, prior.amplitude_scale))
         lengths = {
             name: numpyro.sample(name, dist.LogNormal(prior.length_loc, prior.length_scale))

@@ -458,7 +458,7 @@ def test_the_hessian_outside_the_laplace_basis_is_the_priors():
     )
     model = noise_field._cached_model(QUADRATURE, noise_field.NoiseFieldConfig(), 1)
     point = {k: v[0] for k, v in samples.params.items()}
-    template = inference.unconstrain_fn(model, (data,), {}, point)
+    template = inference._unconstrained(model, data, point)
     flat = ravel_pytree(template)[0]
     objective = inference.negative_log_posterior(model)
     basis = inference._block_basis(template, noise_field.laplace_basis(data))
