@@ -7,9 +7,11 @@ time, as at the instrument's keyboard); the table gives the median and the range
 of each. ``inspect`` reads a finished campaign made here first (``noisebo run``, Forrester);
 ``ask`` reads a campaign measured by hand (``noisebo start``) whose point is already decided;
 ``tell (decides)`` records the last shot of the last seed point, so the command also makes the
-campaign's first decision, with the JAX compilation cache warm from the campaigns before it (each
-repeat is a fresh campaign brought to that shot first, outside the timing). Run it on an idle
-machine: timings of whole processes move with the load.
+campaign's first decision, with the JAX compilation cache and the kept programs
+(``noisebo.programs``) warm from the campaigns before it (each repeat is a fresh campaign brought
+to that shot first, outside the timing); ``tell (decides, nothing kept)`` is the same with an empty
+folder of kept programs, as on the first decision of its kind on a machine: it traces the programs
+and keeps them. Run it on an idle machine: timings of whole processes move with the load.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 import statistics
 import subprocess
@@ -29,13 +32,24 @@ ROOT = Path(__file__).resolve().parents[1]
 NOISEBO = str(Path(sys.executable).with_name("noisebo"))
 FORRESTER = ROOT / "data" / "configs" / "forrester.yaml"
 MANUAL = ROOT / "data" / "configs" / "forrester_manual.yaml"
-TARGETS_S = {"--help": 0.3, "--version": 0.3, "instruments": None, "inspect": 1.0, "ask": 1.0, "tell (decides)": 2.0}
+TARGETS_S = {
+    "--help": 0.3,
+    "--version": 0.3,
+    "instruments": None,
+    "inspect": 1.0,
+    "ask": 1.0,
+    "tell (decides)": 2.0,
+    "tell (decides, nothing kept)": None,
+}
 
 
-def noisebo(*args: str, cwd: Path) -> tuple[float, str]:
-    """(seconds from start to exit, stdout) of one `noisebo ARGS` that must succeed."""
+def noisebo(*args: str, cwd: Path, env: dict | None = None) -> tuple[float, str]:
+    """(seconds from start to exit, stdout) of one `noisebo ARGS` that must succeed, with ``env``
+    added to the environment."""
     start = time.perf_counter()
-    done = subprocess.run([NOISEBO, *args], cwd=cwd, capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        [NOISEBO, *args], cwd=cwd, capture_output=True, text=True, check=False, env={**os.environ, **(env or {})}
+    )
     elapsed = time.perf_counter() - start
     if done.returncode != 0:
         raise SystemExit(f"cli.py: `noisebo {' '.join(args)}` failed ({done.returncode}): {done.stderr.strip()[-400:]}")
@@ -88,12 +102,16 @@ def timings(repeats: int) -> dict[str, list[float]]:
             found["inspect"].append(noisebo("inspect", str(finished), cwd=work)[0])
             found["ask"].append(noisebo("ask", str(asked), cwd=work)[0])
         for i in range(repeats):
-            path = started(work, f"told{i}")
-            answer(path, work, keep_last=True)
-            request = json.loads(noisebo("ask", "--json", str(path), cwd=work)[1])
-            found["tell (decides)"].append(
-                noisebo("tell", str(path), "--point", str(request["point"]), "1.0", cwd=work)[0]
-            )
+            for name, env in (
+                ("tell (decides)", None),
+                ("tell (decides, nothing kept)", {"NOISEBO_PROGRAM_CACHE": str(work / f"nothing-kept-{i}")}),
+            ):
+                path = started(work, f"told{i}-{len(found[name])}-{env is None}")
+                answer(path, work, keep_last=True)
+                request = json.loads(noisebo("ask", "--json", str(path), cwd=work)[1])
+                found[name].append(
+                    noisebo("tell", str(path), "--point", str(request["point"]), "1.0", cwd=work, env=env)[0]
+                )
         return found
     finally:
         shutil.rmtree(work, ignore_errors=True)
