@@ -8,7 +8,7 @@ checkout (or of ~/.noisebo): programs compiled for one CPU are never loaded on a
 shared home directory. NOISEBO_JAX_CACHE=DIR puts it elsewhere; NOISEBO_JAX_CACHE= (empty) turns
 it off. Beside it, in programs/, the decision programs' lowered modules (``noisebo.programs``:
 NOISEBO_PROGRAM_CACHE), which spare a new process their tracing (a manual ``tell`` that decides,
-3.3 s -> 1.7 s: benchmarks/cli.py). XLA:CPU logs two alarming, harmless error lines per program it loads (tuning flags it
+3.3 s -> 1.6 s: benchmarks/cli.py). XLA:CPU logs two alarming, harmless error lines per program it loads (tuning flags it
 mistakes for missing CPU features: openxla/xla#44565), so with the cache on, XLA's own C++ log
 is kept to fatal messages (TF_CPP_MIN_LOG_LEVEL=3) unless that variable is set.
 

@@ -33,7 +33,7 @@ import pickle
 import threading
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable, NamedTuple, Sequence
+from typing import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -49,65 +49,65 @@ def program_dir() -> Path | None:
     return Path(value) if value else None
 
 
-class _Loaded(NamedTuple):
-    call: Callable  # (*leaves) -> output leaves
-    out_tree: Any  # the output's PyTreeDef
-    source: str  # "exported" (traced here) or "loaded" (from a file)
-
-
 class Persisted:
     """A jitted function whose lowered programs are kept in ``program_dir()`` (see the module).
-    Called like ``jax.jit(fn, static_argnums=static_argnums)``."""
+    Called like ``jax.jit(fn, static_argnums=static_argnums)``; kept or not, a call costs what a
+    jitted function's call costs: which program to load or export is decided while JAX traces
+    the call, once per argument structure."""
 
     def __init__(self, name: str, fn: Callable, static_argnums: Sequence[int], depends_on: Sequence[object]):
         self.name, self._fn, self._static = name, fn, tuple(static_argnums)
         self._depends_on = tuple(depends_on)
         self._jitted = jax.jit(fn, static_argnums=self._static)
-        self._loaded: dict[tuple, _Loaded] = {}
-        self._lock = threading.Lock()
+        self._kept = jax.jit(self._through_kept_program, static_argnums=self._static)
+        self._sources: dict[str, str] = {}
 
     def __call__(self, *args):
+        if os.environ.get(ENVIRONMENT_VARIABLE):
+            return self._kept(*args)
+        return self._jitted(*args)
+
+    def sources(self) -> dict[str, str]:
+        """How each kept program this process used came: "exported" (traced here and kept) or
+        "loaded" (from its file), by file name."""
+        return dict(self._sources)
+
+    def _through_kept_program(self, *args):
+        """Runs while JAX traces a call (``args`` hold tracers): the call's program, loaded from
+        its file, or exported and kept."""
         folder = program_dir()
-        if folder is None:
-            return self._jitted(*args)
+        assert folder is not None  # the call came through ``_kept``
         statics = tuple(args[i] for i in self._static)
         dynamic = tuple(a for i, a in enumerate(args) if i not in self._static)
         leaves, tree = jax.tree_util.tree_flatten(dynamic)
-        signature = (statics, tree, tuple(_leaf_signature(leaf) for leaf in leaves))
-        loaded = self._loaded.get(signature)
-        if loaded is None:
-            with self._lock:
-                loaded = self._loaded.get(signature) or self._load_or_export(folder, statics, tree, leaves)
-                self._loaded[signature] = loaded
-        return jax.tree_util.tree_unflatten(loaded.out_tree, loaded.call(*leaves))
-
-    def sources(self) -> dict[tuple, str]:
-        """How each argument structure's program came in this process: "exported" or "loaded"."""
-        return {signature: loaded.source for signature, loaded in self._loaded.items()}
-
-    def _load_or_export(self, folder: Path, statics: tuple, tree, leaves: list) -> _Loaded:
         avals = [jax.typeof(leaf) for leaf in leaves]
         path = folder / f"{self._key(statics, tree, avals)}.program"
         kept = _read(path)
-        if kept is not None:
+        if kept is None:
+            exported, out_tree = self._export(statics, tree, avals)
+            _write(path, exported, out_tree)
+            self._sources[path.name] = "exported"
+        else:
             exported, out_tree = kept
             _prepare_lapack()
-            return _Loaded(jax.jit(exported.call), out_tree, "loaded")
+            self._sources[path.name] = "loaded"
+        return jax.tree_util.tree_unflatten(out_tree, exported.call(*leaves))
+
+    def _export(self, statics: tuple, tree, avals: list):
+        """(Exported, output tree) of ``fn`` for these static values and argument avals."""
         out_trees: list = []
 
         def flat(*flat_leaves):
             rebuilt = list(jax.tree_util.tree_unflatten(tree, flat_leaves))
             for index, value in zip(self._static, statics):
                 rebuilt.insert(index, value)
-            out = self._fn(*rebuilt)
-            out_leaves, out_tree = jax.tree_util.tree_flatten(out)
+            out_leaves, out_tree = jax.tree_util.tree_flatten(self._fn(*rebuilt))
             out_trees.append(out_tree)
             return out_leaves
 
         specs = [jax.ShapeDtypeStruct(a.shape, a.dtype, weak_type=a.weak_type) for a in avals]
         exported = export.export(jax.jit(flat))(*specs)
-        _write(path, exported, out_trees[0])
-        return _Loaded(jax.jit(exported.call), out_trees[0], "exported")
+        return exported, out_trees[0]
 
     def _key(self, statics: tuple, tree, avals: list) -> str:
         described = [
@@ -131,11 +131,6 @@ def persisted(
     config ``fn`` closes over. ``depends_on``: plugin classes or functions ``fn`` calls (a noise
     law, a policy) whose modules' source must key the programs too."""
     return Persisted(name, fn, static_argnums, depends_on)
-
-
-def _leaf_signature(leaf) -> tuple:
-    """What tells two calls' leaves apart cheaply: type, shape, dtype and weak typing."""
-    return (type(leaf), getattr(leaf, "shape", None), str(getattr(leaf, "dtype", "")), getattr(leaf, "weak_type", None))
 
 
 def _read(path: Path):
@@ -165,7 +160,7 @@ def _write(path: Path, exported, out_tree) -> None:
 def _prepare_lapack() -> None:
     """Load jaxlib's LAPACK kernels, as lowering a LAPACK operation does: a deserialised program
     that calls them in a process that never lowered one crashes (jax-ml/jax#29610)."""
-    jax.jit(jnp.linalg.cholesky).lower(jnp.eye(1))
+    jax.jit(jnp.linalg.cholesky).lower(jax.ShapeDtypeStruct((1, 1), jnp.float32))
 
 
 @lru_cache(maxsize=None)
