@@ -84,7 +84,7 @@ def run(
         if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
             line = (
                 f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
-                "(about 10 s, or 1-3 s with the compilation cache of an earlier run)"
+                "(about 10 s the first time on this machine, 1-2 s once an earlier run kept them)"
             )
             say(line)
             if report is not None:
