@@ -68,8 +68,9 @@ class Persisted:
         return self._jitted(*args)
 
     def sources(self) -> dict[str, str]:
-        """How each kept program this process used came: "exported" (traced here and kept) or
-        "loaded" (from its file), by file name."""
+        """How each program this process used came, by file name: "exported" (traced here and
+        kept), "loaded" (from its file), or "not kept" (one that cannot be exported, such as a
+        host callback's: traced here, as plain ``jax.jit`` would)."""
         return dict(self._sources)
 
     def _through_kept_program(self, *args):
@@ -84,7 +85,11 @@ class Persisted:
         path = folder / f"{self._key(statics, tree, avals)}.program"
         kept = _read(path)
         if kept is None:
-            exported, out_tree = self._export(statics, tree, avals)
+            try:
+                exported, out_tree = self._export(statics, tree, avals)
+            except Exception:  # noqa: BLE001 - e.g. a plug-in's host callback, which no export may hold
+                self._sources[path.name] = "not kept"
+                return self._fn(*args)  # traced here, as plain jax.jit would
             _write(path, exported, out_tree)
             self._sources[path.name] = "exported"
         else:

@@ -101,6 +101,18 @@ def test_a_folder_that_cannot_be_written_keeps_nothing_and_the_program_runs(tmp_
     assert float(out["n"]) == 6.0
 
 
+def test_a_program_that_cannot_be_exported_runs_and_keeps_nothing(kept):
+    """A host callback (a plug-in might call one) cannot be serialised: traced in place instead."""
+
+    def with_callback(x):
+        doubled = jax.pure_callback(lambda v: np.asarray(v) * 2, jax.ShapeDtypeStruct(x.shape, x.dtype), x)
+        return doubled + 1
+
+    program = persisted("callback", with_callback)
+    assert np.array_equal(program(B), B * 2 + 1)
+    assert list(program.sources().values()) == ["not kept"] and not list(kept.glob("*.program"))
+
+
 def test_a_plugin_module_keys_the_programs(kept, tmp_path):
     """A noise law or policy from outside noisebo: its module's source is in the key, so an
     edited plugin never loads the program traced from the old one."""
