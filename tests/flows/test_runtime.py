@@ -83,3 +83,21 @@ def test_the_pool_warning_at_exit_is_dropped_and_other_warnings_are_not():
         )
         warnings.warn("another warning", UserWarning, stacklevel=1)
     assert [str(w.message) for w in caught] == ["another warning"]
+
+
+def test_the_kept_programs_go_beside_the_compilation_cache_unless_told_otherwise(tmp_path):
+    code = "import os\nfrom noisebo.flows import runtime\nruntime.configure()\nprint(os.environ.get('NOISEBO_PROGRAM_CACHE'))"
+    base = {k: v for k, v in os.environ.items() if k != "NOISEBO_PROGRAM_CACHE"}
+    cases = [
+        ({"NOISEBO_JAX_CACHE": str(tmp_path / "cache")}, str(tmp_path / "cache" / "programs")),
+        ({"NOISEBO_JAX_CACHE": ""}, "None"),  # no compilation cache: nothing kept either
+        (
+            {"NOISEBO_JAX_CACHE": str(tmp_path / "cache"), "NOISEBO_PROGRAM_CACHE": str(tmp_path / "mine")},
+            str(tmp_path / "mine"),
+        ),
+    ]
+    for extra, expected in cases:
+        out = subprocess.run(
+            [sys.executable, "-c", code], env=base | extra, capture_output=True, text=True, check=True, timeout=120
+        )
+        assert out.stdout.strip() == expected, extra
