@@ -143,9 +143,7 @@ def _read(path: Path):
     try:
         kept = pickle.loads(path.read_bytes())
         return export.deserialize(bytearray(kept["exported"])), kept["out_tree"]
-    except FileNotFoundError:
-        return None
-    except Exception:  # a torn, foreign or outdated file: export again and replace it
+    except Exception:  # absent, or a torn, foreign or outdated file: export again and replace it
         return None
 
 
