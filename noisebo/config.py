@@ -746,7 +746,14 @@ class ScheduleConfig(FrozenModel):
     t the acquisition policy chose (the paper's). "informative" (with the posterior rule, a
     noise model without a field): at the t whose measurement is expected to narrow the
     posterior of the optimal t most per second of instrument time (``information.t_opt_rate``),
-    the point keeping the policy's x: the rule then converges by learning what it tests.
+    the point keeping the policy's x: the rule then converges by learning what it tests. In
+    the budget mode every point measures the noise with its few shots, so every point before
+    convergence is such a point.
+    "valued" (the budget mode, where every point measures the noise; a policy whose t is the
+    reward's, reward or double; no field, no fixed t): at the policy's t, or at the t whose
+    noise measurement is worth more to the points still to come, through what it teaches about
+    t*, than it costs in reward now (``information.t_information_value``): early excursions
+    from the predicted t* that stop once t* is known or the budget nearly spent.
 
     ``clip_sd``: outlier-robust reduction of a point's shots. A shot farther than ``clip_sd``
     robust standard deviations (1.4826 x the median absolute deviation) from the median of the
@@ -805,11 +812,12 @@ class ScheduleConfig(FrozenModel):
         description="posterior rule: converged once the 95 % interval of t* "
         "lies within this fraction of its median either side",
     )
-    noise_t: Literal["policy", "informative"] = Field(
+    noise_t: Literal["policy", "informative", "valued"] = Field(
         "policy",
         description="where a noise-measuring point measures: "
-        "at the policy's t, or (posterior rule) at the t that narrows "
-        "t*'s interval most per second",
+        "at the policy's t, (posterior rule) at the t that narrows "
+        "t*'s interval most per second, or (budget mode) elsewhere than the policy's t where "
+        "what it teaches about t* is worth more to the later points than the reward it loses now",
     )
     shots_before: Count = Field(
         30, ge=2, description="shots per point until the noise model converges (and per seed point, paper mode)"
@@ -910,7 +918,9 @@ class CampaignConfig(FrozenModel):
         return self
 
     @model_validator(mode="after")
-    def _informative_noise_t(self) -> CampaignConfig:
+    def _informative_noise_t(self, info: ValidationInfo) -> CampaignConfig:
+        if self.schedule.noise_t == "valued":
+            return self._valued_noise_t((info.context or {}).get(LOAD_PLUGINS, True))
         if self.schedule.noise_t != "informative":
             return self
         if self.schedule.convergence != "posterior":
@@ -924,6 +934,22 @@ class CampaignConfig(FrozenModel):
             raise ValueError(
                 "schedule.noise_t: informative chooses t, which acquisition.fixed_t fixes; use one of them"
             )
+        return self
+
+    def _valued_noise_t(self, load_plugins: bool) -> CampaignConfig:
+        if self.schedule.mode != "budget":
+            raise ValueError(
+                "schedule.noise_t: valued weighs each budget-mode point's noise measurement; set schedule.mode: budget"
+            )
+        if load_plugins and not registry.policy(self.acquisition.policy).reward_chooses_t:
+            raise ValueError(
+                "schedule.noise_t: valued moves t away from the reward's predicted optimum, which the "
+                f"policy {self.acquisition.policy!r} does not choose t by; use reward or double"
+            )
+        if self.noise_model.field is not None:
+            raise ValueError("schedule.noise_t: valued needs a noise model without noise_model.field")
+        if self.acquisition.fixed_t is not None:
+            raise ValueError("schedule.noise_t: valued chooses t, which acquisition.fixed_t fixes; use one of them")
         return self
 
     @model_validator(mode="after")

@@ -61,10 +61,42 @@ def t_opt_rate(
     relative sampling variance of the sample sd of ``shots`` shots, (1 - c4^2) / c4^2) lowers
     Var[t*] by Cov(t*, Noise(t))^2 / (Var[Noise(t)] + Var[e]): the ensemble (Kalman) form of a
     one-step look-ahead on t*. Each is divided by the point's cost, shots t + overhead."""
+    return t_opt_reduction(t_draws, noise_draws, rel_var) / (shots * t + overhead_s)
+
+
+def t_opt_reduction(t_draws: jnp.ndarray, noise_draws: jnp.ndarray, rel_var: float) -> jnp.ndarray:
+    """How much one noise measurement at each t of the grid lowers Var[t*] (n_t,), s^2: the
+    ensemble look-ahead of ``t_opt_rate`` before it is divided by the point's cost."""
     dt = t_draws - jnp.mean(t_draws)
     centred = noise_draws - jnp.mean(noise_draws, axis=0)
     cov = jnp.mean(dt[:, None] * centred, axis=0)
     var = jnp.mean(centred**2, axis=0)
     sampling = jnp.mean(noise_draws, axis=0) ** 2 * rel_var
-    reduction = cov**2 / jnp.maximum(var + sampling, 1e-300)
-    return reduction / (shots * t + overhead_s)
+    return cov**2 / jnp.maximum(var + sampling, 1e-300)
+
+
+def t_information_value(
+    t_draws: jnp.ndarray,
+    noise_draws: jnp.ndarray,
+    t: jnp.ndarray,
+    rel_var: float,
+    alpha: float,
+    beta: float,
+    points_left: float,
+) -> jnp.ndarray:
+    """What a noise measurement at each t of the grid t (n_t,) is worth to the points still to
+    come, in the reward's units (Eq. 5) summed over those ``points_left`` points (budget mode).
+
+    Draw d of the noise model's S posterior draws (t_draws (S,) their optimal t, noise_draws
+    (S, n_t) their curves on the grid) has the reward curve R_d(t) = -alpha t^2 - beta Noise_d(t).
+    A point at the t that maximises the draws' mean reward loses max R_d - R_d(t) where draw d is
+    the truth; L, the mean over the draws, is what not knowing t* costs a point. Near the optimum
+    that loss is quadratic in the error of t, so its mean is proportional to Var[t*]: a
+    measurement that lowers Var[t*] by dV (``t_opt_reduction``) saves L dV / Var[t*] on each point
+    after it. Zero where the draws agree on t*."""
+    curves = -alpha * t[None, :] ** 2 - beta * noise_draws
+    best = jnp.argmax(jnp.mean(curves, axis=0))
+    loss = jnp.mean(jnp.max(curves, axis=1) - curves[:, best])
+    var_t = jnp.var(t_draws)
+    saved = loss * t_opt_reduction(t_draws, noise_draws, rel_var) / jnp.where(var_t > 0, var_t, 1.0)
+    return jnp.where(var_t > 0, points_left * saved, 0.0)

@@ -136,11 +136,14 @@ class Policy:
     ``chooses_shots``: once the noise model has converged, each shot count of
     ``information.shot_options`` is scored and the best kept (otherwise the schedule's).
     ``paper``: 0, or the rank of one of the paper's two policies (1 reward-driven, 2 double: a
-    sweep's ``both`` runs them in that order)."""
+    sweep's ``both`` runs them in that order).
+    ``reward_chooses_t``: its t is the reward's predicted optimum, so in the budget mode a noise
+    measurement elsewhere may pay for itself (``information.t_information_value``)."""
 
     uses_spread: bool = False
     chooses_shots: bool = False
     paper: int = 0
+    reward_chooses_t: bool = False
 
     def acquisition_map(
         self, post: Posterior, shots, acq: AcquisitionConfig, rew: RewardConfig, overhead_s: float = 0.0
@@ -167,6 +170,7 @@ class RewardDriven(Policy):
     """The "reward" policy: acq_x * Norm(R)^gamma (Eq. 6)."""
 
     paper = 1
+    reward_chooses_t = True
 
     def acquisition_map(self, post, shots, acq, rew, overhead_s=0.0):
         return reward_driven(post, shots, acq, rew)
@@ -188,6 +192,7 @@ class DoubleAcquisition(Policy):
     """The "double" policy: (Norm(acq_t) + Norm(acq_x)) / 2 (section 2.2.4)."""
 
     paper = 2
+    reward_chooses_t = True
 
     def acquisition_map(self, post, shots, acq, rew, overhead_s=0.0):
         return double_acquisition(post, shots, acq, rew)

@@ -209,6 +209,9 @@ def acquire(
     if sched.noise_t == "informative" and not now_converged and shots >= 2:
         j = informative_t(prediction, j, shots, config, budget_left)
         noise_at_t = float(np.asarray(post.noise_mean)[j])
+    elif sched.noise_t == "valued" and policy_of(config.acquisition).reward_chooses_t:
+        j = valued_t(prediction, j, shots, config, budget_left, step)
+        noise_at_t = float(np.asarray(post.noise_mean)[j])
     if sched.adaptive_shots and not now_converged:
         shots = min(shots, noise_point_shots(post, j, x, g, sched))
     decision = Decision(
@@ -277,6 +280,46 @@ def informative_t(prediction: Prediction, j: int, shots: int, config: CampaignCo
     rate = np.where(np.asarray(allowed), rate, -np.inf)
     best = int(np.argmax(rate))
     return best if rate[best] > 0 else j
+
+
+def valued_t(prediction: Prediction, j: int, shots: int, config: CampaignConfig, budget_left, step: int) -> int:
+    """The budget mode's t: the policy's index j, or the affordable t on the t grid whose noise
+    measurement is worth more to the points still to come (``information.t_information_value``)
+    than it costs in reward now, R(t[j]) - R(t) under the posterior mean (nothing where R(t) is
+    at least R(t[j])).
+
+    Every budget-mode point measures the noise, but a point near the predicted t* teaches
+    little about where t* is: the noise law's level there, not its slope. Early, with a wide
+    posterior of t* and much left to spend, a point elsewhere pays; once t* is known or the
+    budget nearly spent, it does not."""
+    if prediction.t_draws is None or prediction.noise_draws is None:
+        return j
+    allowed, _ = affordable(config, shots, budget_left)
+    t, rew, sched = grids(config).t, config.reward, config.schedule
+    value = np.asarray(
+        information.t_information_value(
+            prediction.t_draws,
+            prediction.noise_draws,
+            jnp.asarray(t),
+            float(noise_model.sampling_rel_var(shots)),
+            rew.alpha,
+            rew.beta,
+            points_left(sched, float(t[j]), shots, budget_left, step),
+        )
+    )
+    now = -rew.alpha * t**2 - rew.beta * np.asarray(prediction.posterior.noise_mean)
+    score = np.where(np.asarray(allowed), value - np.maximum(now[j] - now, 0.0), -np.inf)
+    best = int(np.argmax(score))
+    return best if score[best] > value[j] else j
+
+
+def points_left(sched: ScheduleConfig, t: float, shots: int, budget_left, step: int) -> float:
+    """The points a campaign has left after BO step ``step``'s (0-based) if each takes ``shots``
+    shots at t s: what the steps and the instrument-time budget (None: none) still allow."""
+    left = float(sched.n_steps - step - 1)
+    if budget_left is not None:
+        left = min(left, budget_left / (sched.point_overhead_s + shots * t) - 1.0)
+    return max(left, 0.0)
 
 
 def noise_point_shots(post: Posterior, j: int, x: tuple, g: Grids, sched) -> int:

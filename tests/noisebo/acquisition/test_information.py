@@ -126,3 +126,36 @@ def test_t_opt_rate_prefers_the_cheaper_of_two_equally_telling_times():
     noise = jnp.array([[1.0, 2.0], [2.0, 4.0], [3.0, 6.0]])  # the second is the first doubled: same relative precision
     rate = np.asarray(information.t_opt_rate(t_draws, noise, jnp.array([1.0, 3.0]), 0.05, 10, 0.0))
     np.testing.assert_allclose(rate[0] / rate[1], 3.0, rtol=1e-12)
+
+
+def test_t_opt_reduction_is_the_rate_times_the_cost():
+    t_draws = jnp.array([1.0, 3.0])
+    noise = jnp.array([[1.0, 2.0], [2.0, 2.0]])
+    reduction = information.t_opt_reduction(t_draws, noise, 0.1)
+    np.testing.assert_allclose(np.asarray(reduction), [0.25 / 0.475, 0.0], rtol=1e-12, atol=1e-300)
+
+
+def test_t_information_value_by_hand():
+    # Grid t = (1, 2), alpha 1, beta 1; two draws with noise curves (1, 0) and (0, 3):
+    # R_0 = (-2, -4), R_1 = (-1, -7); mean (-1.5, -5.5), so the mean's best is t = 1, where
+    # draw 0 loses 0 and draw 1 loses 0 (each draw's own best is t = 1): no loss, no value.
+    t = jnp.array([1.0, 2.0])
+    agree = information.t_information_value(
+        jnp.array([1.0, 2.0]), jnp.array([[1.0, 0.0], [0.0, 3.0]]), t, 0.1, 1.0, 1.0, 10.0
+    )
+    np.testing.assert_allclose(np.asarray(agree), [0.0, 0.0], atol=1e-300)
+    # Draws (1, 0) and (4, 0): R_0 = (-2, -4), R_1 = (-5, -4); mean (-3.5, -4): best t = 1;
+    # draw 1 loses -4 - (-5) = 1, so L = 0.5. t* draws (1, 2): Var 0.25. Noise at t = 1 moves
+    # with t* (Cov 0.75, Var 2.25, mean 2.5, sampling 6.25 x 0.1): dV = 0.5625 / 2.875; at t = 2
+    # nothing moves. Value = 10 points x 0.5 x dV / 0.25.
+    value = information.t_information_value(
+        jnp.array([1.0, 2.0]), jnp.array([[1.0, 0.0], [4.0, 0.0]]), t, 0.1, 1.0, 1.0, 10.0
+    )
+    np.testing.assert_allclose(np.asarray(value), [10 * 0.5 * (0.5625 / 2.875) / 0.25, 0.0], rtol=1e-12, atol=1e-300)
+
+
+def test_t_information_value_is_zero_when_the_draws_agree_on_t_opt():
+    same = jnp.array([2.0, 2.0, 2.0])
+    noise = jnp.array([[1.0, 2.0], [1.5, 2.5], [2.0, 3.0]])
+    value = information.t_information_value(same, noise, jnp.array([1.0, 2.0]), 0.1, 1.0, 1.0, 100.0)
+    np.testing.assert_allclose(np.asarray(value), [0.0, 0.0], atol=1e-300)
