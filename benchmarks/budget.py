@@ -23,6 +23,13 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
   policy, no profile;
 - "budget info_rate": the budget mode with ``acquisition.policy: info_rate`` (the most reduction
   of f's integrated variance per second), no profile;
+- "budget informative": the budget mode with ``schedule.convergence: posterior`` (5 %) and
+  ``noise_t: informative`` (until the 95 % interval of t* is within 5 %, each point measures at
+  the t that narrows it most per second, keeping the policy's x), the config's policy, no profile;
+- "budget info_rate informative": the same with ``acquisition.policy: info_rate``;
+- "budget valued": the budget mode with ``schedule.noise_t: valued`` (a point leaves the policy's
+  t where what its noise measurement teaches about t* is worth more to the later points than the
+  reward it loses), the config's policy, no profile;
 - "budget warm": the budget mode with ``noise_model.profile``: --profile, or else a profile made here
   by ``noisebo noise-profile`` from 3 campaigns of the paper's protocol (15 steps) on the same
   instrument and settings with seeds 1000-1002, none of the benchmark's seeds (the output says
@@ -83,6 +90,8 @@ STAR_TAG = " (t*)"
 N_LOG_SPACED = 5
 INFO_RATE = "info_rate"
 COLD, WARM, GPCAM, BUDGET_RATE = "budget cold", "budget warm", "gpcam", "budget info_rate"
+VALUED, INFORMATIVE = "budget valued", "budget informative"
+RATE_INFORMATIVE = "budget info_rate informative"
 PROFILE_SEEDS = (1000, 1001, 1002)  # the warm design's profile campaigns: none of the benchmark's seeds
 # What --help lists: a fixed design's name depends on the config (its t range and t*).
 DESIGNS = (
@@ -93,6 +102,9 @@ DESIGNS = (
     INFO_RATE,
     COLD,
     BUDGET_RATE,
+    INFORMATIVE,
+    RATE_INFORMATIVE,
+    VALUED,
     WARM,
     GPCAM,
 )
@@ -160,11 +172,22 @@ def grid_t(config, t: float) -> float:
     return float(g[int(np.argmin(np.abs(g - t)))])
 
 
+BUDGET_MODE = {"mode": "budget"}
+LEARNS_T = {**BUDGET_MODE, "convergence": "posterior", "t_interval_rel": 0.05, "noise_t": "informative"}
+# The budget designs without a profile: name -> (schedule, acquisition overrides).
+BUDGET_DESIGNS = {
+    COLD: (BUDGET_MODE, {}),
+    BUDGET_RATE: (BUDGET_MODE, {"policy": INFO_RATE}),
+    INFORMATIVE: (LEARNS_T, {}),
+    RATE_INFORMATIVE: (LEARNS_T, {"policy": INFO_RATE}),
+    VALUED: ({**BUDGET_MODE, "noise_t": "valued"}, {}),
+}
+
+
 def design_config(base, name: str, fixed: dict[str, float], profile=None):
-    if name == COLD:
-        return base.with_overrides(schedule={"mode": "budget"})
-    if name == BUDGET_RATE:
-        return base.with_overrides(schedule={"mode": "budget"}, acquisition={"policy": INFO_RATE})
+    if name in BUDGET_DESIGNS:
+        schedule, acquisition = BUDGET_DESIGNS[name]
+        return base.with_overrides(schedule=schedule, acquisition=acquisition)
     if name == WARM:
         return base.with_overrides(
             schedule={"mode": "budget"},
@@ -390,7 +413,7 @@ def main(argv=None) -> int:
     score = scorer(base, instrument)
     s = base.space
     fixed = fixed_designs(s.t_min, s.t_max, t_star)
-    known = [*paper_policies(), *fixed, INFO_RATE, COLD, BUDGET_RATE, WARM, GPCAM]
+    known = [*paper_policies(), *fixed, INFO_RATE, *BUDGET_DESIGNS, WARM, GPCAM]
     names, unknown = resolve(args.designs or known, known)
     if unknown:
         parser.error(
