@@ -918,7 +918,7 @@ class CampaignConfig(FrozenModel):
         return self
 
     @model_validator(mode="after")
-    def _informative_noise_t(self, info: ValidationInfo) -> CampaignConfig:
+    def _noise_t_settings(self, info: ValidationInfo) -> CampaignConfig:
         if self.schedule.noise_t == "valued":
             return self._valued_noise_t((info.context or {}).get(LOAD_PLUGINS, True))
         if self.schedule.noise_t != "informative":

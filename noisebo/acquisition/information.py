@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from noisebo.models.reward import reward
+
 # Shot counts a point may get once the noise model has converged (capped by shots_before).
 SHOT_OPTIONS = (1, 2, 3, 5, 8, 13, 20, 30, 50)
 
@@ -94,7 +96,7 @@ def t_information_value(
     that loss is quadratic in the error of t, so its mean is proportional to Var[t*]: a
     measurement that lowers Var[t*] by dV (``t_opt_reduction``) saves L dV / Var[t*] on each point
     after it. Zero where the draws agree on t*."""
-    curves = -alpha * t[None, :] ** 2 - beta * noise_draws
+    curves = reward(t[None, :], noise_draws, alpha, beta)
     best = jnp.argmax(jnp.mean(curves, axis=0))
     loss = jnp.mean(jnp.max(curves, axis=1) - curves[:, best])
     var_t = jnp.var(t_draws)

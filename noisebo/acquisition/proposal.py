@@ -45,6 +45,7 @@ from noisebo.models.prediction import (
     field_rows,
     spread,
 )
+from noisebo.models.reward import reward
 from noisebo.programs import persisted
 
 
@@ -307,7 +308,7 @@ def valued_t(prediction: Prediction, j: int, shots: int, config: CampaignConfig,
             points_left(sched, float(t[j]), shots, budget_left, step),
         )
     )
-    now = -rew.alpha * t**2 - rew.beta * np.asarray(prediction.posterior.noise_mean)
+    now = np.asarray(reward(jnp.asarray(t), prediction.posterior.noise_mean, rew.alpha, rew.beta))
     score = np.where(np.asarray(allowed), value - np.maximum(now[j] - now, 0.0), -np.inf)
     best = int(np.argmax(score))
     return best if score[best] > value[j] else j
