@@ -747,8 +747,9 @@ class ScheduleConfig(FrozenModel):
     noise model without a field): at the t whose measurement is expected to narrow the
     posterior of the optimal t most per second of instrument time (``information.t_opt_rate``),
     the point keeping the policy's x: the rule then converges by learning what it tests. In
-    the budget mode every point measures the noise with its few shots, so every point before
-    convergence is such a point.
+    the budget mode every point measures the noise with its few shots, so every point whose
+    step finds the interval wider than ``t_interval_rel`` is such a point: the rule is checked
+    afresh each step there, since an interval that narrowed early can widen again.
     "valued" (the budget mode, where every point measures the noise; a policy whose t is the
     reward's, reward or double; no field, no fixed t): at the policy's t, or at the t whose
     noise measurement is worth more to the points still to come, through what it teaches about

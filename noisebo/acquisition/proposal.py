@@ -207,7 +207,7 @@ def acquire(
     assert best is not None  # options is never empty: it holds the wanted count
     x, j, acq_value, acq_map, noise_at_t, shots = best
     g = grids(config)
-    if sched.noise_t == "informative" and not now_converged and shots >= 2:
+    if sched.noise_t == "informative" and convergence.narrowing(sched) and shots >= 2:
         j = informative_t(prediction, j, shots, config, budget_left)
         noise_at_t = float(np.asarray(post.noise_mean)[j])
     elif sched.noise_t == "valued" and policy_of(config.acquisition).reward_chooses_t:

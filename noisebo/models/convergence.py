@@ -62,6 +62,17 @@ class Convergence(NamedTuple):
     t_interval: float
     converged: bool
 
+    def narrowing(self, schedule: ScheduleConfig) -> bool:
+        """Whether the decision should still narrow the posterior of the optimal t: until the
+        model converges, and in the budget mode with the posterior rule whenever this step's
+        interval is wider than ``t_interval_rel``. There the rule is checked afresh each step:
+        an interval that narrowed early can widen again as shots come in, and a budget-mode
+        point costs the same whichever t it measures, whereas the paper's protocol leaves its
+        30-shot points for good once converged."""
+        if schedule.mode == "budget" and schedule.convergence == "posterior":
+            return not self.t_interval <= schedule.t_interval_rel
+        return not self.converged
+
     def recorded(self, state: CampaignState) -> CampaignState:
         """``state`` with this step's optimal t (and t*(x)) and convergence recorded."""
         return state.with_t_opt(self.t_opt, self.converged, self.t_opt_map if self.t_opt_map.size else None)

@@ -233,6 +233,39 @@ def test_an_informative_noise_point_measures_where_the_rate_on_t_star_peaks(tiny
     assert policy.x == chosen.x  # the point keeps the policy's x
 
 
+@pytest.mark.parametrize("mode", ["paper", "budget"])
+def test_a_wide_interval_after_convergence_narrows_again_only_in_the_budget_mode(tiny_config, mode):
+    # A campaign that converged at an earlier step but whose interval of t* is wide again: the
+    # budget mode's informative point goes back where the rate on t* peaks; the paper's protocol,
+    # done learning, keeps the policy's t.
+    from noisebo.acquisition import information
+    from noisebo.campaign.decision import decide_on
+    from noisebo.models.fitting import fit_key, fit_models
+    from noisebo.models.prediction import predict
+
+    config = tiny_config.with_overrides(
+        schedule={"convergence": "posterior", "t_interval_rel": 1e-6, "noise_t": "informative", "mode": mode}
+    )
+    seeds = run_campaign(config.with_overrides(schedule={"n_steps": 0}), ForresterInstrument(), 1).state
+    converged = seeds.with_t_opt(2.0, True)
+    fitted = fit_models(config, converged, fit_key(1, 0))
+    chosen, _ = decide_on(config, fitted, converged, 0)
+    policy, _ = decide_on(config.with_overrides(schedule={"noise_t": "policy"}), fitted, converged, 0)
+    prediction = predict(config, fitted, converged)
+    rate = information.t_opt_rate(
+        prediction.t_draws,
+        prediction.noise_draws,
+        jnp.asarray(grids(config).t),
+        float(noise_model.sampling_rel_var(chosen.shots)),
+        chosen.shots,
+        0.0,
+    )
+    peak = grids(config).t[int(np.argmax(np.asarray(rate)))]
+    assert chosen.converged and chosen.t_opt_interval > 1e-6 and chosen.x == policy.x
+    assert chosen.t == (peak if mode == "budget" else policy.t)
+    assert peak != policy.t  # the two outcomes differ, so the mode decides which one is taken
+
+
 def test_points_left_counts_the_steps_and_the_budget_by_hand():
     from noisebo.acquisition.proposal import points_left
     from noisebo.config import ScheduleConfig

@@ -53,3 +53,25 @@ def test_t_interval_by_hand():
     draws = np.array([1.0, 2.0, 2.0, 3.0])  # sd sqrt(0.5), median 2
     assert t_interval(draws) == pytest.approx(1.96 * np.sqrt(0.5) / 2.0, rel=1e-12)
     assert t_interval(np.full(20, 2.5)) == 0.0
+
+
+@pytest.mark.parametrize(
+    "mode, rule, interval, converged, expected",
+    [
+        ("paper", "posterior", 0.20, True, False),  # the paper's protocol: converged is for good
+        ("paper", "posterior", 0.01, False, True),
+        ("paper", "variance", float("nan"), False, True),
+        ("budget", "posterior", 0.20, True, True),  # widened again after converging: narrow again
+        ("budget", "posterior", 0.05, False, False),  # at the rule's 5 %: narrow enough
+        ("budget", "posterior", 0.04, True, False),
+        ("budget", "posterior", float("nan"), False, True),  # no draws yet
+        ("budget", "variance", 0.20, True, False),  # no interval rule: convergence decides
+    ],
+)
+def test_narrowing_rechecks_the_interval_in_the_budget_mode(mode, rule, interval, converged, expected):
+    from noisebo.models.convergence import Convergence
+
+    budget = {"budget_s": 100.0} if mode == "budget" else {}
+    s = ScheduleConfig(mode=mode, convergence=rule, t_interval_rel=0.05, **budget)
+    c = Convergence(t_opt=2.0, t_opt_map=np.zeros(0), t_interval=interval, converged=converged)
+    assert c.narrowing(s) is expected
