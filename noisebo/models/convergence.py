@@ -67,8 +67,8 @@ class Convergence(NamedTuple):
         model converges, and in the budget mode with the posterior rule whenever this step's
         interval is wider than ``t_interval_rel``. There the rule is checked afresh each step:
         an interval that narrowed early can widen again as shots come in, and a budget-mode
-        point costs the same whichever t it measures, whereas the paper's protocol leaves its
-        30-shot points for good once converged."""
+        point takes its few shots either way (narrowing t* costs no extra shots), whereas the
+        paper's protocol leaves its 30-shot points for good once converged."""
         if schedule.mode == "budget" and schedule.convergence == "posterior":
             return not self.t_interval <= schedule.t_interval_rel
         return not self.converged
