@@ -920,24 +920,23 @@ class CampaignConfig(FrozenModel):
 
     @model_validator(mode="after")
     def _noise_t_settings(self, info: ValidationInfo) -> CampaignConfig:
-        if self.schedule.noise_t == "valued":
-            return self._valued_noise_t((info.context or {}).get(LOAD_PLUGINS, True))
-        if self.schedule.noise_t != "informative":
+        kind = self.schedule.noise_t
+        if kind == "policy":
             return self
-        if self.schedule.convergence != "posterior":
+        if kind == "valued":
+            self._valued_needs((info.context or {}).get(LOAD_PLUGINS, True))
+        elif self.schedule.convergence != "posterior":
             raise ValueError(
                 "schedule.noise_t: informative narrows the posterior of the optimal t, which only the "
                 "posterior rule tests; set schedule.convergence: posterior"
             )
         if self.noise_model.field is not None:
-            raise ValueError("schedule.noise_t: informative needs a noise model without noise_model.field")
+            raise ValueError(f"schedule.noise_t: {kind} needs a noise model without noise_model.field")
         if self.acquisition.fixed_t is not None:
-            raise ValueError(
-                "schedule.noise_t: informative chooses t, which acquisition.fixed_t fixes; use one of them"
-            )
+            raise ValueError(f"schedule.noise_t: {kind} chooses t, which acquisition.fixed_t fixes; use one of them")
         return self
 
-    def _valued_noise_t(self, load_plugins: bool) -> CampaignConfig:
+    def _valued_needs(self, load_plugins: bool) -> None:
         if self.schedule.mode != "budget":
             raise ValueError(
                 "schedule.noise_t: valued weighs each budget-mode point's noise measurement; set schedule.mode: budget"
@@ -947,11 +946,6 @@ class CampaignConfig(FrozenModel):
                 "schedule.noise_t: valued moves t away from the reward's predicted optimum, which the "
                 f"policy {self.acquisition.policy!r} does not choose t by; use reward or double"
             )
-        if self.noise_model.field is not None:
-            raise ValueError("schedule.noise_t: valued needs a noise model without noise_model.field")
-        if self.acquisition.fixed_t is not None:
-            raise ValueError("schedule.noise_t: valued chooses t, which acquisition.fixed_t fixes; use one of them")
-        return self
 
     @model_validator(mode="after")
     def _budget_mode_learns(self) -> CampaignConfig:
