@@ -862,6 +862,13 @@ class ScheduleConfig(FrozenModel):
         """Shots a seed point takes: ``shots_before`` (paper), ``shots_after`` (budget)."""
         return self.shots_after if self.mode == "budget" else self.shots_before
 
+    @property
+    def draws_t_star(self) -> bool:
+        """Whether a decision needs the noise model's draws of the optimal t: the posterior
+        rule tests their interval and ``noise_t: valued`` weighs them (``informative``, which
+        needs the posterior rule, narrows it)."""
+        return self.convergence == "posterior" or self.noise_t == "valued"
+
     @model_validator(mode="after")
     def _budget_mode_measures_scatter(self) -> ScheduleConfig:
         if self.mode == "budget" and self.shots_after < 2:

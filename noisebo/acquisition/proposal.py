@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from noisebo.acquisition import information
+from noisebo.acquisition import information, noise_t
 from noisebo.acquisition.policies import (
     acquisition_map,
     argmax_2d,
@@ -27,7 +27,7 @@ from noisebo.config import (
 )
 from noisebo import registry
 from noisebo.keys import PROPOSE, jax_key
-from noisebo.models import inference, noise_model, primary
+from noisebo.models import inference, primary
 from noisebo.models.convergence import Convergence
 from noisebo.models.fitting import Fitted, hyperparameters
 from noisebo.models.grids import (
@@ -45,7 +45,6 @@ from noisebo.models.prediction import (
     field_rows,
     spread,
 )
-from noisebo.models.reward import reward
 from noisebo.programs import persisted
 
 
@@ -207,11 +206,9 @@ def acquire(
     assert best is not None  # options is never empty: it holds the wanted count
     x, j, acq_value, acq_map, noise_at_t, shots = best
     g = grids(config)
-    if sched.noise_t == "informative" and convergence.narrowing(sched) and shots >= 2:
-        j = informative_t(prediction, j, shots, config, budget_left)
-        noise_at_t = float(np.asarray(post.noise_mean)[j])
-    elif sched.noise_t == "valued" and policy_of(config.acquisition).reward_chooses_t:
-        j = valued_t(prediction, j, shots, config, budget_left, step)
+    rule = noise_t.rule_of(sched)
+    if rule.applies(config, convergence, shots):
+        j = rule.choose(prediction, j, shots, affordable(config, shots, budget_left)[0], config, budget_left, step)
         noise_at_t = float(np.asarray(post.noise_mean)[j])
     if sched.adaptive_shots and not now_converged:
         shots = min(shots, noise_point_shots(post, j, x, g, sched))
@@ -258,69 +255,6 @@ def _propose(config: CampaignConfig, fitted: Fitted, post: Posterior, key, shots
     lows, highs = np.asarray(s.lows), np.asarray(s.highs)
     x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
     return x, int(j), float(acq_value), acq_map, float(noise_at)
-
-
-def informative_t(prediction: Prediction, j: int, shots: int, config: CampaignConfig, budget_left) -> int:
-    """``schedule.noise_t: informative``: the index of the affordable t on the t grid whose
-    noise measurement of ``shots`` shots narrows the posterior of the optimal t most per second
-    (``information.t_opt_rate``); the policy's index j when no draw disagrees about t*."""
-    if prediction.t_draws is None or prediction.noise_draws is None:
-        return j
-    allowed, _ = affordable(config, shots, budget_left)
-    t = grids(config).t
-    rate = np.asarray(
-        information.t_opt_rate(
-            prediction.t_draws,
-            prediction.noise_draws,
-            jnp.asarray(t),
-            float(noise_model.sampling_rel_var(shots)),
-            shots,
-            config.schedule.point_overhead_s,
-        )
-    )
-    rate = np.where(np.asarray(allowed), rate, -np.inf)
-    best = int(np.argmax(rate))
-    return best if rate[best] > 0 else j
-
-
-def valued_t(prediction: Prediction, j: int, shots: int, config: CampaignConfig, budget_left, step: int) -> int:
-    """The budget mode's t: the policy's index j, or the affordable t on the t grid whose noise
-    measurement is worth more to the points still to come (``information.t_information_value``)
-    than it costs in reward now, R(t[j]) - R(t) under the posterior mean (nothing where R(t) is
-    at least R(t[j])).
-
-    Every budget-mode point measures the noise, but a point near the predicted t* teaches
-    little about where t* is: the noise law's level there, not its slope. Early, with a wide
-    posterior of t* and much left to spend, a point elsewhere pays; once t* is known or the
-    budget nearly spent, it does not."""
-    if prediction.t_draws is None or prediction.noise_draws is None:
-        return j
-    allowed, _ = affordable(config, shots, budget_left)
-    t, rew, sched = grids(config).t, config.reward, config.schedule
-    value = np.asarray(
-        information.t_information_value(
-            prediction.t_draws,
-            prediction.noise_draws,
-            jnp.asarray(t),
-            float(noise_model.sampling_rel_var(shots)),
-            rew.alpha,
-            rew.beta,
-            points_left(sched, float(t[j]), shots, budget_left, step),
-        )
-    )
-    now = np.asarray(reward(jnp.asarray(t), prediction.posterior.noise_mean, rew.alpha, rew.beta))
-    score = np.where(np.asarray(allowed), value - np.maximum(now[j] - now, 0.0), -np.inf)
-    best = int(np.argmax(score))
-    return best if score[best] > value[j] else j
-
-
-def points_left(sched: ScheduleConfig, t: float, shots: int, budget_left, step: int) -> float:
-    """The points a campaign has left after BO step ``step``'s (0-based) if each takes ``shots``
-    shots at t s: what the steps and the instrument-time budget (None: none) still allow."""
-    left = float(sched.n_steps - step - 1)
-    if budget_left is not None:
-        left = min(left, budget_left / (sched.point_overhead_s + shots * t) - 1.0)
-    return max(left, 0.0)
 
 
 def noise_point_shots(post: Posterior, j: int, x: tuple, g: Grids, sched) -> int:

@@ -125,7 +125,7 @@ def _predict_program(config: CampaignConfig, uses_spread: bool):
         config.noise_model.mean,
         config.noise_model.field is not None,
         uses_spread,
-        config.schedule.convergence == "posterior" or config.schedule.noise_t == "valued",
+        config.schedule.draws_t_star,
     )
 
 

@@ -266,54 +266,13 @@ def test_a_wide_interval_after_convergence_narrows_again_only_in_the_budget_mode
     assert peak != policy.t  # the two outcomes differ, so the mode decides which one is taken
 
 
-def test_points_left_counts_the_steps_and_the_budget_by_hand():
-    from noisebo.acquisition.proposal import points_left
-    from noisebo.config import ScheduleConfig
-
-    sched = ScheduleConfig(n_steps=10, shots_after=3, point_overhead_s=1.0)
-    assert points_left(sched, 2.0, 3, None, 4) == 5.0  # steps 5..9 after step 4
-    assert points_left(sched, 2.0, 3, 36.0, 4) == pytest.approx(36.0 / 7.0 - 1.0)  # 1 + 3 x 2 s a point, this one too
-    assert points_left(sched, 2.0, 3, 3.0, 4) == 0.0
-
-
-def test_a_valued_noise_point_leaves_the_policys_t_only_for_what_it_teaches():
-    # t grid (1, 2) s, alpha = beta = 1, the hand case of test_t_information_value_by_hand: a
-    # noise measurement at t = 1 is worth 0.5 x (0.5625 / 2.875) / 0.25 = 0.39 to each later
-    # point, at t = 2 nothing. The posterior mean noise (2.5, 0) gives R = (-3.5, -4), so moving
-    # from the policy's t = 2 to t = 1 costs no reward: t = 1. With no point to come: t = 2.
-    from noisebo.acquisition.proposal import valued_t
-    from noisebo.models.prediction import Posterior, Prediction
-
-    config = CampaignConfig().with_overrides(
-        space={"t_min": 1.0, "t_max": 2.0, "n_t": 2},
-        reward={"alpha": 1.0, "beta": 1.0},
-        schedule={"mode": "budget", "noise_t": "valued", "n_steps": 100, "shots_after": 3},
-    )
-    post = Posterior(
-        f_mean=jnp.zeros(3),
-        f_var=jnp.ones(3),
-        noise_mean=jnp.array([2.5, 0.0]),
-        noise_var=jnp.ones(2),
-        t=jnp.array([1.0, 2.0]),
-        t_opt=jnp.asarray(1.0),
-        noise_at_t_opt=jnp.asarray(2.5),
-        f_best=jnp.asarray(0.0),
-        reward_best=jnp.asarray(0.0),
-    )
-    prediction = Prediction(post, jnp.zeros(4), jnp.array([1.0, 2.0]), jnp.array([[1.0, 0.0], [4.0, 0.0]]))
-    assert valued_t(prediction, 1, 3, config, None, 0) == 0
-    assert valued_t(prediction, 1, 3, config, None, 99) == 1  # the last step: nothing to come
-    assert valued_t(prediction, 1, 3, config, 6.0, 0) == 1  # a budget with room for this point only
-    assert valued_t(prediction._replace(t_draws=None), 1, 3, config, None, 0) == 1
-
-
 def test_a_valued_budget_decision_keeps_the_policys_x_and_leaves_its_t_only_while_it_pays(tiny_config):
     # Nine points into a valued budget campaign (3 seeds, 6 steps) the draws still disagree on
-    # t*: with thousands of points to come a noise measurement elsewhere pays, at the t valued_t
+    # t*: with thousands of points to come a noise measurement elsewhere pays, at the t ValuedT
     # finds from this posterior; on the last step nothing is to come and the policy's t stands.
     import dataclasses
 
-    from noisebo.acquisition.proposal import valued_t
+    from noisebo.acquisition.noise_t import ValuedT
     from noisebo.campaign.decision import decide_on
     from noisebo.models.fitting import fit_key, fit_models
     from noisebo.models.prediction import predict
@@ -327,7 +286,8 @@ def test_a_valued_budget_decision_keeps_the_policys_x_and_leaves_its_t_only_whil
     t = list(grids(config).t)
     prediction = predict(config, fitted, state)
     assert chosen.x == policy.x and chosen.shots == policy.shots == 3 and not chosen.measure_noise
-    assert chosen.t == t[valued_t(prediction, t.index(policy.t), 3, config, None, 6)] != policy.t
+    j = ValuedT().choose(prediction, t.index(policy.t), 3, affordable(config, 3, None)[0], config, None, 6)
+    assert chosen.t == t[j] != policy.t
     assert chosen.noise_at_t == pytest.approx(float(np.asarray(prediction.posterior.noise_mean)[t.index(chosen.t)]))
     last, _ = decide_on(config, fitted, state, 4999)
     assert last.t == policy.t
