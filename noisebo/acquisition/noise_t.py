@@ -50,7 +50,7 @@ class NoiseT(Protocol):
 
 
 class PolicyT:
-    """ "policy": the paper's; every point measures at the t the acquisition policy chose."""
+    """The rule "policy", the paper's: every point measures at the t the acquisition policy chose."""
 
     name: ClassVar[str] = "policy"
 
@@ -62,7 +62,7 @@ class PolicyT:
 
 
 class InformativeT:
-    """ "informative": while the posterior of the optimal t is still to be narrowed
+    """The rule "informative": while the posterior of the optimal t is still to be narrowed
     (``Convergence.narrowing``), a point of two or more shots measures at the affordable t
     whose noise measurement narrows that posterior most per second (``information.t_opt_rate``);
     the policy's t when no draw disagrees about t*."""
@@ -93,7 +93,7 @@ class InformativeT:
 
 
 class ValuedT:
-    """ "valued" (the budget mode): the policy's t, or the affordable t whose noise measurement
+    """The rule "valued" (the budget mode): the policy's t, or the affordable t whose noise measurement
     is worth more to the points still to come (``information.t_information_value``) than it
     costs in reward now, R(t[j]) - R(t) under the posterior mean (nothing where R(t) is at
     least R(t[j])).
