@@ -12,6 +12,11 @@ NOISEBO_PROGRAM_CACHE), which spare a new process their tracing (a manual ``tell
 mistakes for missing CPU features: openxla/xla#44565), so with the cache on, XLA's own C++ log
 is kept to fatal messages (TF_CPP_MIN_LOG_LEVEL=3) unless that variable is set.
 
+The cache is capped (CACHE_MAX_BYTES; the least recently used programs go first), and with a cap
+JAX reads and writes its entries under a file lock: processes that share the folder (a sweep's
+campaigns, a test run's workers) never read a program another is still writing. Without the cap
+JAX writes entries in place, unlocked, and a torn read costs a recompile and a warning.
+
 ``configure()`` runs when the ``flows`` package is imported, before Prefect is.
 
 A command that fails says so in one line; the traceback behind it goes to this process's failure
@@ -31,6 +36,7 @@ import time
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+CACHE_MAX_BYTES = 2 * 1024**3  # a few hundred campaigns' programs; a test run writes about 20 MB
 
 
 def _state_dir() -> Path:
@@ -60,6 +66,7 @@ def configure() -> None:
         os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
         _jax_setting("jax_compilation_cache_dir", cache)
         _jax_setting("jax_persistent_cache_min_compile_time_secs", 0.0)
+        _jax_setting("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
         os.environ.setdefault("NOISEBO_PROGRAM_CACHE", str(Path(cache) / "programs"))
 
 

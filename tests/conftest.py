@@ -1,13 +1,27 @@
 import os
+import shutil
 import tempfile
 
 import pytest
 import yaml
 
+
+def _temporary_default(name: str, prefix: str) -> bool:
+    """Point the variable ``name`` at a new temporary folder unless it is set (as in an xdist
+    worker, which inherits the controller's); True when this process made the folder."""
+    if name in os.environ:
+        return False
+    os.environ[name] = tempfile.mkdtemp(prefix=prefix)
+    return True
+
+
 # Before anything imports Prefect: a private Prefect home, quiet logs, no analytics.
-os.environ.setdefault("PREFECT_HOME", tempfile.mkdtemp(prefix="noisebo-test-prefect-"))
-os.environ.setdefault("NOISEBO_JAX_CACHE", "")
-os.environ.setdefault("NOISEBO_LOG_DIR", tempfile.mkdtemp(prefix="noisebo-test-logs-"))  # failure logs
+_temporary_default("PREFECT_HOME", "noisebo-test-prefect-")
+# One compilation cache for the run: the xdist workers and every process a test starts (a CLI
+# run, a server) load the programs another has compiled instead of compiling them again. The
+# workers inherit this process's environment, so they share the folder; it goes at the end.
+_OWN_JAX_CACHE = _temporary_default("NOISEBO_JAX_CACHE", "noisebo-test-jax-")
+_temporary_default("NOISEBO_LOG_DIR", "noisebo-test-logs-")  # failure logs
 
 from noisebo.flows import runtime  # noqa: E402
 
@@ -20,6 +34,11 @@ TINY = CampaignConfig().with_overrides(
     space={"n_x": 40, "n_t": 30},
     schedule={"n_steps": 4, "shots_before": 10, "shots_after": 3},
 )
+
+
+def pytest_unconfigure(config):
+    if _OWN_JAX_CACHE and not hasattr(config, "workerinput"):  # the controller, not an xdist worker
+        shutil.rmtree(os.environ["NOISEBO_JAX_CACHE"], ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

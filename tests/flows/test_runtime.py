@@ -101,3 +101,18 @@ def test_the_kept_programs_go_beside_the_compilation_cache_unless_told_otherwise
             [sys.executable, "-c", code], env=base | extra, capture_output=True, text=True, check=True, timeout=120
         )
         assert out.stdout.strip() == expected, extra
+
+
+def test_the_compilation_cache_is_capped_so_jax_locks_its_entries(tmp_path):
+    # Only a capped cache is JAX's locked one (its reads and writes under a file lock, an access
+    # time beside each entry for the eviction), which processes sharing the folder need.
+    code = (
+        "from noisebo.flows import runtime\nruntime.configure()\nimport jax\n"
+        "print(jax.config.jax_compilation_cache_max_size)\n"
+        "jax.jit(lambda x: x * 2.0)(1.0).block_until_ready()\n"
+    )
+    env = dict(os.environ, NOISEBO_JAX_CACHE=str(tmp_path / "cache"))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.strip() == str(runtime.CACHE_MAX_BYTES) == str(2 * 1024**3)
+    names = [p.name for p in (tmp_path / "cache").iterdir()]
+    assert any(n.endswith("-cache") for n in names) and any(n.endswith("-atime") for n in names), names
