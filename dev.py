@@ -55,9 +55,11 @@ def environment() -> dict[str, str]:
 
 def parallel(pytest_args: list[str]) -> list[str]:
     """pytest-xdist options: one worker per core up to 4 (each test file stays on one worker, so
-    module fixtures run once), unless the arguments choose (-n, --numprocesses, -p no:xdist)."""
+    module fixtures run once; the files in the order tests/conftest.py gives them, the longest
+    first), unless the arguments choose (-n, --numprocesses, -p no:xdist)."""
     chosen = any(a == "-n" or a.startswith(("-n", "--numprocesses")) or a == "no:xdist" for a in pytest_args)
-    return [] if chosen else ["-n", str(max(1, min(4, os.cpu_count() or 1))), "--dist", "loadfile"]
+    workers = str(max(1, min(4, os.cpu_count() or 1)))
+    return [] if chosen else ["-n", workers, "--dist", "loadfile", "--no-loadscope-reorder"]
 
 
 def main(argv: list[str]) -> int:

@@ -36,6 +36,46 @@ TINY = CampaignConfig().with_overrides(
 )
 
 
+# The files that take longest (measured: `python3 dev.py test --durations=60`, and with `-m e2e`),
+# first. The workers take files in collection order (dev.py turns xdist's reordering by test count
+# off), so a long file started last would leave the other workers idle at the end.
+LONGEST_FIRST = (
+    "e2e/test_long_kills.py",
+    "e2e/test_wheel_install.py",
+    "e2e/test_distributed.py",
+    "e2e/test_deployments.py",
+    "e2e/test_bridge_kills.py",
+    "noisebo/models/test_noise_field.py",
+    "flows/test_crash_resume.py",
+    "flows/test_temporary_server.py",
+    "flows/test_campaign_flow.py",
+    "test_lint.py",
+    "cli/test_main.py",
+    "cli/test_failures.py",
+    "noisebo/campaign/test_profile_campaign.py",
+    "noisebo/campaign/test_decision.py",
+    "noisebo/test_programs.py",
+    "noisebo/campaign/test_dimensions.py",
+    "noisebo/models/test_inputs.py",
+    "storage/test_hdf5.py",
+    "noisebo/campaign/test_decision_field.py",
+    "view/test_field_views.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+
+    def place(item) -> int:
+        try:
+            path = item.path.relative_to(config.rootpath / "tests").as_posix()
+        except ValueError:  # a test collected from outside tests/
+            return len(LONGEST_FIRST)
+        return rank.get(path, len(LONGEST_FIRST))
+
+    items.sort(key=place)  # stable: the rest keep their order, and so do the tests within a file
+
+
 def pytest_unconfigure(config):
     if _OWN_JAX_CACHE and not hasattr(config, "workerinput"):  # the controller, not an xdist worker
         shutil.rmtree(os.environ["NOISEBO_JAX_CACHE"], ignore_errors=True)
