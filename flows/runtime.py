@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
-CACHE_MAX_BYTES = 2 * 1024**3  # a few hundred campaigns' programs; a test run writes about 20 MB
+CACHE_MAX_BYTES = 2 * 1024**3  # the whole test run, every kind of campaign, writes about 20 MB
 
 
 def _state_dir() -> Path:
