@@ -6,21 +6,23 @@ import pytest
 import yaml
 
 
-def _temporary_default(name: str, prefix: str) -> bool:
+_MADE_HERE: list[str] = []  # the temporary folders this process made, removed at the end
+
+
+def _temporary_default(name: str, prefix: str) -> None:
     """Point the variable ``name`` at a new temporary folder unless it is set (as in an xdist
-    worker, which inherits the controller's); True when this process made the folder."""
-    if name in os.environ:
-        return False
-    os.environ[name] = tempfile.mkdtemp(prefix=prefix)
-    return True
+    worker, which inherits the controller's, or where the caller chose one)."""
+    if name not in os.environ:
+        os.environ[name] = tempfile.mkdtemp(prefix=prefix)
+        _MADE_HERE.append(os.environ[name])
 
 
 # Before anything imports Prefect: a private Prefect home, quiet logs, no analytics.
 _temporary_default("PREFECT_HOME", "noisebo-test-prefect-")
 # One compilation cache for the run: the xdist workers and every process a test starts (a CLI
 # run, a server) load the programs another has compiled instead of compiling them again. The
-# workers inherit this process's environment, so they share the folder; it goes at the end.
-_OWN_JAX_CACHE = _temporary_default("NOISEBO_JAX_CACHE", "noisebo-test-jax-")
+# workers inherit this process's environment, so they share the folder.
+_temporary_default("NOISEBO_JAX_CACHE", "noisebo-test-jax-")
 _temporary_default("NOISEBO_LOG_DIR", "noisebo-test-logs-")  # failure logs
 
 from noisebo.flows import runtime  # noqa: E402
@@ -77,8 +79,9 @@ def pytest_collection_modifyitems(config, items):
 
 
 def pytest_unconfigure(config):
-    if _OWN_JAX_CACHE and not hasattr(config, "workerinput"):  # the controller, not an xdist worker
-        shutil.rmtree(os.environ["NOISEBO_JAX_CACHE"], ignore_errors=True)
+    if not hasattr(config, "workerinput"):  # the controller, once its workers are done
+        for folder in _MADE_HERE:
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")
