@@ -24,7 +24,15 @@ _temporary_default("PREFECT_HOME", "noisebo-test-prefect-")
 # workers inherit this process's environment, so they share the folder.
 _temporary_default("NOISEBO_JAX_CACHE", "noisebo-test-jax-")
 _temporary_default("NOISEBO_LOG_DIR", "noisebo-test-logs-")  # failure logs
+# Quick to compile rather than quick to run: a test runs each program a few times, so XLA's
+# optimisation passes cost more than they save (the same programs, 23 % less time in the
+# compile-bound tests of tests/noisebo). Before anything imports JAX; the workers and every
+# process a test starts inherit it. Benchmarks and campaigns keep the optimisations.
+os.environ.setdefault("JAX_DISABLE_MOST_OPTIMIZATIONS", "1")
 
+import sys  # noqa: E402
+
+assert "jax" not in sys.modules, "JAX was imported before tests/conftest.py could configure it"
 from noisebo.flows import runtime  # noqa: E402
 
 runtime.configure()
@@ -44,22 +52,24 @@ TINY = CampaignConfig().with_overrides(
 LONGEST_FIRST = (
     "e2e/test_long_kills.py",
     "e2e/test_wheel_install.py",
+    "flows/test_crash_resume.py",
     "e2e/test_distributed.py",
     "e2e/test_deployments.py",
     "e2e/test_bridge_kills.py",
-    "noisebo/models/test_noise_field.py",
-    "flows/test_crash_resume.py",
     "flows/test_temporary_server.py",
-    "flows/test_campaign_flow.py",
+    "noisebo/models/test_noise_field.py",
+    "noisebo/campaign/test_profile_campaign.py",
     "test_lint.py",
     "cli/test_main.py",
-    "cli/test_failures.py",
-    "noisebo/campaign/test_profile_campaign.py",
+    "flows/test_campaign_flow.py",
     "noisebo/campaign/test_decision.py",
-    "noisebo/test_programs.py",
-    "noisebo/campaign/test_dimensions.py",
-    "noisebo/models/test_inputs.py",
+    "storage/test_damage.py",
+    "cli/test_damaged_files.py",
     "storage/test_hdf5.py",
+    "noisebo/campaign/test_dimensions.py",
+    "cli/test_failures.py",
+    "noisebo/test_plugin_registry.py",
+    "bridge/test_server.py",
     "noisebo/campaign/test_decision_field.py",
     "view/test_field_views.py",
 )

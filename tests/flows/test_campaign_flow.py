@@ -98,27 +98,27 @@ def test_resuming_a_finished_campaign_changes_nothing(finished, prefect_harness)
 
 
 def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect_harness, tmp_path):
-    # Six campaigns at once writing into one folder: six distinct, intact files, each equal to
+    # Four campaigns at once writing into one folder: four distinct, intact files, each equal to
     # its seed run alone.
-    six_at_once = sweep.with_options(task_runner=task_runner("threads", 6))
-    table = six_at_once(tiny_config, seeds=[5, 6, 7], policies=["reward", "double"], out_dir=str(tmp_path))
+    four_at_once = sweep.with_options(task_runner=task_runner("threads", 4))
+    table = four_at_once(tiny_config, seeds=[5, 6], policies=["reward", "double"], out_dir=str(tmp_path))
     files = sorted(p.name for p in tmp_path.glob("*.h5"))
-    assert files == [f"tiny_{policy}_s000{seed}.h5" for policy in ("double", "reward") for seed in (5, 6, 7)]
+    assert files == [f"tiny_{policy}_s000{seed}.h5" for policy in ("double", "reward") for seed in (5, 6)]
     text = Path(table).read_text()
-    assert "| reward | 3 |" in text and "| double | 3 |" in text
+    assert "| reward | 2 |" in text and "| double | 2 |" in text
     alone, _, _ = points_of(finished)
     swept, _, _ = points_of(tmp_path / "tiny_reward_s0005.h5")
     np.testing.assert_array_equal(alone["value"], swept["value"])
     for policy in ("reward", "double"):
         config = tiny_config.with_overrides(acquisition={"policy": policy})
-        for seed in (5, 6, 7):
+        for seed in (5, 6):
             pure = run_campaign(config, build(config.instrument), seed)
             points, shots, attrs = points_of(tmp_path / f"tiny_{policy}_s{seed:04d}.h5")
             assert attrs["status"] == "completed" and attrs["seed"] == seed and attrs["policy"] == policy
             np.testing.assert_array_equal(points["value"], [p.value for p in pure.state.points])
             assert len(shots["value"]) == sum(p.n_shots for p in pure.state.points)
     summary = json.loads((tmp_path / "sweep_summary.json").read_text())
-    assert len(summary["records"]) == 6
+    assert len(summary["records"]) == 4
     from prefect import get_client
     from prefect.client.schemas.filters import ArtifactFilter, ArtifactFilterKey
 
@@ -126,8 +126,8 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
         artifact = client.read_artifacts(
             artifact_filter=ArtifactFilter(key=ArtifactFilterKey(any_=["sweep-tiny-summary"]))
         )[-1]
-    assert artifact.data.startswith(f"# sweep tiny\n\n6 of 6 campaigns finished; files in `{tmp_path}`\n")
-    assert "| reward | 3 |" in artifact.data
+    assert artifact.data.startswith(f"# sweep tiny\n\n4 of 4 campaigns finished; files in `{tmp_path}`\n")
+    assert "| reward | 2 |" in artifact.data
     assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000
     # `noisebo report DIR` redraws the same from the files alone
     from noisebo.view.report import report

@@ -18,7 +18,7 @@ import pytest
 
 from benchmarks.storage import point_commits, started
 from noisebo.events import Status, StatusChanged
-from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_failures, read_shot_fits, read_spectra
+from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_failures, read_shot_fits, spectra_reader
 from noisebo.storage.isolated import call_isolated
 from noisebo.storage.recorder import Recorder, rebuild_file
 from tests.storage.test_hdf5 import SMALL, assert_same
@@ -75,7 +75,8 @@ def everything(path: Path, spectra: bool) -> dict:
     """What every reader gives for ``path``."""
     out = {"campaign": read_campaign(path), "failures": read_failures(path), "fits": read_shot_fits(path)}
     if spectra:
-        out["spectra"] = {p: read_spectra(path, p) for p in range(POINTS["spectra"])}
+        with spectra_reader(path) as spectra_of:
+            out["spectra"] = {p: spectra_of(p) for p in range(POINTS["spectra"])}
     return out
 
 

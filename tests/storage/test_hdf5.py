@@ -23,7 +23,7 @@ from noisebo.storage.hdf5 import (
     read_campaign,
     read_failures,
     read_shot_fits,
-    read_spectra,
+    spectra_reader,
     write_snapshot,
 )
 from noisebo.storage.recorder import Recorder
@@ -63,14 +63,15 @@ def assert_reads_as_whole(path: Path, state, folder: Path) -> None:
         assert read_shot_fits(path) is None
     else:
         assert_same(read_shot_fits(path), fits)
-    for point in range(len(state.points) + 1):
-        try:
-            expected = read_spectra(whole, point)
-        except CampaignFileError:
-            with pytest.raises(CampaignFileError, match=f"no spectra for point {point}"):
-                read_spectra(path, point)
-            continue
-        assert_same(read_spectra(path, point), expected)
+    with spectra_reader(whole) as expected_of, spectra_reader(path) as spectra_of:  # each file opened once
+        for point in range(len(state.points) + 1):
+            try:
+                expected = expected_of(point)
+            except CampaignFileError:
+                with pytest.raises(CampaignFileError, match=f"no spectra for point {point}"):
+                    spectra_of(point)
+                continue
+            assert_same(spectra_of(point), expected)
 
 
 def commit_points(recorder: Recorder, config, points: range, spectra: bool) -> None:

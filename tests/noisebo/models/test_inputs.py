@@ -1,3 +1,4 @@
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -63,17 +64,24 @@ def unmerged_primary(capacity=8):
     )
 
 
+def jitted_density(model):
+    """The model's log density at (data, params), compiled once per data shape (run op by op,
+    its few hundred operations compile one by one)."""
+    return jax.jit(lambda data, params: log_density(model, (data,), {}, params)[0])
+
+
 def test_merged_primary_likelihood_differs_by_a_constant_and_predicts_the_same():
     merged, _, groups = primary.prepare(X, VALUE, VAR, 0.0, 1.0, 256)
     assert groups.count.tolist() == [2, 3, 1]
     raw = unmerged_primary()
-    model = primary.make_model(PrimaryModelConfig())
+    density = jitted_density(primary.make_model(PrimaryModelConfig()))
+    predict = jax.jit(primary.predict_samples)
     gaps, xs = [], jnp.linspace(0, 1, 7)
     for amplitude, length in ((0.5, 0.1), (1.3, 0.25), (3.0, 0.7)):
         params = {"amplitude": jnp.asarray(amplitude), "length": jnp.asarray(length)}
-        gaps.append(float(log_density(model, (merged,), {}, params)[0] - log_density(model, (raw,), {}, params)[0]))
+        gaps.append(float(density(merged, params) - density(raw, params)))
         batch = {k: v[None] for k, v in params.items()}
-        for a, b in zip(primary.predict_samples(batch, merged, xs), primary.predict_samples(batch, raw, xs)):
+        for a, b in zip(predict(batch, merged, xs), predict(batch, raw, xs)):
             np.testing.assert_allclose(
                 np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7
             )  # up to the 1e-8 jitter per row
@@ -98,16 +106,17 @@ def test_merged_noise_likelihood_differs_by_a_constant_and_predicts_the_same():
         mask=jnp.ones(6, dtype=bool),
         bounds=merged.bounds,
     )
-    model = noise_model.make_model(cfg)
+    density = jitted_density(noise_model.make_model(cfg))
+    predict = jax.jit(noise_model.predict_samples, static_argnums=0)
     gaps, tq = [], jnp.array([0.3, 2.0, 9.0])
     for a0, a1, amplitude, length in ((0.05, 1.1, 0.05, 0.3), (0.2, 0.6, 0.2, 0.1), (0.01, 2.0, 0.02, 0.8)):
         params = {"a0": a0, "a1": a1, "amplitude": amplitude, "length": length}
         params = {k_: jnp.asarray(v) for k_, v in params.items()}
-        gaps.append(float(log_density(model, (merged,), {}, params)[0] - log_density(model, (raw,), {}, params)[0]))
+        gaps.append(float(density(merged, params) - density(raw, params)))
         batch = {k_: v[None] for k_, v in params.items()}
         for a, b in zip(
-            noise_model.predict_samples("inv_sqrt", batch, merged, tq, (tq - 0.2) / 9.8),
-            noise_model.predict_samples("inv_sqrt", batch, raw, tq, (tq - 0.2) / 9.8),
+            predict("inv_sqrt", batch, merged, tq, (tq - 0.2) / 9.8),
+            predict("inv_sqrt", batch, raw, tq, (tq - 0.2) / 9.8),
         ):
             np.testing.assert_allclose(
                 np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7

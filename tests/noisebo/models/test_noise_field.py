@@ -2,6 +2,7 @@
 x-independent model as the field's zero-amplitude limit, walls of known noise found with their
 optimal t), padding invariance, and the cost at 50 and 300 training positions (printed)."""
 
+import functools
 import math
 import time
 
@@ -33,22 +34,32 @@ def measure(x, t, sd, rng, shots=SHOTS):
 
 
 DEFAULT_FIELD = noise_field.NoiseFieldConfig()
+# The predictions compiled whole: op by op, their hundreds of operations compile one by one.
+field_one_law = jax.jit(noise_field.predict_one, static_argnums=0)
+x_independent_law = jax.jit(noise_model.predict_one, static_argnums=0)
+field_samples = jax.jit(noise_field.predict_samples, static_argnums=0)
 
 
-def fit(x, t, s, cfg=QUADRATURE, field=DEFAULT_FIELD, laplace=32, **kwargs):
-    data, scale, _ = noise_field.prepare(x, t, s, np.full(len(t), SHOTS), cfg, field, T_MIN, T_MAX, 256)
+def fit(x, t, s, cfg=QUADRATURE, field=DEFAULT_FIELD, laplace=32, capacity=None, **kwargs):
+    data, scale, _ = noise_field.prepare(x, t, s, np.full(len(t), SHOTS), cfg, field, T_MIN, T_MAX, 256, capacity)
     samples, data = noise_field.fit(data, cfg, field, jax.random.PRNGKey(0), 2, laplace, **kwargs)
     return samples, data, scale
 
 
-def predicted(samples, data, scale, kind, xq):
-    """Posterior mean of Noise (value units) on T_FINE at xq (m, d), its t*(x), and A0(x) at the MAP."""
+@functools.partial(jax.jit, static_argnums=(3, 4))
+def _predicted(params, weights, data, kind, map_first, xq):
     means, variances = noise_field.predict_samples(
-        kind, samples.params, data, jnp.asarray(xq), jnp.asarray(T_FINE), jnp.asarray(scaled_t(T_FINE))
+        kind, params, data, xq, jnp.asarray(T_FINE), jnp.asarray(scaled_t(T_FINE))
     )
-    mean, _ = inference.combine(means, variances, samples.map_first, samples.weights)
+    mean, _ = inference.combine(means, variances, map_first, weights)
+    return mean, noise_field.field_one({k: v[0] for k, v in params.items()}, data, xq)
+
+
+def predicted(samples, data, scale, kind, xq):
+    """Posterior mean of Noise (value units) on T_FINE at xq (m, d), its t*(x), and A0(x) at the
+    MAP (compiled as one program: op by op, its few hundred operations compile one by one)."""
+    mean, (a0, a1) = _predicted(samples.params, samples.weights, data, kind, samples.map_first, jnp.asarray(xq))
     mean = np.asarray(mean) * scale
-    a0, a1 = noise_field.field_one({k: v[0] for k, v in samples.params.items()}, data, jnp.asarray(xq))
     return (
         mean,
         np.asarray(noise_field.optimal_t(jnp.asarray(T_FINE), jnp.asarray(mean), ALPHA, BETA)),
@@ -125,8 +136,8 @@ def test_zero_field_amplitude_predicts_exactly_as_the_x_independent_model():
     law = {"a0": 0.05, "a1": 1.1, "amplitude": 0.08, "length": 0.3}
     z = np.random.default_rng(1).standard_normal(data.freq.shape[0])  # any z: the field is 0
     xq, tq = jnp.asarray([[0.0], [0.37], [1.0]]), jnp.asarray([0.25, 1.0, 4.0, 9.5])
-    mean, var = noise_field.predict_one("inv_sqrt", law | {"g0_z": jnp.asarray(z)}, data, xq, tq, scaled_t(tq))
-    n_mean, n_var = noise_model.predict_one("inv_sqrt", law, ndata, tq, scaled_t(tq))
+    mean, var = field_one_law("inv_sqrt", law | {"g0_z": jnp.asarray(z)}, data, xq, tq, scaled_t(tq))
+    n_mean, n_var = x_independent_law("inv_sqrt", law, ndata, tq, scaled_t(tq))
     # Equal up to the 1e-8 jitter, added per (x, t) group here and per t there (variances ~1e-3).
     np.testing.assert_allclose(np.asarray(mean), np.broadcast_to(n_mean, mean.shape), rtol=1e-6)
     np.testing.assert_allclose(np.asarray(var), np.broadcast_to(n_var, var.shape), rtol=1e-5)
@@ -138,16 +149,16 @@ def test_fitted_with_the_field_amplitude_pinned_near_zero_matches_the_fitted_x_i
     field = noise_field.NoiseFieldConfig()
     data, scale, _ = noise_field.prepare(x, t, s, np.full(t.size, SHOTS), cfg, field, T_MIN, T_MAX, 256)
     data = noise_field.set_field(data, {"g0_amplitude": 1e-6, "g0_length": 0.2})
-    samples, data = noise_field.fit(data, cfg, field, jax.random.PRNGKey(0), 4, 0, estimate=False)
+    samples, data = noise_field.fit(data, cfg, field, jax.random.PRNGKey(0), 2, 0, estimate=False)
     ndata, _, _ = noise_model.prepare(t, s, np.full(t.size, SHOTS), cfg, T_MIN, T_MAX, 256)
     nsamples = inference.fit_map(
-        noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 4, 0, noise_model.initial_guess(ndata, cfg)
+        noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 2, 0, noise_model.initial_guess(ndata, cfg)
     )
     point = {k: v[0] for k, v in samples.params.items()}
     npoint = {k: v[0] for k, v in nsamples.params.items()}
     tq = jnp.asarray(T_FINE[::64])
-    mean, _ = noise_field.predict_one("inv_sqrt", point, data, jnp.asarray([[0.5]]), tq, scaled_t(tq))
-    n_mean, _ = noise_model.predict_one("inv_sqrt", npoint, ndata, tq, scaled_t(tq))
+    mean, _ = field_one_law("inv_sqrt", point, data, jnp.asarray([[0.5]]), tq, scaled_t(tq))
+    n_mean, _ = x_independent_law("inv_sqrt", npoint, ndata, tq, scaled_t(tq))
     # The same posterior mode up to the field's 1e-6 (and L-BFGS's tolerance): A0, A1 and the
     # curve to 0.1 %, where the sampling error of the curve is ~3 %.
     assert float(point["a1"]) == pytest.approx(float(npoint["a1"]), rel=1e-3)
@@ -165,12 +176,12 @@ def test_an_x_independent_noise_gives_a_flat_field():
     npoint = {
         k: v[0]
         for k, v in inference.fit_map(
-            noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 4, 0, noise_model.initial_guess(ndata, cfg)
+            noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 2, 0, noise_model.initial_guess(ndata, cfg)
         ).params.items()
     }
     xq = np.linspace(0.0, 1.0, 11)[:, None]
     mean, _, a0, _ = predicted(samples, data, scale, "inv_sqrt", xq)
-    n_mean, _ = noise_model.predict_one("inv_sqrt", npoint, ndata, jnp.asarray(T_FINE), scaled_t(T_FINE))
+    n_mean, _ = x_independent_law("inv_sqrt", npoint, ndata, jnp.asarray(T_FINE), scaled_t(T_FINE))
     assert float(np.max(np.abs(np.log(a0 / np.median(a0))))) < 0.25  # A0 within 25 % of its median
     np.testing.assert_allclose(mean, np.broadcast_to(np.asarray(n_mean) * scale, mean.shape), rtol=0.05)
 
@@ -200,7 +211,8 @@ def test_three_seed_points_give_a_sane_fit():
     rng = np.random.default_rng(0)
     x, t = rng.random((3, 2)), np.array([8.0, 2.0, 0.5])
     s = measure(x[:, 0], t, np.sqrt(1 / t + 0.04), rng)
-    samples, data, scale = fit(x, t, s, laplace=8)
+    # Padded as the 2-D wall below is (200 inputs): the same programs, compiled once.
+    samples, data, scale = fit(x, t, s, capacity=256)
     mean, _, _, _ = predicted(samples, data, scale, "quadrature", np.array([[0.5, 0.5]]))
     np.testing.assert_allclose(mean[0, ::256], np.sqrt(1 / T_FINE[::256] + 0.04), rtol=0.3)
     assert float(samples.params["amplitude"][0]) < 1.0  # the residual over t stays a residual
@@ -344,7 +356,7 @@ def test_padding_changes_no_prediction(wall_1d):
         out.append(
             [
                 np.asarray(a)
-                for a in noise_field.predict_samples(
+                for a in field_samples(
                     "quadrature",
                     samples.params,
                     data,
