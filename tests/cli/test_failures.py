@@ -44,6 +44,7 @@ def wait_for_line(stream, prefix: str) -> str:
     raise AssertionError(f"no line starting with {prefix!r}")
 
 
+@pytest.mark.e2e  # real processes (CI runs -m e2e)
 @pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)], ids=["SIGTERM", "SIGINT"])
 def test_a_second_signal_stops_at_once_with_its_exit_code(signum, code, tiny_config, tmp_path, prefect_harness):
     # every shot hangs for a minute: the first signal's "finish the point" would take that long

@@ -247,6 +247,7 @@ def test_a_schema_3_file_and_its_campaign_written_anew_inspect_the_same(tmp_path
     assert seen[old]["points"][0]["t_opt"] is None and seen[old]["points"][3]["t_opt"] is not None
 
 
+@pytest.mark.e2e  # real processes (CI runs -m e2e)
 def test_a_temporary_server_that_does_not_start_in_time_is_one_line_and_no_file(tmp_path, tiny_yaml):
     import os
     import subprocess

@@ -86,6 +86,7 @@ def test_kill_9_of_noisebo_run_takes_its_temporary_server_with_it(tmp_path, tiny
         run.stdout.close()
 
 
+@pytest.mark.e2e
 def test_the_guard_stops_the_server_when_the_parent_goes_without_a_death_signal(tmp_path):
     """The watch thread alone (as where PR_SET_PDEATHSIG is not available, or a thread that is
     not the main one started the server): the parent is killed once the server answers."""
@@ -119,6 +120,7 @@ def database(tmp_path, name: str) -> str:
     return f"sqlite+aiosqlite:///{tmp_path}/{name}.db"
 
 
+@pytest.mark.e2e
 def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path):
     """Two real Prefect servers left behind by a parent killed before it could stop them, started
     as Prefect starts them: one recorded (as this version records its servers), one not (as older
@@ -193,6 +195,7 @@ def test_a_later_start_stops_servers_whose_parent_is_gone_and_no_other(tmp_path)
         processes.terminate(elsewhere, started[elsewhere])
 
 
+@pytest.mark.e2e
 def test_a_port_taken_meanwhile_is_retried_on_another_without_a_word(tmp_path):
     """The port Prefect picked is taken by the time the server binds it: uvicorn exits 3 after
     Prefect's lifespan shutdown traceback, Prefect starts it again elsewhere; none of it is shown."""

@@ -162,6 +162,7 @@ def _fit_in_a_new_process(tmp_path: Path, folder: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.e2e  # real processes (CI runs -m e2e)
 def test_in_new_processes_a_decisions_fits_load_their_programs_and_come_out_the_same(tmp_path):
     """Three processes fit the first decision's models: without kept programs, exporting them,
     and loading them (the case that crashed before LAPACK was prepared). The hyperparameters
