@@ -24,15 +24,7 @@ _temporary_default("PREFECT_HOME", "noisebo-test-prefect-")
 # workers inherit this process's environment, so they share the folder.
 _temporary_default("NOISEBO_JAX_CACHE", "noisebo-test-jax-")
 _temporary_default("NOISEBO_LOG_DIR", "noisebo-test-logs-")  # failure logs
-# Quick to compile rather than quick to run: a test runs each program a few times, so XLA's
-# optimisation passes cost more than they save (the same programs, 23 % less time in the
-# compile-bound tests of tests/noisebo). Before anything imports JAX; the workers and every
-# process a test starts inherit it. Benchmarks and campaigns keep the optimisations.
-os.environ.setdefault("JAX_DISABLE_MOST_OPTIMIZATIONS", "1")
 
-import sys  # noqa: E402
-
-assert "jax" not in sys.modules, "JAX was imported before tests/conftest.py could configure it"
 from noisebo.flows import runtime  # noqa: E402
 
 runtime.configure()
@@ -75,7 +67,26 @@ LONGEST_FIRST = (
 )
 
 
+QUICK_TO_COMPILE = "JAX_DISABLE_MOST_OPTIMIZATIONS"
+
+
+@pytest.hookimpl(trylast=True)  # after -m has deselected
 def pytest_collection_modifyitems(config, items):
+    _order_longest_first(config, items)
+    # Quick to compile rather than quick to run: most tests run each program a few times, so XLA's
+    # optimisation passes cost more than they save (the same programs; 23 % less time in the
+    # compile-bound tests of tests/noisebo). Not where end-to-end tests are selected: their long
+    # campaigns run their programs thousands of times (the 200-point kills took 40 % longer).
+    # Set in each process that runs tests (an xdist worker collects for itself) before any test
+    # compiles; the processes a test starts inherit it. A value set by the caller wins.
+    if QUICK_TO_COMPILE not in os.environ and not any(item.get_closest_marker("e2e") for item in items):
+        os.environ[QUICK_TO_COMPILE] = "1"
+        import jax
+
+        jax.config.update("jax_disable_most_optimizations", True)
+
+
+def _order_longest_first(config, items):
     rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
 
     def place(item) -> int:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from noisebo.flows.processes import BIN, start, stop, wait_for
+from noisebo.flows.processes import BIN, local_server, start, stop, wait_for
 from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.storage.record import read_record
@@ -53,10 +53,19 @@ def test_a_dask_sweep_equals_each_seed_alone(prefect_server, tiny_config, tmp_pa
     assert (out / "sweep_summary.md").exists() and (out / "convergence_steps.png").exists()
 
 
-def test_a_sweep_on_two_prefect_workers_equals_each_seed_alone(prefect_server, tiny_config, tmp_path):
+@pytest.fixture
+def own_server(tmp_path):
+    """A Prefect server of this test's own: its deployments, bound to a work pool, must not be
+    the ones a later test on the session's server serves under the same names (a run of such a
+    deployment crashed in `noisebo serve`'s runner, looking for its code in a folder "None")."""
+    with local_server(tmp_path / "prefect-server") as env:
+        yield env
+
+
+def test_a_sweep_on_two_prefect_workers_equals_each_seed_alone(own_server, tiny_config, tmp_path):
     config = tmp_path / "tiny.yaml"
     config.write_text(yaml.safe_dump(tiny_config.model_dump(mode="json")))
-    env = prefect_server
+    env = own_server
     deployed = subprocess.run(
         [str(BIN / "noisebo"), "deploy", str(config), "--pool", "e2e-pool", "--out", str(tmp_path / "unused")],
         env=env,
