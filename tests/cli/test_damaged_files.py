@@ -76,10 +76,10 @@ def campaigns(tmp_path_factory) -> dict[str, Path]:
 
 
 def cpu_seconds() -> float:
-    """CPU seconds of this process and of its children that have ended: the commands read the
+    """CPU seconds of this thread and of the children that have ended: the commands read the
     file in a spawned child (``noisebo.storage.isolated``)."""
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return time.process_time() + children.ru_utime + children.ru_stime
+    return time.thread_time() + children.ru_utime + children.ru_stime  # not the worker's other threads
 
 
 def run_cli(argv: list[str], capsys) -> tuple[int, str, float, float]:
