@@ -17,7 +17,9 @@ JAX reads and writes its entries under a file lock: processes that share the fol
 campaigns, a test run's workers) never read a program another is still writing. Without the cap
 JAX writes entries in place, unlocked, and a torn read costs a recompile and a warning.
 
-``configure()`` runs when the ``flows`` package is imported, before Prefect is.
+``configure()`` runs when the ``flows`` package is imported, before Prefect is. It also repairs
+an entry a killed process left without its access time (``repair_cache``), which would otherwise
+stop JAX from keeping any new program in the folder.
 
 A command that fails says so in one line; the traceback behind it goes to this process's failure
 log, data/logs/noisebo-DATE-TIME-PID.log of the checkout (or of ~/.noisebo; NOISEBO_LOG_DIR=DIR
@@ -37,6 +39,7 @@ from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 CACHE_MAX_BYTES = 2 * 1024**3  # the whole test run, every kind of campaign, writes about 20 MB
+CACHE_SUFFIX, ATIME_SUFFIX = "-cache", "-atime"  # JAX's names for an entry and its access time
 
 
 def _state_dir() -> Path:
@@ -68,6 +71,31 @@ def configure() -> None:
         _jax_setting("jax_persistent_cache_min_compile_time_secs", 0.0)
         _jax_setting("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
         os.environ.setdefault("NOISEBO_PROGRAM_CACHE", str(Path(cache) / "programs"))
+        repair_cache(Path(cache))
+
+
+def repair_cache(folder: Path) -> int:
+    """Give every entry of JAX's capped compilation cache in ``folder`` that lacks its access-time
+    file one (now); returns how many. JAX writes an entry, then its access time; a process killed
+    between the two leaves an entry without one, and from then on every process's next write to
+    the cache reads all access times first, fails, and warns ("Error writing persistent
+    compilation cache entry ... FileNotFoundError") instead of keeping the program. Listing the
+    folder costs about a millisecond."""
+    try:
+        names = {entry.name for entry in os.scandir(folder)}
+    except OSError:  # no cache yet
+        return 0
+    now = time.time_ns().to_bytes(8, "little")
+    repaired = 0
+    for name in names:
+        key = name.removesuffix(CACHE_SUFFIX)
+        if key != name and key + ATIME_SUFFIX not in names:
+            try:
+                (folder / (key + ATIME_SUFFIX)).write_bytes(now)
+                repaired += 1
+            except OSError:  # a read-only cache: JAX will not write to it either
+                pass
+    return repaired
 
 
 POOL_AT_EXIT = "The garbage collector is trying to clean up non-checked-in connection"

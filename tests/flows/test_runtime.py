@@ -116,3 +116,25 @@ def test_the_compilation_cache_is_capped_so_jax_locks_its_entries(tmp_path):
     assert out.stdout.strip() == str(runtime.CACHE_MAX_BYTES) == str(2 * 1024**3)
     names = [p.name for p in (tmp_path / "cache").iterdir()]
     assert any(n.endswith("-cache") for n in names) and any(n.endswith("-atime") for n in names), names
+
+
+def test_an_entry_a_killed_process_left_without_its_access_time_is_repaired(tmp_path):
+    # JAX writes an entry and then its access time; an entry without one made every later write
+    # to the cache fail with a warning (seen after the crash tests' kills), so nothing new was kept.
+    cache = tmp_path / "cache"
+    code = "import jax\njax.jit(lambda x: x * {})(1.0).block_until_ready()\n"
+    env = dict(os.environ, NOISEBO_JAX_CACHE=str(cache))
+    run = [sys.executable, "-W", "error", "-c", "from noisebo.flows import runtime\nruntime.configure()\n"]
+    subprocess.run([*run[:-1], run[-1] + code.format(2.0)], env=env, check=True, timeout=120, capture_output=True)
+    atimes = sorted(cache.glob("*-atime"))
+    assert atimes
+    atimes[0].unlink()  # as a kill between the two writes leaves it
+    assert runtime.repair_cache(cache) == 1 and runtime.repair_cache(cache) == 0
+    atimes[0].unlink()
+    out = subprocess.run([*run[:-1], run[-1] + code.format(3.0)], env=env, timeout=120, capture_output=True, text=True)
+    assert out.returncode == 0 and "Error writing" not in out.stderr, out.stderr
+    assert len(list(cache.glob("*-cache"))) == len(list(cache.glob("*-atime"))) > len(atimes)
+
+
+def test_repairing_a_missing_cache_folder_does_nothing(tmp_path):
+    assert runtime.repair_cache(tmp_path / "none") == 0
