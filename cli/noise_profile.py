@@ -24,12 +24,14 @@ def noise_measurements(path: Path) -> dict:
     record = read_record(path)
     points = record.points
     measured = points.noise_measured.astype(bool) & (points.n_shots >= 2)
+    x = np.asarray(points.x, dtype=np.float64).reshape(len(points), -1)
     return {
         "file": str(path),
         "config": record.config,
         "driver": record.driver,
         "seed": record.seed,
         "created_utc": str(record.attrs.get("created_utc", "")),
+        "x": x[measured],
         "t": points.t.astype(np.float64)[measured],
         "shot_std": points.shot_std.astype(np.float64)[measured],
         "n_shots": points.n_shots.astype(np.float64)[measured],
@@ -46,12 +48,26 @@ def _same(campaigns: list[dict], what: str, describe) -> None:
             )
 
 
+def _field_kind(field, config) -> str:
+    if field is None:
+        return "independent of x"
+    return f"a field varying {field.varies} over {config.space.dimensions} axes"
+
+
 def make_profile(files: list[Path]) -> NoiseProfile:
     import numpy as np
 
     from noisebo.config import parse_config
     from noisebo.keys import PROFILE, jax_key
-    from noisebo.models.profile import NoiseProfile, NotDistillable, ProfileCampaign, ProfileDriver, distil
+    from noisebo.models.profile import (
+        FieldCampaign,
+        NoiseProfile,
+        NotDistillable,
+        ProfileCampaign,
+        ProfileDriver,
+        distil,
+        distil_field,
+    )
     from noisebo.storage.hdf5 import check_present
     from noisebo.storage.isolated import call_isolated
 
@@ -61,16 +77,29 @@ def make_profile(files: list[Path]) -> NoiseProfile:
     _same(
         [{**c, "law": cfg.noise_model.mean} for c, cfg in zip(campaigns, configs)], "the noise law", lambda c: c["law"]
     )
+    fields = [cfg.noise_model.field for cfg in configs]
+    _same(
+        [{**c, "field": _field_kind(f, cfg)} for c, f, cfg in zip(campaigns, fields, configs)],
+        "the noise",
+        lambda c: c["field"],
+    )
     pooled = {k: np.concatenate([c[k] for c in campaigns]) for k in ("t", "shot_std", "n_shots")}
     names = ", ".join(str(f) for f in files)
     try:
-        parameters = distil(configs[0], pooled["t"], pooled["shot_std"], pooled["n_shots"], jax_key(0, PROFILE))
+        if fields[0] is None:
+            parameters = distil(configs[0], pooled["t"], pooled["shot_std"], pooled["n_shots"], jax_key(0, PROFILE))
+        else:
+            parts = [
+                FieldCampaign(cfg, c["x"], c["t"], c["shot_std"], c["n_shots"]) for c, cfg in zip(campaigns, configs)
+            ]
+            parameters = distil_field(parts, jax_key(0, PROFILE))
     except NotDistillable as why:
         raise CampaignFileError(f"no noise profile can be made of {names}: {why}") from None
     driver = campaigns[0]["driver"]
     return NoiseProfile(
         driver=ProfileDriver(name=driver["name"], version=driver["version"], settings=driver["settings"]),
         law=configs[0].noise_model.mean,
+        field=None if fields[0] is None else fields[0].varies,
         parameters=parameters,
         t_range_s=(float(pooled["t"].min()), float(pooled["t"].max())),
         noise_points=int(pooled["t"].size),

@@ -561,8 +561,16 @@ class NoiseProfile(FrozenModel):
     schema_version: Literal[1] = Field(1, description="the profile format's version")
     driver: ProfileDriver = Field(description="the instrument driver the campaigns ran on")
     law: str = Field(description="the noise law (`noise_model.mean`) the profile describes")
+    field: Literal["a0", "a0_a1"] | None = Field(
+        None,
+        description="made of noise-field campaigns: which of the law's parameters varied over x "
+        "(`noise_model.field.varies`); null: noise that does not depend on x",
+    )
     parameters: dict[str, ParameterPosterior] = Field(
-        description="each law parameter's posterior (a0, a1, and p for a law that infers its exponent)"
+        description="each law parameter's posterior (a0, a1, and p for a law that infers its exponent); "
+        "for a noise field also each field's spread over positions (g0_amplitude, and g1_amplitude "
+        "for a0_a1: sd of log A0(x), log A1(x)) and its lengths (g0_length, or g0_length_k per axis; "
+        "in the axis's x units)"
     )
     t_range_s: tuple[FiniteFloat, FiniteFloat] = Field(description="the shortest and longest t measured (s)")
     noise_points: Count = Field(description="the noise measurements the law was fitted on")
@@ -592,7 +600,10 @@ class NoiseModelConfig(FrozenModel):
     starts from what earlier campaigns on the instrument learned. Before every fit the profile is
     checked against the campaign's own replicate scatter (``noisebo.models.profile_check``); once
     its posterior predictive p-value falls below ``profile_alpha`` the profile is dropped for good
-    and the law is learned afresh from the uniform priors. ``profile_check``: refuse a profile of
+    and the law is learned afresh from the uniform priors. With a noise field the profile must
+    be of field campaigns of the same variant and axes: its level a0, a1 (p) are the normal
+    priors and its spread over positions the field amplitude's prior median; its check is
+    ``noisebo.models.field_profile_check``. ``profile_check``: refuse a profile of
     another driver or other driver settings (false: use it anyway, e.g. after a change of
     settings known not to touch the noise).
     """
@@ -647,14 +658,16 @@ class NoiseModelConfig(FrozenModel):
         profile = self.profile
         if profile is None:
             return self
-        if self.field is not None:
-            raise ValueError("profile: a profile holds a noise law over t; it cannot be the prior of a noise field")
+        varies = None if self.field is None else self.field.varies
+        if profile.field != varies:
+            raise ValueError(f"profile: {_profile_kind(profile.field)}; {_field_kind(varies)}")
         if profile.law != self.mean:
             raise ValueError(
                 f"profile: it describes the law {profile.law!r}, the config's noise_model.mean is {self.mean!r}"
             )
         needed = ("a0", "a1", "p") if registry.noise_law(self.mean).infers_exponent else ("a0", "a1")
-        missing = [name for name in needed if name not in profile.parameters]
+        spreads = () if varies is None else ("g0_amplitude",) if varies == "a0" else ("g0_amplitude", "g1_amplitude")
+        missing = [name for name in needed + spreads if name not in profile.parameters]
         if missing:
             raise ValueError(f"profile: the law {self.mean!r} needs the parameter(s) {', '.join(missing)}")
         for name, prior in zip(needed, (self.a0_prior, self.a1_prior, self.p_prior)):
@@ -665,6 +678,18 @@ class NoiseModelConfig(FrozenModel):
                     f"[{prior.low:g}, {prior.high:g}]"
                 )
         return self
+
+
+def _profile_kind(varies: str | None) -> str:
+    if varies is None:
+        return "it holds a noise law over t, made of campaigns without noise_model.field"
+    return f"it was made of noise-field campaigns (noise_model.field.varies: {varies})"
+
+
+def _field_kind(varies: str | None) -> str:
+    if varies is None:
+        return "the config has no noise_model.field (make the profile of campaigns without one, or set the field)"
+    return f"the config's noise_model.field varies {varies} (make the profile of campaigns with the same field)"
 
 
 class InferenceConfig(FrozenModel):
@@ -960,6 +985,19 @@ class CampaignConfig(FrozenModel):
             raise ValueError(
                 "schedule.mode: budget learns the noise from every point's replicate scatter; set "
                 "noise_model.learn_after_convergence: true"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _profile_lengths_fit_axes(self) -> CampaignConfig:
+        profile = self.noise_model.profile
+        if profile is None or profile.field is None:
+            return self
+        made = sum(name.startswith("g0_length") for name in profile.parameters)
+        if made != self.space.dimensions:
+            raise ValueError(
+                f"noise_model.profile: its noise field was learned over {made} axes, the space has "
+                f"{self.space.dimensions}"
             )
         return self
 

@@ -20,6 +20,7 @@ MEASURE = 2
 FIT = 3
 PROPOSE = 4
 PROFILE = 5  # a noise profile's fit (noisebo noise-profile)
+PROFILE_CHECK = 6  # the replicates of a noise-field profile's check
 
 
 def _checked(parts: tuple) -> list[int]:

@@ -16,7 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from noisebo.config import CampaignConfig
-from noisebo.models import inference, noise_field
+from noisebo.models import field_profile_check, inference, noise_field, noise_model
+from noisebo.models.profile_check import ProfileCheck
 from noisebo.models.inputs import capacity_for
 from noisebo.models.reward import reward
 from noisebo.state import CampaignState
@@ -107,7 +108,7 @@ def fit_field(
     previous: dict | None,
     warm: bool,
     capacity: int | None,
-) -> tuple[inference.Samples, noise_field.FieldData, float, int, bool]:
+) -> tuple[inference.Samples, noise_field.FieldData, float, int, bool, ProfileCheck]:
     """Fit the noise field on the campaign's noise-training points.
 
     The field's amplitude and lengths are re-estimated every step (``noise_field.estimate_field``)
@@ -117,19 +118,23 @@ def fit_field(
     t-dependence and A1 goes to 0. A warm step (``decision.warm_step``) stops there; the other
     steps also scan the field's shapes and add ``FIELD_RESTARTS`` prior draws. Returns the samples (the MAP point then the
     Laplace draws), the data holding the hyperparameters used, the data scale (noise units), the
-    number of (x, t) groups and whether t was binned."""
+    number of (x, t) groups, whether t was binned and the noise profile's check
+    (``field_profile_check``; while the profile is in use its means are one more start)."""
     nm, s, inf = config.noise_model, config.space, config.inference
     x, t, std, shots = training_inputs(config, state, scaled_positions)
     distinct = min(int(np.unique(t).size), inf.max_inputs)
     field = nm.field
     assert field is not None  # fit_field runs for a noise field only
+    spans = np.asarray(s.highs) - np.asarray(s.lows)
+    check = field_profile_check.verdict(nm, state.profile_dropped_step is not None, x, spans, t, std, shots)
     data, scale, groups = noise_field.prepare(
-        x, t, std, shots, nm, field, s.t_min, s.t_max, inf.max_inputs, capacity, t_capacity(distinct)
+        x, t, std, shots, nm, field, s.t_min, s.t_max, inf.max_inputs, capacity, t_capacity(distinct), check.in_use
     )
     hyper = previous_field(previous, data)
     if hyper is not None:
         data = noise_field.set_field(data, hyper)
     law = previous_law(previous, data, scale)
+    starts = ([law] if law else []) + ([] if warm else noise_model.profile_guess(data, nm))
     samples, data = noise_field.fit(
         data,
         nm,
@@ -137,11 +142,11 @@ def fit_field(
         key,
         FIELD_RESTARTS,
         inf.laplace_samples,
-        guesses=[law] if law else (),
+        guesses=starts,
         draws=not warm,
         scan=not (warm and hyper is not None),
     )
-    return samples, data, scale, groups.count.size, groups.binned
+    return samples, data, scale, groups.count.size, groups.binned, check
 
 
 def rows(

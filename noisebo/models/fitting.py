@@ -190,10 +190,10 @@ def fit_noise_model(
     k_noise = key
     warm = warm and bool(_previous_guesses(previous, "primary", 1.0))
     if config.noise_model.field is not None:
-        samples, field_data, scale, inputs, binned = field_fit.fit_field(
+        samples, field_data, scale, inputs, binned, check = field_fit.fit_field(
             config, state, scaled(s, x), k_noise, previous, warm, capacity
         )
-        return NoiseFit(samples, field_data, scale, inputs, binned, warm)
+        return NoiseFit(samples, field_data, scale, inputs, binned, warm, profile=check)
     cfg = config.noise_model
     train = state.noise_training_mask(cfg.learn_after_convergence, config.schedule.shots_after)
     t_train, std_train, n_train = t[train], state.column("shot_std")[train], n_shots[train]

@@ -128,6 +128,8 @@ from noisebo.models.noise_model import (
     c4,
     group_log_factor,
     mean_law,
+    prior_rows,
+    profile_factor,
     sampling_rel_var,
 )
 from noisebo.models.noise_model import initial_guess as law_guess
@@ -150,7 +152,10 @@ class FieldData(NamedTuple):
     freq (M, d): the basis functions' frequencies (rad per scaled unit); box (): half-width of the
     basis box in scaled units; bounds (3, 2): prior bounds of (a0, a1, p), scaled units.
     field_amplitude (F,), field_lengths (F, d): the fields' hyperparameters (standard deviation
-    of g in log units; lengths in scaled x), fixed during a MAP fit (``set_field``)."""
+    of g in log units; lengths in scaled x), fixed during a MAP fit (``set_field``).
+    With a noise profile (``noise_model.profile``), as ``noise_model.NoiseData``: prior (3, 2)
+    the normal prior of the levels a0, a1 (scaled units) and p, prior_weight () 1 while the
+    profile is in use, 0 once dropped; both None without one."""
 
     t: jnp.ndarray
     ts: jnp.ndarray
@@ -169,6 +174,8 @@ class FieldData(NamedTuple):
     bounds: jnp.ndarray
     field_amplitude: jnp.ndarray
     field_lengths: jnp.ndarray
+    prior: jnp.ndarray | None = None
+    prior_weight: jnp.ndarray | None = None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -364,6 +371,7 @@ def make_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
             "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
         )
         length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
+        profile_factor(data, a0, a1, p, law.infers_exponent)
         white = dist.Normal(0.0, 1.0).expand([data.freq.shape[0]]).to_event(1)
         params = {prefix + "_z": numpyro.sample(prefix + "_z", white) for prefix in prefixes}
         g0, g1 = log_fields(params, data, data.phi)
@@ -386,12 +394,14 @@ def prepare(
     max_inputs: int,
     capacity: int | None = None,
     t_capacity: int | None = None,
+    profile_in_use: bool = True,
 ) -> tuple[FieldData, float, Grouped]:
     """Merge measured noise (numpy: x (n, d) scaled to [0, 1] (or (n,) for one axis), t (n,)
     seconds, shot_std (n,) the sample sd of each point's shots, n_shots (n,) >= 2) into one group
     per distinct (x, t) and pad for the model: groups to ``capacity`` (default
     ``capacity_for(groups)``), distinct t values to ``t_capacity`` (default ``capacity_for(T)``).
     The fields' hyperparameters start at their prior medians (``estimate_field`` sets them).
+    With a noise profile, its prior of the levels, weighted by ``profile_in_use``.
 
     The distinct t values are exact up to ``max_inputs`` of them; beyond, t is binned into
     ``max_inputs`` equal-width bins (each bin's points at their precision-weighted mean t, an
@@ -458,6 +468,10 @@ def prepare(
         field_amplitude=jnp.asarray(np.full(n_fields, math.exp(field.amplitude_loc))),
         field_lengths=jnp.asarray(np.full((n_fields, dims), math.exp(field.length_loc))),
     )
+    if cfg.profile is not None:
+        data = data._replace(
+            prior=jnp.asarray(prior_rows(cfg, scale)), prior_weight=jnp.asarray(1.0 if profile_in_use else 0.0)
+        )
     groups = Grouped(
         np.column_stack([gx, (gt - t_min) / span]), merged.mean, merged.var, merged.count, merged.scatter, t_binned
     )
@@ -576,6 +590,15 @@ def _neg_evidence(theta, kind: str, f: int, steps: int, ev: _Evidence, data: Fie
 _evidence_value_and_grad = jax.jit(jax.value_and_grad(_neg_evidence, has_aux=True), static_argnums=(1, 2, 3))
 
 
+def amplitude_loc(data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfig, f: int) -> float:
+    """The log-median of field ``f``'s amplitude prior: the noise profile's spread over positions
+    (``g0_amplitude``, ``g1_amplitude``) while the profile is in use, else ``field.amplitude_loc``;
+    its log-sd stays ``field.amplitude_scale`` (a new sample's spread may differ)."""
+    if cfg.profile is None or data.prior_weight is None or float(data.prior_weight) == 0.0:
+        return field.amplitude_loc
+    return math.log(max(cfg.profile.parameters[f"g{f}_amplitude"].mean, 1e-6))
+
+
 def estimate_field(
     data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfig, point: dict, from_medians: bool = True
 ) -> dict:
@@ -585,7 +608,8 @@ def estimate_field(
 
     Type-II MAP: the Laplace approximation to the marginal likelihood of each field's amplitude
     and lengths, with the law's other parameters (and the other field) held at ``point`` and the
-    residual GP left out, times their LogNormal priors (``field``). Bounds: 4 prior sds either
+    residual GP left out, times their LogNormal priors (``field``; the amplitude's median from a
+    noise profile in use: ``amplitude_loc``). Bounds: 4 prior sds either
     side of the median, lengths at least ``shortest_length``. Maximised by L-BFGS-B from the
     current values and (``from_medians``) from the best of a few shapes at the current amplitude
     (round at the prior median length and one prior sd either side; for d > 1 also one prior sd
@@ -617,12 +641,13 @@ def estimate_field(
     p = float(point.get("p", 0.5))
     fields = log_fields(point, data, data.phi)
     values = (point["a0"] * _exp(fields[0]), point["a1"] * _exp(fields[1]))
-    prior = jnp.asarray([field.amplitude_loc, field.amplitude_scale, field.length_loc, field.length_scale])
-    lo = [field.amplitude_loc - 4 * field.amplitude_scale] + list(
-        np.maximum(field.length_loc - 4 * field.length_scale, np.log(shortest_length(data)))
-    )
-    hi = [field.amplitude_loc + 4 * field.amplitude_scale] + [field.length_loc + 4 * field.length_scale] * dims
     for f in range(n_fields):
+        loc = amplitude_loc(data, cfg, field, f)
+        prior = jnp.asarray([loc, field.amplitude_scale, field.length_loc, field.length_scale])
+        lo = [loc - 4 * field.amplitude_scale] + list(
+            np.maximum(field.length_loc - 4 * field.length_scale, np.log(shortest_length(data)))
+        )
+        hi = [loc + 4 * field.amplitude_scale] + [field.length_loc + 4 * field.length_scale] * dims
         g_now = jnp.where(jnp.asarray(pmask), log_fields(point, data, phi)[f], 0.0)
         other = values[1] * data.t ** (-p) if f == 0 else values[0]
         ev = _Evidence(
@@ -635,7 +660,7 @@ def estimate_field(
             other,
         )
 
-        def fun(theta, f=f, ev=ev):
+        def fun(theta, f=f, ev=ev, prior=prior):
             # Always from the point's field, so the objective is a fixed function of theta.
             (value, _), grad = _evidence_value_and_grad(
                 jnp.asarray(theta), cfg.mean, f, SCORING_STEPS, ev, data, p, prior

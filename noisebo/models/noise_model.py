@@ -93,10 +93,7 @@ def make_model(cfg: NoiseModelConfig):
             "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
         )
         length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
-        if data.prior is not None and data.prior_weight is not None:  # the profile: a normal prior, weighted 1 or 0
-            values = jnp.stack([a0, a1, jnp.asarray(p, dtype=a0.dtype)])[: 3 if law.infers_exponent else 2]
-            rows = data.prior[: values.shape[0]]
-            numpyro.factor("profile", data.prior_weight * jnp.sum(dist.Normal(rows[:, 0], rows[:, 1]).log_prob(values)))
+        profile_factor(data, a0, a1, p, law.infers_exponent)
         m = law.mean(data.t, a0, a1, p)
         cov = masked_covariance(matern52(data.ts, data.ts, amplitude**2, length), m**2 * data.rel_var, data.mask)
         numpyro.sample("y", dist.MultivariateNormal(jnp.where(data.mask, m, 0.0), covariance_matrix=cov), obs=data.y)
@@ -131,6 +128,31 @@ def group_log_factor(m: jnp.ndarray, data: Replicates) -> jnp.ndarray:
     safe_m = jnp.where(data.mask, m, 1.0)
     terms = -0.5 * data.scatter / safe_m**2 - (data.count - 1.0) * jnp.log(safe_m)
     return jnp.sum(jnp.where(data.mask, terms, 0.0))
+
+
+class WithProfile(Protocol):
+    """Training data that may carry a noise profile's prior: ``NoiseData`` or the noise field's."""
+
+    @property
+    def bounds(self) -> jnp.ndarray: ...
+    @property
+    def prior(self) -> jnp.ndarray | None: ...
+    @property
+    def prior_weight(self) -> jnp.ndarray | None: ...
+
+
+def profile_factor(data: WithProfile, a0, a1, p, infers_exponent: bool) -> None:
+    """Inside a numpyro model: the noise profile's normal prior of a0, a1 (and p) as a factor
+    weighted by ``data.prior_weight`` (1 while the profile is in use, 0 once dropped); nothing
+    without a profile (``data.prior`` None). ``data``: ``NoiseData`` or the noise field's data."""
+    if data.prior is None or data.prior_weight is None:
+        return
+    import numpyro
+    import numpyro.distributions as dist
+
+    values = jnp.stack([a0, a1, jnp.asarray(p, dtype=a0.dtype)])[: 3 if infers_exponent else 2]
+    rows = data.prior[: values.shape[0]]
+    numpyro.factor("profile", data.prior_weight * jnp.sum(dist.Normal(rows[:, 0], rows[:, 1]).log_prob(values)))
 
 
 def prior_rows(cfg: NoiseModelConfig, scale: float) -> np.ndarray:
@@ -229,7 +251,7 @@ def initial_guess(data: Replicates, cfg: NoiseModelConfig) -> dict[str, float]:
     return guess
 
 
-def profile_guess(data: NoiseData, cfg: NoiseModelConfig) -> list[dict[str, float]]:
+def profile_guess(data: WithProfile, cfg: NoiseModelConfig) -> list[dict[str, float]]:
     """The profile's means as a starting point of the MAP fit (scaled units), while it is in use;
     none otherwise."""
     if data.prior is None or data.prior_weight is None or float(data.prior_weight) == 0.0:

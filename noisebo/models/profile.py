@@ -11,6 +11,8 @@ each law parameter's posterior mean and sd, in the noise's units.
 
 from __future__ import annotations
 
+from typing import NamedTuple, Sequence
+
 import jax
 import numpy as np
 
@@ -22,7 +24,7 @@ from noisebo.config import (  # noqa: F401 - the profile's records, re-exported
     ProfileCampaign,
     ProfileDriver,
 )
-from noisebo.models import inference, noise_model
+from noisebo.models import field_fit, inference, noise_field, noise_model
 
 LAPLACE_DRAWS = 256  # posterior draws the parameters' mean and sd are taken over
 
@@ -41,11 +43,8 @@ def distil(
     Raises ``NotDistillable`` for fewer than two distinct t or non-finite measurements."""
     t, shot_std, n_shots = (np.asarray(a, dtype=np.float64) for a in (t, shot_std, n_shots))
     if config.noise_model.field is not None:
-        raise NotDistillable("its noise depends on x (noise_model.field); a profile holds a noise law over t only")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(shot_std)) and np.all(n_shots >= 2)):
-        raise NotDistillable("a noise measurement is not finite or has fewer than 2 shots")
-    if np.unique(t).size < 2:
-        raise NotDistillable(f"the noise was measured at {np.unique(t).size} distinct t; a law needs at least 2")
+        raise NotDistillable("its noise depends on x (noise_model.field): distil_field makes its profile")
+    _check_measurements(t, shot_std, n_shots)
     s, inf = config.space, config.inference
     t_min, t_max = min(s.t_min, float(t.min())), max(s.t_max, float(t.max()))
     own = config.noise_model.model_copy(update={"profile": None})  # the campaigns' data alone, not their prior
@@ -60,4 +59,71 @@ def distil(
             continue
         draws = np.asarray(fitted.params[name], dtype=np.float64) * (scale if name in ("a0", "a1") else 1.0)
         out[name] = ParameterPosterior(mean=float(draws.mean()), sd=float(draws.std()))
+    return out
+
+
+def _check_measurements(t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray) -> None:
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(shot_std)) and np.all(n_shots >= 2)):
+        raise NotDistillable("a noise measurement is not finite or has fewer than 2 shots")
+    if np.unique(t).size < 2:
+        raise NotDistillable(f"the noise was measured at {np.unique(t).size} distinct t; a law needs at least 2")
+
+
+class FieldCampaign(NamedTuple):
+    """One noise-field campaign's noise measurements: its ``config``, positions x (n, d) in x
+    units, t (n,) s, the sample sd of each point's shots (n,) in value units and their number (n,)."""
+
+    config: CampaignConfig
+    x: np.ndarray
+    t: np.ndarray
+    shot_std: np.ndarray
+    n_shots: np.ndarray
+
+
+def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """One campaign's noise field fitted on its own: the law's Laplace draws (a0, a1 in value
+    units; p) and the fields' spreads and lengths (lengths in x units)."""
+    config = campaign.config
+    nm, s, inf = config.noise_model, config.space, config.inference
+    field = nm.field
+    assert field is not None  # distil_field takes field campaigns only
+    t, shot_std, n_shots = (np.asarray(a, dtype=np.float64) for a in campaign[2:])
+    _check_measurements(t, shot_std, n_shots)
+    lows, spans = np.asarray(s.lows), np.asarray(s.highs) - np.asarray(s.lows)
+    x = (np.asarray(campaign.x, dtype=np.float64).reshape(t.size, -1) - lows) / spans
+    t_min, t_max = min(s.t_min, float(t.min())), max(s.t_max, float(t.max()))
+    own = nm.model_copy(update={"profile": None})  # the campaign's data alone, not its prior
+    data, scale, _ = noise_field.prepare(x, t, shot_std, n_shots, own, field, t_min, t_max, inf.max_inputs)
+    samples, data = noise_field.fit(data, own, field, key, field_fit.FIELD_RESTARTS, LAPLACE_DRAWS)
+    law = {
+        name: np.asarray(value, dtype=np.float64) * (scale if name in ("a0", "a1") else 1.0)
+        for name, value in samples.params.items()
+        if name in ("a0", "a1", "p")
+    }
+    hyper = noise_field.field_hyperparameters(data)
+    for prefix in noise_field.field_names(field):
+        for k, name in enumerate(noise_field.length_names(prefix, spans.size)):
+            hyper[name] *= float(spans[k])
+    return law, hyper
+
+
+def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> dict[str, ParameterPosterior]:
+    """The posterior of a noise field's law from noise-field campaigns on one instrument, each
+    fitted on its own (their positions are different places, perhaps on different samples):
+    a0, a1 (and p) pooled over the campaigns' Laplace draws (``LAPLACE_DRAWS`` each, the MAP
+    point first; the level a0 of A0(x) = a0 exp(g0(x))), so their sd holds both each fit's
+    uncertainty and the spread between campaigns; each field's spread over positions
+    (g0_amplitude, sd of log A0(x); g1_amplitude for "a0_a1") and lengths (x units) as mean and
+    sd over the campaigns' estimates (sd 0 from one campaign). ``key`` is folded with each
+    campaign's index. Raises ``NotDistillable`` as ``distil``."""
+    if not campaigns:
+        raise NotDistillable("no campaign was given")
+    laws, hypers = zip(*(_field_fit(c, jax.random.fold_in(key, i)) for i, c in enumerate(campaigns)))
+    out = {}
+    for name in laws[0]:
+        draws = np.concatenate([law[name] for law in laws])
+        out[name] = ParameterPosterior(mean=float(draws.mean()), sd=float(draws.std()))
+    for name in hypers[0]:
+        values = np.asarray([hyper[name] for hyper in hypers])
+        out[name] = ParameterPosterior(mean=float(values.mean()), sd=float(values.std()))
     return out

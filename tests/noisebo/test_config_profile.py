@@ -72,11 +72,52 @@ def test_a_profile_that_cannot_be_this_campaign_s_prior_is_refused(change, messa
     assert message in str(info.value)
 
 
-def test_a_noise_field_takes_no_profile():
+SPREAD = {"g0_amplitude": {"mean": 0.5, "sd": 0.1}, "g0_length": {"mean": 0.2, "sd": 0.05}}
+FIELD_PROFILE = PROFILE | {"field": "a0", "parameters": PROFILE["parameters"] | SPREAD}
+
+
+@pytest.mark.parametrize(
+    ("profile", "field", "space", "message"),
+    [
+        (PROFILE, {}, None, "it holds a noise law over t, made of campaigns without noise_model.field; the config's "),
+        (
+            FIELD_PROFILE,
+            None,
+            None,
+            "it was made of noise-field campaigns (noise_model.field.varies: a0); the config has no",
+        ),
+        (FIELD_PROFILE, {"varies": "a0_a1"}, None, "field.varies: a0); the config's noise_model.field varies a0_a1"),
+        (
+            FIELD_PROFILE | {"field": "a0_a1"},
+            {"varies": "a0_a1"},
+            None,
+            "the law 'inv_sqrt' needs the parameter(s) g1_amplitude",
+        ),
+        (
+            FIELD_PROFILE,
+            {},
+            {"axes": [{"name": "x", "low": 0, "high": 1}, {"name": "y", "low": 0, "high": 1}]},
+            "its noise field was learned over 1 axes, the space has 2",
+        ),
+    ],
+    ids=["law profile, field config", "field profile, no field", "other field", "no second spread", "other axes"],
+)
+def test_a_profile_must_be_of_the_same_kind_of_noise(profile, field, space, message):
     data = CampaignConfig().model_dump(mode="json")
-    data["noise_model"] |= {"profile": PROFILE, "field": {}}
-    with pytest.raises(ConfigError, match="cannot be the prior of a noise field"):
+    data["noise_model"] |= {"profile": profile, "field": field}
+    if space is not None:
+        data["space"] = {"axes": space["axes"], "t_min": 0.2, "t_max": 10.0}
+    with pytest.raises(ConfigError) as info:
         parse_config(data)
+    assert message in str(info.value)
+
+
+def test_a_field_profile_is_a_field_campaign_s_prior():
+    data = CampaignConfig().model_dump(mode="json")
+    data["noise_model"] |= {"profile": FIELD_PROFILE, "field": {}}
+    config = parse_config(data)
+    assert config.noise_model.profile.field == "a0"
+    assert config.noise_model.profile.parameters["g0_amplitude"].mean == 0.5
 
 
 @pytest.mark.parametrize(

@@ -9,7 +9,7 @@ from noisebo.instruments.forrester import ForresterInstrument, ForresterSettings
 from noisebo.campaign import engine
 from noisebo.campaign.driver import run_campaign
 from noisebo.campaign.steps import paired_positions, seed_points
-from noisebo.config import CampaignConfig, ConfigError, parse_config
+from noisebo.config import CampaignConfig, ConfigError, NoiseProfile, ParameterPosterior, ProfileDriver, parse_config
 from noisebo.events import DriverInfo
 from noisebo.models.convergence import converged, converged_map
 from noisebo.models.grids import grids
@@ -140,3 +140,38 @@ def test_paired_seed_positions_by_hand():
 def test_a_noise_field_needs_map_inference():
     with pytest.raises(ConfigError, match="noise_model.field: the noise field is fitted by MAP"):
         parse_config({"noise_model": {"field": {}}, "inference": {"mode": "nuts"}})
+
+
+def field_profile(settings: dict) -> dict:
+    """A profile of this setting's noise field, by hand: level A0 = 0.1, A1 = 1, the patch a
+    spread of about 1 in log A0 over 0.05 of x (x units: the space is [0, 1])."""
+    posterior = {"a0": (0.1, 0.02), "a1": (1.0, 0.05), "g0_amplitude": (1.0, 0.2), "g0_length": (0.05, 0.01)}
+    return NoiseProfile(
+        driver=ProfileDriver(name="forrester", version="1", settings=settings),
+        law="quadrature",
+        field="a0",
+        parameters={name: ParameterPosterior(mean=m, sd=s) for name, (m, s) in posterior.items()},
+        t_range_s=(0.2, 10.0),
+        noise_points=40,
+        campaigns=(),
+        made_utc="2026-11-25T00:00:00+00:00",
+    ).model_dump(mode="json")
+
+
+@pytest.mark.parametrize(
+    ("instrument", "kept"),
+    [({}, True), ({"a0": 0.5, "a1": 0.4}, False)],
+    ids=["the same instrument", "another instrument"],
+)
+def test_a_field_profile_is_the_prior_until_the_replicate_scatter_contradicts_it(instrument, kept):
+    settings = SETTINGS.model_copy(update=instrument)
+    config = CONFIG.with_overrides(
+        instrument={"settings": settings.model_dump()},
+        noise_model={"profile": field_profile(SETTINGS.model_dump()), "profile_check": False},
+        schedule={"n_steps": 2},
+    )
+    final = run_campaign(config, ForresterInstrument(settings), 5).final
+    assert [d.profile_in_use for d in final.decisions] == [kept, kept]
+    assert (final.data.profile_dropped_step is None) == kept
+    first = final.decisions[0].profile_p
+    assert first >= config.noise_model.profile_alpha if kept else first < config.noise_model.profile_alpha

@@ -6,7 +6,9 @@ import pytest
 from noisebo.config import CampaignConfig
 from noisebo.keys import PROFILE, jax_key
 from noisebo.models.noise_model import c4
-from noisebo.models.profile import NotDistillable, distil
+from simulated_fields import field_measurements
+
+from noisebo.models.profile import FieldCampaign, NotDistillable, distil, distil_field
 
 CONFIG = CampaignConfig()
 
@@ -51,7 +53,39 @@ def test_measurements_no_law_can_be_fitted_to_say_why(change, message):
         distil(CONFIG, *change(*law_measurements()), jax_key(0, PROFILE))
 
 
-def test_a_noise_field_is_not_distilled():
+def test_a_noise_field_is_distilled_by_distil_field():
     field = CONFIG.with_overrides(noise_model={"field": {}})
     with pytest.raises(NotDistillable, match="depends on x"):
         distil(field, *law_measurements(), jax_key(0, PROFILE))
+
+
+def test_a_field_profile_pools_each_campaign_s_own_fit_with_lengths_in_x_units():
+    # The same measurements twice, the second campaign's x axis ten times as long: its fit is
+    # the first one's with every length times 10, so the pooled length is 5.5 L +- 4.5 L.
+    field = CONFIG.with_overrides(noise_model={"field": {}})
+    wide = field.with_overrides(space={"x_max": 10.0})
+    x, t, sd, n = field_measurements()
+    posterior = distil_field(
+        [FieldCampaign(field, x, t, sd, n), FieldCampaign(wide, 10 * x, t, sd, n)], jax_key(0, PROFILE)
+    )
+    assert set(posterior) == {"a0", "a1", "g0_amplitude", "g0_length"}
+    length, spread = posterior["g0_length"], posterior["g0_amplitude"]
+    one = length.mean / 5.5
+    assert length.sd == pytest.approx(4.5 * one, rel=0.02) and 0.02 < one < 1.0
+    assert spread.sd < 0.02 * spread.mean and 0.1 < spread.mean < 2.0
+    assert posterior["a1"].mean == pytest.approx(2.0, rel=0.15)
+    assert abs(posterior["a0"].mean - 0.3) < 2 * posterior["a0"].sd + 0.1
+
+
+@pytest.mark.parametrize(
+    ("campaigns", "message"),
+    [
+        (lambda f, m: [], "no campaign"),
+        (lambda f, m: [FieldCampaign(f, m[0], np.full_like(m[1], 2.0), *m[2:])], "1 distinct t"),
+    ],
+    ids=["none", "one t"],
+)
+def test_field_campaigns_no_law_can_be_fitted_to_say_why(campaigns, message):
+    field = CONFIG.with_overrides(noise_model={"field": {}})
+    with pytest.raises(NotDistillable, match=message):
+        distil_field(campaigns(field, field_measurements(positions=5)), jax_key(0, PROFILE))
