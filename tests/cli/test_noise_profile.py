@@ -8,7 +8,7 @@ import yaml
 
 from noisebo.cli.main import main
 from noisebo.instruments import build
-from noisebo.instruments.registry import driver_info
+from noisebo.instruments.registry import driver_info, validated
 from noisebo.campaign import driver, engine
 from noisebo.models.profile import NoiseProfile
 from noisebo.storage.recorder import Recorder
@@ -27,10 +27,12 @@ def campaigns(tmp_path_factory, tiny_config):
     folder = tmp_path_factory.mktemp("profiles")
     config = tiny_config.with_overrides(schedule={"n_steps": 2})
     other = config.with_overrides(instrument={"kind": "forrester", "settings": {"a0": 0.5, "a1": 1.0}})
+    field = config.with_overrides(noise_model={"field": {}}, schedule={"n_seed": 4, "n_steps": 1})
     return {
         "a": finished(folder / "a.h5", config, 1),
         "b": finished(folder / "b.h5", config, 2),
         "other": finished(folder / "other.h5", other, 3),
+        "field": finished(folder / "field.h5", field, 4),
     }
 
 
@@ -50,12 +52,30 @@ def test_a_profile_pools_the_campaigns_noise_measurements(campaigns, tmp_path, c
     assert abs(a1.mean - 2.0) < 3 * a1.sd + 0.3  # the simulator's A1 = 2
 
 
+def test_a_field_campaign_gives_a_field_profile_a_field_campaign_takes(campaigns, tmp_path, capsys, tiny_config):
+    out = tmp_path / "field.yaml"
+    assert main(["noise-profile", str(campaigns["field"]), "--out", str(out)]) == 0
+    assert "g0_amplitude = " in capsys.readouterr().out
+    profile = NoiseProfile.model_validate(yaml.safe_load(out.read_text()))
+    assert profile.field == "a0" and {"a0", "a1", "g0_amplitude", "g0_length"} == set(profile.parameters)
+    assert all(p.sd == 0 for n, p in profile.parameters.items() if n.startswith("g0"))  # one campaign
+    with h5py.File(campaigns["field"], "r") as f:
+        assert profile.noise_points == int(np.sum(f["points/noise_measured"][()]))
+    taken = validated(tiny_config.with_overrides(noise_model={"field": {}, "profile": profile.model_dump(mode="json")}))
+    assert taken.noise_model.profile == profile
+
+
 def table():
     return [
         ("missing", lambda c, tmp: [str(tmp / "nowhere.h5")], "nowhere.h5"),
         ("empty", lambda c, tmp: [str(_write(tmp / "empty.h5", b""))], "empty"),
         ("not HDF5", lambda c, tmp: [str(_write(tmp / "text.h5", b"not a campaign\n" * 100))], "not an HDF5 file"),
         ("two instruments", lambda c, tmp: [str(c["a"]), str(c["other"])], "one instrument with one setting"),
+        (
+            "a field and a law",
+            lambda c, tmp: [str(c["a"]), str(c["field"])],
+            "was made with the noise a field varying a0 over 1 axes",
+        ),
     ]
 
 
