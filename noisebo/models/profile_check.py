@@ -21,6 +21,7 @@ on a true profile in under 1 % (``p_value``'s tests).
 
 from __future__ import annotations
 
+from functools import lru_cache
 from itertools import product
 from typing import NamedTuple
 
@@ -29,6 +30,7 @@ from scipy import optimize
 
 from noisebo import registry
 from noisebo.config import NoiseModelConfig, NoiseProfile
+from noisebo.models.inputs import capacity_for
 
 NODES = 5  # Gauss-Hermite nodes per profile parameter
 TINY_NOISE = 1e-12  # a law's noise is kept above this (a profile with A0 = A1 = 0 predicts none)
@@ -72,9 +74,28 @@ def _log_likelihood(sigma: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
     return float(np.sum(-dof * np.log(sigma) - dof * s**2 / (2.0 * sigma**2)))
 
 
-def _law_sigma(law, t: np.ndarray, values: dict[str, float]) -> np.ndarray:
-    sigma = np.asarray(law.mean(t, values["a0"], values["a1"], values.get("p", 0.5)), dtype=np.float64)
+@lru_cache(maxsize=None)
+def _law_program(kind: str):
+    import jax
+
+    law = registry.noise_law(kind)
+    return jax.jit(law.mean)
+
+
+def law_sigma(kind: str, t, a0, a1, p=0.5) -> np.ndarray:
+    """The noise sd of the law ``kind`` (numpy in and out, broadcasting), kept above
+    ``TINY_NOISE``. Run as one compiled program per padded size (``capacity_for`` of the
+    broadcast size): the law's operations run eagerly would compile for every new shape, i.e.
+    at every step of a campaign (0.3-0.5 s each)."""
+    arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (t, a0, a1, p)))
+    shape, n = arrays[0].shape, arrays[0].size
+    padded = [np.pad(a.reshape(-1), (0, capacity_for(n) - n), constant_values=1.0) for a in arrays]
+    sigma = np.asarray(_law_program(kind)(*padded), dtype=np.float64)[:n].reshape(shape)
     return np.maximum(sigma, TINY_NOISE)
+
+
+def _law_sigma(kind: str, t: np.ndarray, values: dict[str, float]) -> np.ndarray:
+    return law_sigma(kind, t, values["a0"], values["a1"], values.get("p", 0.5))
 
 
 def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
@@ -86,7 +107,7 @@ def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof
     bounds = [(priors[n].low, priors[n].high) for n in names]
 
     def loss(theta: np.ndarray) -> float:
-        return -_log_likelihood(_law_sigma(law, t, dict(zip(names, theta))), s, dof)
+        return -_log_likelihood(_law_sigma(cfg.mean, t, dict(zip(names, theta))), s, dof)
 
     starts = [[_profile(cfg).parameters[n].mean for n in names]]
     scale = float(np.median(s)) if np.median(s) > 0 else 1.0
@@ -113,11 +134,10 @@ def p_value(cfg: NoiseModelConfig, t: np.ndarray, shot_std: np.ndarray, n_shots:
         return float("nan")
     from scipy import stats  # 0.2 s to import: only a campaign with a profile needs it
 
-    law = registry.noise_law(cfg.mean)
     best = best_log_likelihood(cfg, t, s, dof)
     free = min(len(_profile(cfg).parameters), np.unique(t).size)
     sets, weights = _nodes(cfg)
-    ratios = np.asarray([2.0 * (best - _log_likelihood(_law_sigma(law, t, values), s, dof)) for values in sets])
+    ratios = np.asarray([2.0 * (best - _log_likelihood(_law_sigma(cfg.mean, t, values), s, dof)) for values in sets])
     return float(np.sum(weights * stats.chi2.sf(np.maximum(ratios, 0.0), free)))
 
 

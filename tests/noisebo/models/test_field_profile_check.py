@@ -83,3 +83,12 @@ def test_the_verdict_drops_the_profile_and_then_no_longer_checks():
 
 def test_the_profile_s_lengths_are_read_in_the_campaign_s_x_units():
     assert check.lengths(PROFILE, "g0", np.array([0.5])) == pytest.approx([0.3])
+
+
+def test_only_the_newest_points_are_checked():
+    old = field_points(11, 0.1, 1.0, 40, 30)  # half the shot noise: contradicts the profile
+    new = field_points(12, 0.1, 2.0, check.MAX_POINTS, 3)  # the profile's instrument
+    both = lambda first, second: tuple(np.concatenate([a, b]) for a, b in zip(first, second))  # noqa: E731
+    assert checked(old).p_value < 0.01
+    assert checked(both(old, new)).p_value == checked(new).p_value  # the old points are not looked at
+    assert checked(both(new, old)).p_value < 0.01
