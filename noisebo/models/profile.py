@@ -6,7 +6,9 @@ what one campaign learned of Noise(t) is worth keeping. ``distil`` pools the noi
 of several campaigns (each point's t, the sample sd of its shots and their number) and fits the
 campaigns' noise law to them once, as a campaign's noise model does (the law plus its residual
 GP, the sampling variance of a sample sd in the likelihood); the MAP fit's Laplace draws give
-each law parameter's posterior mean and sd, in the noise's units.
+each law parameter's posterior mean and sd, in the noise's units. Noise-field campaigns
+(``distil_field``) are fitted one by one, since their positions are different places: what they
+share is the law's level and the fields' spread over positions and lengths.
 """
 
 from __future__ import annotations
