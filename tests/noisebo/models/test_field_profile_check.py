@@ -92,3 +92,18 @@ def test_only_the_newest_points_are_checked():
     assert checked(old).p_value < 0.01
     assert checked(both(old, new)).p_value == checked(new).p_value  # the old points are not looked at
     assert checked(both(new, old)).p_value < 0.01
+
+
+def test_a_profile_whose_a1_varies_too_checks_both_fields():
+    spread = {"g1_amplitude": {"mean": 0.2, "sd": 0.0}, "g1_length": {"mean": 0.15, "sd": 0.0}}
+    profile = NoiseProfile.model_validate(
+        PROFILE.model_dump() | {"field": "a0_a1", "parameters": LAW | SPREAD | spread}
+    )
+    noise = CampaignConfig().with_overrides(noise_model={"field": {"varies": "a0_a1"}, "profile": profile.model_dump()})
+
+    def p(a0, a1, seed):
+        x, t, s, n = field_points(seed, a0, a1, 10, 30)
+        return check.p_value(noise.noise_model, x, SPAN, t, s, n)
+
+    assert sum(p(0.1, 2.0, seed) < 0.01 for seed in range(10)) <= 1
+    assert all(p(0.1, 1.0, seed) < 0.01 for seed in range(10))
