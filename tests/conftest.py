@@ -55,14 +55,16 @@ LONGEST_FIRST = (
     "cli/test_main.py",
     "flows/test_campaign_flow.py",
     "noisebo/campaign/test_decision.py",
+    "noisebo/campaign/test_decision_field.py",
     "storage/test_damage.py",
     "cli/test_damaged_files.py",
     "storage/test_hdf5.py",
     "noisebo/campaign/test_dimensions.py",
+    "noisebo/models/test_profile.py",
+    "cli/test_noise_profile.py",
     "cli/test_failures.py",
     "noisebo/test_plugin_registry.py",
     "bridge/test_server.py",
-    "noisebo/campaign/test_decision_field.py",
     "view/test_field_views.py",
 )
 
