@@ -117,10 +117,6 @@ def _logsumexp(a: np.ndarray) -> np.ndarray:
     return top[..., 0] + np.log(np.sum(np.exp(a - top), axis=-1))
 
 
-def _sigma(cfg: NoiseModelConfig, t, a0, a1, p) -> np.ndarray:
-    return law_sigma(cfg.mean, t, a0, a1, p)
-
-
 def _on_nodes(cfg: NoiseModelConfig, t: np.ndarray, smooth: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The noise sd (n, K) at t (n,) under the profile's means with the fields at the nodes
     (``_nodes``), and the nodes' log weights (K,)."""
@@ -129,14 +125,12 @@ def _on_nodes(cfg: NoiseModelConfig, t: np.ndarray, smooth: bool = False) -> tup
     grid, log_w = _nodes(len(_fields(profile)), smooth)
     a0 = mean["a0"] * np.exp(mean["g0_amplitude"] * grid[:, 0])
     a1 = mean["a1"] * (np.exp(mean["g1_amplitude"] * grid[:, 1]) if grid.shape[1] > 1 else np.ones(len(grid)))
-    return _sigma(cfg, t[:, None], a0[None, :], a1[None, :], mean.get("p", 0.5)), log_w
+    return law_sigma(cfg.mean, t[:, None], a0[None, :], a1[None, :], mean.get("p", 0.5)), log_w
 
 
-def discrepancy(
-    cfg: NoiseModelConfig, ids: np.ndarray, t: np.ndarray, s: np.ndarray, dof: np.ndarray, n_positions: int
-) -> np.ndarray:
+def discrepancy(cfg: NoiseModelConfig, ids: np.ndarray, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
     """D for data sets s (R, n) (sample sds at t (n,) with dof (n,) = shots - 1 at positions
-    ``ids`` (n,), sorted, in 0..n_positions - 1), under the profile's means: (R,)."""
+    ``ids`` (n,), sorted), under the profile's means: (R,)."""
     sigma, log_w = _on_nodes(cfg, t)
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     floor = 1e-3 * np.maximum(np.median(s, axis=1, keepdims=True), TINY_NOISE)
@@ -206,7 +200,7 @@ def replicates(
         g = rng.standard_normal((count, positions.shape[0])) @ np.linalg.cholesky(k).T
         levels.append(np.exp(amplitude[:, None] * g)[:, ids])
     a1 = draws["a1"][:, None] * (levels[1] if len(levels) > 1 else 1.0)
-    sigma = _sigma(cfg, t[None, :], draws["a0"][:, None] * levels[0], a1, p[:, None])
+    sigma = law_sigma(cfg.mean, t[None, :], draws["a0"][:, None] * levels[0], a1, p[:, None])
     return sigma * np.sqrt(rng.chisquare(np.broadcast_to(dof, sigma.shape)) / dof)
 
 
@@ -240,7 +234,7 @@ def p_value(
     shifts = shift_statistics(cfg, t, sets, dof)
     smaller = np.minimum.reduce(
         [
-            _exceeding(discrepancy(cfg, ids, t, sets, dof, positions.shape[0])),
+            _exceeding(discrepancy(cfg, ids, t, sets, dof)),
             _exceeding(shifts[:, 0]),
             _exceeding(shifts[:, 1]),
         ]
