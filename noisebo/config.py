@@ -993,12 +993,15 @@ class CampaignConfig(FrozenModel):
         profile = self.noise_model.profile
         if profile is None or profile.field is None:
             return self
+        d = self.space.dimensions
         made = sum(name.startswith("g0_length") for name in profile.parameters)
-        if made != self.space.dimensions:
-            raise ValueError(
-                f"noise_model.profile: its noise field was learned over {made} axes, the space has "
-                f"{self.space.dimensions}"
-            )
+        if made != d:
+            raise ValueError(f"noise_model.profile: its noise field was learned over {made} axes, the space has {d}")
+        for prefix in ("g0",) if profile.field == "a0" else ("g0", "g1"):
+            names = [f"{prefix}_length"] if d == 1 else [f"{prefix}_length_{k}" for k in range(d)]
+            missing = [name for name in names if name not in profile.parameters]
+            if missing:
+                raise ValueError(f"noise_model.profile: its noise field lacks {', '.join(missing)}")
         return self
 
     @model_validator(mode="after")

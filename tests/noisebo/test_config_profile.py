@@ -99,8 +99,22 @@ FIELD_PROFILE = PROFILE | {"field": "a0", "parameters": PROFILE["parameters"] | 
             {"axes": [{"name": "x", "low": 0, "high": 1}, {"name": "y", "low": 0, "high": 1}]},
             "its noise field was learned over 1 axes, the space has 2",
         ),
+        (
+            FIELD_PROFILE
+            | {"field": "a0_a1", "parameters": FIELD_PROFILE["parameters"] | {"g1_amplitude": SPREAD["g0_amplitude"]}},
+            {"varies": "a0_a1"},
+            None,
+            "its noise field lacks g1_length",
+        ),
     ],
-    ids=["law profile, field config", "field profile, no field", "other field", "no second spread", "other axes"],
+    ids=[
+        "law profile, field config",
+        "field profile, no field",
+        "other field",
+        "no second spread",
+        "other axes",
+        "no second length",
+    ],
 )
 def test_a_profile_must_be_of_the_same_kind_of_noise(profile, field, space, message):
     data = CampaignConfig().model_dump(mode="json")
