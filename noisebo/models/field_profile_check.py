@@ -47,6 +47,7 @@ from scipy.special import chdtr, gammaln, logsumexp, ndtri
 
 from noisebo import keys
 from noisebo.config import NoiseModelConfig, NoiseProfile
+from noisebo.models import noise_field
 from noisebo.models.profile_check import NO_PROFILE, TINY_NOISE, ProfileCheck, law_sigma
 
 GRID = 41  # nodes of each position's field, one field
@@ -71,8 +72,7 @@ def _fields(profile: NoiseProfile) -> tuple[str, ...]:
 def lengths(profile: NoiseProfile, prefix: str, spans: np.ndarray) -> np.ndarray:
     """Field ``prefix``'s lengths (d,) in x scaled by ``spans`` (d,), the campaign's axis widths
     in x units (the profile keeps them in x units)."""
-    d = spans.shape[0]
-    names = [f"{prefix}_length"] if d == 1 else [f"{prefix}_length_{k}" for k in range(d)]
+    names = noise_field.length_names(prefix, spans.shape[0])
     return np.asarray([profile.parameters[n].mean for n in names]) / spans
 
 

@@ -55,13 +55,21 @@ def distil(
     guess = noise_model.initial_guess(data, own)
     name, depends_on = noise_model.program_name(own)
     fitted = inference.fit_map(model, data, key, inf.restarts, LAPLACE_DRAWS, [guess], name=name, depends_on=depends_on)
-    out = {}
-    for name in ("a0", "a1", "p"):
-        if name not in fitted.params:
-            continue
-        draws = np.asarray(fitted.params[name], dtype=np.float64) * (scale if name in ("a0", "a1") else 1.0)
-        out[name] = ParameterPosterior(mean=float(draws.mean()), sd=float(draws.std()))
-    return out
+    return {name: _summary(draws) for name, draws in _law_draws(fitted.params, scale).items()}
+
+
+def _law_draws(params: dict, scale: float) -> dict[str, np.ndarray]:
+    """The law's parameters' draws from a fit's samples: a0, a1 in value units (times the data
+    ``scale``), and p where the law has it."""
+    return {
+        name: np.asarray(params[name], dtype=np.float64) * (scale if name != "p" else 1.0)
+        for name in ("a0", "a1", "p")
+        if name in params
+    }
+
+
+def _summary(values: np.ndarray) -> ParameterPosterior:
+    return ParameterPosterior(mean=float(np.mean(values)), sd=float(np.std(values)))
 
 
 def _check_measurements(t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray) -> None:
@@ -97,11 +105,7 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
     own = nm.model_copy(update={"profile": None})  # the campaign's data alone, not its prior
     data, scale, _ = noise_field.prepare(x, t, shot_std, n_shots, own, field, t_min, t_max, inf.max_inputs)
     samples, data = noise_field.fit(data, own, field, key, field_fit.FIELD_RESTARTS, LAPLACE_DRAWS)
-    law = {
-        name: np.asarray(value, dtype=np.float64) * (scale if name in ("a0", "a1") else 1.0)
-        for name, value in samples.params.items()
-        if name in ("a0", "a1", "p")
-    }
+    law = _law_draws(samples.params, scale)
     hyper = noise_field.field_hyperparameters(data)
     for prefix in noise_field.field_names(field):
         for k, name in enumerate(noise_field.length_names(prefix, spans.size)):
@@ -121,11 +125,5 @@ def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> dict[str
     if not campaigns:
         raise NotDistillable("no campaign was given")
     laws, hypers = zip(*(_field_fit(c, jax.random.fold_in(key, i)) for i, c in enumerate(campaigns)))
-    out = {}
-    for name in laws[0]:
-        draws = np.concatenate([law[name] for law in laws])
-        out[name] = ParameterPosterior(mean=float(draws.mean()), sd=float(draws.std()))
-    for name in hypers[0]:
-        values = np.asarray([hyper[name] for hyper in hypers])
-        out[name] = ParameterPosterior(mean=float(values.mean()), sd=float(values.std()))
-    return out
+    pooled = {name: _summary(np.concatenate([law[name] for law in laws])) for name in laws[0]}
+    return pooled | {name: _summary(np.asarray([hyper[name] for hyper in hypers])) for name in hypers[0]}
