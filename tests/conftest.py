@@ -70,22 +70,38 @@ LONGEST_FIRST = (
 
 
 QUICK_TO_COMPILE = "JAX_DISABLE_MOST_OPTIMIZATIONS"
+# XLA's CPU fusion emitters compile each fusion through MLIR: slower to compile than the older
+# emitters (29 % less time in tests/noisebo/models/test_noise_field.py and
+# tests/noisebo/campaign/test_decision.py without them, cold cache).
+QUICK_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
+
+
+def pytest_configure(config):
+    # Quick to compile rather than quick to run: most tests run each program a few times, so XLA's
+    # optimisation passes cost more than they save. Not where end-to-end tests are selected: their
+    # long campaigns run their programs thousands of times (the 200-point kills took 40 % longer).
+    # Set in each process that runs tests (an xdist worker configures for itself) before anything
+    # starts XLA (it reads XLA_FLAGS once); the processes a test starts inherit both. A value set by
+    # the caller wins.
+    if _selects_e2e(config.getoption("markexpr") or "") or QUICK_TO_COMPILE in os.environ:
+        return
+    os.environ[QUICK_TO_COMPILE] = "1"
+    if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {QUICK_XLA_FLAGS}".strip()
+    import jax
+
+    jax.config.update("jax_disable_most_optimizations", True)
+
+
+def _selects_e2e(markexpr: str) -> bool:
+    """Whether ``-m markexpr`` may select end-to-end tests (the default, ``not slow and not e2e``,
+    does not)."""
+    return "e2e" in markexpr.replace("not e2e", "")
 
 
 @pytest.hookimpl(trylast=True)  # after -m has deselected
 def pytest_collection_modifyitems(config, items):
     _order_longest_first(config, items)
-    # Quick to compile rather than quick to run: most tests run each program a few times, so XLA's
-    # optimisation passes cost more than they save (the same programs; 23 % less time in the
-    # compile-bound tests of tests/noisebo). Not where end-to-end tests are selected: their long
-    # campaigns run their programs thousands of times (the 200-point kills took 40 % longer).
-    # Set in each process that runs tests (an xdist worker collects for itself) before any test
-    # compiles; the processes a test starts inherit it. A value set by the caller wins.
-    if QUICK_TO_COMPILE not in os.environ and not any(item.get_closest_marker("e2e") for item in items):
-        os.environ[QUICK_TO_COMPILE] = "1"
-        import jax
-
-        jax.config.update("jax_disable_most_optimizations", True)
 
 
 def _order_longest_first(config, items):

@@ -1,7 +1,8 @@
 """The lint rules of pyproject.toml ([tool.ruff.lint]) and its format ([tool.ruff]) hold for the whole repository, the
 whole installed package type-checks with [tool.mypy]'s settings (the core, and the adapters mapped into the namespace
 with it: one mypy run covers both), a plain `mypy` checks the core, and a breach of each is caught: CI runs them
-through this test."""
+through this test. The whole-package type check (a minute of mypy over the package and what it imports) is in the
+end-to-end tier (`-m e2e`, which CI runs), so the default run stays short."""
 
 import subprocess
 import sys
@@ -82,6 +83,7 @@ def installed(tmp_path_factory) -> tuple[Path, Path]:
     return site, where / "cache"
 
 
+@pytest.mark.e2e
 def test_the_installed_package_type_checks(installed):
     site, cache = installed
     out = mypy("-p", "noisebo", cwd=site, cache=cache)
@@ -89,6 +91,7 @@ def test_the_installed_package_type_checks(installed):
     assert out.stdout.startswith("Success: no issues found")
 
 
+@pytest.mark.e2e
 def test_a_type_error_in_an_adapter_is_caught(installed):
     site, cache = installed
     wrong = site / "noisebo" / "view" / "wrong.py"
