@@ -478,6 +478,14 @@ class PrimaryModelConfig(FrozenModel):
     length_scale: PositiveFloat = Field(0.5, description="log-sd of each length scale's LogNormal prior")
 
 
+def field_length_names(prefix: str, dimensions: int) -> tuple[str, ...]:
+    """A noise field's length hyperparameters, as fits and profiles name them: (prefix_length,)
+    for one axis, else prefix_length_k (k = 0 .. dimensions - 1)."""
+    if dimensions == 1:
+        return (f"{prefix}_length",)
+    return tuple(f"{prefix}_length_{k}" for k in range(dimensions))
+
+
 class NoiseFieldConfig(FrozenModel):
     """How the noise law's parameters vary over x (see the module docstring). The law, the
     A0/A1/p priors and the residual GP over t come from ``NoiseModelConfig``.
@@ -998,8 +1006,7 @@ class CampaignConfig(FrozenModel):
         if made != d:
             raise ValueError(f"noise_model.profile: its noise field was learned over {made} axes, the space has {d}")
         for prefix in ("g0",) if profile.field == "a0" else ("g0", "g1"):
-            names = [f"{prefix}_length"] if d == 1 else [f"{prefix}_length_{k}" for k in range(d)]
-            missing = [name for name in names if name not in profile.parameters]
+            missing = [name for name in field_length_names(prefix, d) if name not in profile.parameters]
             if missing:
                 raise ValueError(f"noise_model.profile: its noise field lacks {', '.join(missing)}")
         return self

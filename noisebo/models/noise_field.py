@@ -120,6 +120,7 @@ from scipy import optimize
 
 from noisebo import registry
 from noisebo.config import NoiseFieldConfig, NoiseModelConfig
+from noisebo.config import field_length_names as length_names
 from noisebo.models import inference
 from noisebo.models.inputs import Grouped, capacity_for, group_ids, merge
 from noisebo.models.kernels import JITTER, matern52
@@ -185,13 +186,6 @@ class FieldData(NamedTuple):
 def field_names(field: NoiseFieldConfig) -> tuple[str, ...]:
     """The fields' name prefixes: ("g0",) or ("g0", "g1")."""
     return ("g0",) if field.varies == "a0" else ("g0", "g1")
-
-
-def length_names(prefix: str, dimensions: int) -> tuple[str, ...]:
-    """A field's length hyperparameters: (prefix_length,) for one axis, else prefix_length_k."""
-    if dimensions == 1:
-        return (f"{prefix}_length",)
-    return tuple(f"{prefix}_length_{k}" for k in range(dimensions))
 
 
 def basis(dimensions: int, field: NoiseFieldConfig) -> tuple[np.ndarray, float]:
