@@ -247,9 +247,15 @@ def warm_profile(args, base):
 
     if args.profile is not None:
         profile = NoiseProfile.model_validate(read_profile(args.profile, "--profile"))
-        return profile, (
-            f"profile {args.profile} ({len(profile.campaigns)} campaigns of {profile.driver.name}"
-            f"{'' if describes(profile, base) else '; other driver or settings, used with profile_check: false'})"
+        configs = ", ".join(sorted({c.config for c in profile.campaigns})) or "unnamed configs"
+        same = (
+            "the same driver and settings"
+            if describes(profile, base)
+            else "another driver or settings, used with profile_check: false"
+        )
+        return (
+            profile,
+            f"profile {args.profile} ({len(profile.campaigns)} campaigns of {configs} on {profile.driver.name}: {same})",
         )
     folder = (args.json.parent / f"{args.json.stem}_profile") if args.json else Path("budget_profile")
     folder.mkdir(parents=True, exist_ok=True)
@@ -445,7 +451,7 @@ def main(argv=None) -> int:
             names.remove(GPCAM)
             notes.append(f"gpcam: not run: {missing_peer}")
     profile = None
-    if WARM in names and not args.report:
+    if WARM in names and (not args.report or args.profile is not None):  # a report names a given profile too
         profile, whence = warm_profile(args, base)
         notes.append(f"budget warm: {whence}")
     for name in names:

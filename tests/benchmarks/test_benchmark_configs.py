@@ -260,3 +260,49 @@ def test_the_two_t_star_definitions():
         f"{_tstar.LAW} = {stars[_tstar.LAW]:.4f} s" in line and f"{_tstar.X_AVG} = {stars[_tstar.X_AVG]:.4f} s" in line
     )
     assert line.endswith(f"compare against {_tstar.X_AVG}")
+
+
+@pytest.mark.parametrize(
+    "settings, says",
+    [
+        ({"a0": 0.1, "a1": 2.0}, "the same driver and settings"),
+        ({"a0": 0.5, "a1": 1.0}, "another driver or settings, used with profile_check: false"),
+    ],
+)
+def test_the_warm_design_s_profile_is_named_with_its_campaigns_configs(tmp_path, capsys, settings, says):
+    """Given --profile, the output (a report too) says which campaigns the profile came from and
+    whether they ran on the benchmark's driver and settings (data/configs/forrester.yaml's)."""
+    from noisebo.config import NoiseProfile, ParameterPosterior, ProfileDriver
+    from noisebo.instruments.forrester import ForresterSettings
+
+    made = [
+        {
+            "file": f"other_s{s}.h5",
+            "config": "forrester_left_half",
+            "seed": s,
+            "created_utc": "2026-11-26T00:00:00+00:00",
+            "noise_points": 5,
+        }
+        for s in (1000, 1001)
+    ]
+    profile = NoiseProfile(
+        driver=ProfileDriver(name="forrester", version="1", settings=ForresterSettings(**settings).model_dump()),
+        law="inv_sqrt",
+        parameters={"a0": ParameterPosterior(mean=0.3, sd=0.1), "a1": ParameterPosterior(mean=1.8, sd=0.2)},
+        t_range_s=(0.2, 6.0),
+        noise_points=10,
+        campaigns=made,
+        made_utc="2026-11-26T00:00:00+00:00",
+    )
+    (tmp_path / "profile.yaml").write_text(yaml.safe_dump(profile.model_dump(mode="json")))
+    record = {"seed": 0, "times_s": [10.0, 50.0], "rmse": [1.0, 0.4], "points": 12, "t_opt": 2.4, "t_rel_error": 0.0}
+    path = tmp_path / "warm.json"
+    path.write_text(json.dumps({"records": {"budget warm": [record]}}))
+    argv = ["--report", "--json", str(path), "--designs", "budget warm", "--budget", "60", "--at", "20"]
+    assert budget.main([*argv, "--profile", str(tmp_path / "profile.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert (
+        f"budget warm: profile {tmp_path / 'profile.yaml'} (2 campaigns of forrester_left_half on forrester: {says})"
+        in out
+    )
+    assert "| budget warm (1 seeds) |" in out
