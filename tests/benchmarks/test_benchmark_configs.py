@@ -306,3 +306,23 @@ def test_the_warm_design_s_profile_is_named_with_its_campaigns_configs(tmp_path,
         in out
     )
     assert "| budget warm (1 seeds) |" in out
+
+
+@pytest.mark.parametrize("path", sorted((BENCHMARKS / "configs").glob("*.yaml")), ids=lambda p: p.stem)
+def test_every_benchmark_config_validates(path):
+    assert validated(load_config(path)).name == path.stem
+
+
+@pytest.mark.parametrize(
+    "half, whole",
+    [
+        ("forrester_left_half", ROOT / "data" / "configs" / "forrester.yaml"),
+        ("forrester_noise05_left_half", BENCHMARKS / "configs" / "forrester_noise05.yaml"),
+    ],
+)
+def test_the_other_objective_runs_on_the_same_instrument(half, whole):
+    """The warm design's other objective: the same driver and settings (so a profile of it passes
+    the profile check) over the left half of x."""
+    other, same = validated(load_config(BENCHMARKS / "configs" / f"{half}.yaml")), validated(load_config(whole))
+    assert other.instrument == same.instrument
+    assert (other.space.x_min, other.space.x_max) == (0.0, 0.5) and (same.space.x_min, same.space.x_max) == (0.0, 1.0)
