@@ -46,8 +46,7 @@ import numpy as np
 from scipy.special import chdtr, gammaln, logsumexp, ndtri
 
 from noisebo import keys
-from noisebo.config import NoiseModelConfig, NoiseProfile
-from noisebo.models import noise_field
+from noisebo.config import NoiseModelConfig, NoiseProfile, field_length_names
 from noisebo.models.profile_check import NO_PROFILE, TINY_NOISE, ProfileCheck, law_sigma
 
 GRID = 41  # nodes of each position's field, one field
@@ -72,7 +71,7 @@ def _fields(profile: NoiseProfile) -> tuple[str, ...]:
 def lengths(profile: NoiseProfile, prefix: str, spans: np.ndarray) -> np.ndarray:
     """Field ``prefix``'s lengths (d,) in x scaled by ``spans`` (d,), the campaign's axis widths
     in x units (the profile keeps them in x units)."""
-    names = noise_field.length_names(prefix, spans.shape[0])
+    names = field_length_names(prefix, spans.shape[0])
     return np.asarray([profile.parameters[n].mean for n in names]) / spans
 
 

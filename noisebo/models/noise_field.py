@@ -119,8 +119,7 @@ import numpy as np
 from scipy import optimize
 
 from noisebo import registry
-from noisebo.config import NoiseFieldConfig, NoiseModelConfig
-from noisebo.config import field_length_names as length_names
+from noisebo.config import NoiseFieldConfig, NoiseModelConfig, field_length_names
 from noisebo.models import inference
 from noisebo.models.inputs import Grouped, capacity_for, group_ids, merge
 from noisebo.models.kernels import JITTER, matern52
@@ -277,7 +276,7 @@ def set_field(data: FieldData, hyper: dict) -> FieldData:
     n_fields = data.field_amplitude.shape[0]
     prefixes = ("g0", "g1")[:n_fields]
     amp = jnp.asarray([float(hyper[f"{p}_amplitude"]) for p in prefixes])
-    lengths = jnp.asarray([[float(hyper[n]) for n in length_names(p, dims)] for p in prefixes])
+    lengths = jnp.asarray([[float(hyper[n]) for n in field_length_names(p, dims)] for p in prefixes])
     return data._replace(field_amplitude=amp, field_lengths=lengths)
 
 
@@ -287,7 +286,7 @@ def field_hyperparameters(data: FieldData) -> dict:
     out = {}
     for f, prefix in enumerate(("g0", "g1")[: data.field_amplitude.shape[0]]):
         out[f"{prefix}_amplitude"] = float(data.field_amplitude[f])
-        out |= {n: float(v) for n, v in zip(length_names(prefix, dims), np.asarray(data.field_lengths[f]))}
+        out |= {n: float(v) for n, v in zip(field_length_names(prefix, dims), np.asarray(data.field_lengths[f]))}
     return out
 
 
@@ -698,7 +697,7 @@ def estimate_field(
         theta = np.exp(best.x)
         prefix = ("g0", "g1")[f]
         out[f"{prefix}_amplitude"] = float(theta[0])
-        out |= {n: float(val) for n, val in zip(length_names(prefix, dims), theta[1:])}
+        out |= {n: float(val) for n, val in zip(field_length_names(prefix, dims), theta[1:])}
     return out
 
 

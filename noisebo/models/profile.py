@@ -25,6 +25,7 @@ from noisebo.config import (  # noqa: F401 - the profile's records, re-exported
     ParameterPosterior,
     ProfileCampaign,
     ProfileDriver,
+    field_length_names,
 )
 from noisebo.models import field_fit, inference, noise_field, noise_model
 
@@ -108,7 +109,7 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
     law = _law_draws(samples.params, scale)
     hyper = noise_field.field_hyperparameters(data)
     for prefix in noise_field.field_names(field):
-        for k, name in enumerate(noise_field.length_names(prefix, spans.size)):
+        for k, name in enumerate(field_length_names(prefix, spans.size)):
             hyper[name] *= float(spans[k])
     return law, hyper
 
