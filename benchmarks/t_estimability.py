@@ -9,6 +9,12 @@ from the configured seed design, the other points at t*), fits the law's two amp
 maximum likelihood (s^2 (n-1) / sigma^2 is chi-squared), and reports how far the optimum of the
 fitted law lands from t*. No model, prior or acquisition is involved: this is the accuracy a
 campaign of that design can reach at best, for the configured design and a few alternatives.
+The fitted family is the one of the two-source laws (A1/sqrt(t) + A0, sqrt(A1^2/t + A0^2)) that
+lies closer to the simulator's noise law over [t_min, t_max]; the header names it.
+
+A second table does the same for a noise profile (``noisebo noise-profile``): the noise points of
+K campaigns of the config (seed points and the BO points before convergence, no few-shot points:
+the ones a profile pools) fitted together, the best any profile of K campaigns can know t* from.
 t* here is t*(law), the optimum with the simulator's x-independent noise law (``_tstar.py``): the
 law is what is fitted. The config is validated as ``noisebo run`` validates it (``_config.py``).
 """
@@ -32,43 +38,88 @@ from noisebo.campaign.steps import seed_points  # noqa: E402
 N_BEFORE_CONVERGENCE = 3  # BO points measured with shots_before: converged at step 2, the earliest
 
 
-def law_amplitudes(noise_law, t_min: float, t_max: float) -> tuple[float, float]:
-    """(A0, A1) of sqrt(A1^2/t + A0^2) fitted to the true law on a log grid (relative least squares)."""
+PROFILE_CAMPAIGNS = (1, 3, 5, 10, 20)  # campaigns pooled in a profile, the second table's rows
+
+
+def _sources(law: str, t: np.ndarray) -> np.ndarray:
+    """Each amplitude's term for ``law`` (m, 2): A0's and A1's, in noise units ("inv_sqrt") or
+    variance units ("quadrature"), so the law is linear in (A0, A1) or (A0^2, A1^2)."""
+    return np.column_stack([np.ones_like(t), 1.0 / np.sqrt(t) if law == "inv_sqrt" else 1.0 / t])
+
+
+def law_amplitudes(noise_law, t_min: float, t_max: float) -> tuple[str, float, float]:
+    """The two-source law closest to ``noise_law`` on a log grid over [t_min, t_max] (relative
+    least squares): its name ("inv_sqrt": A1/sqrt(t) + A0, "quadrature": sqrt(A1^2/t + A0^2)),
+    A0 and A1 (noise units)."""
     t = np.geomspace(t_min, t_max, 64)
-    var = noise_law(t) ** 2
-    design = np.column_stack([np.ones_like(t), 1.0 / t]) / var[:, None]
-    (a0_sq, a1_sq), *_ = np.linalg.lstsq(design, np.ones_like(t), rcond=None)
-    return float(np.sqrt(max(a0_sq, 0.0))), float(np.sqrt(max(a1_sq, 0.0)))
+    noise = noise_law(t)
+    best = None
+    for law, power in (("inv_sqrt", 1), ("quadrature", 2)):
+        target = noise**power
+        coef, *_ = np.linalg.lstsq(_sources(law, t) / target[:, None], np.ones_like(t), rcond=None)
+        amplitudes = np.maximum(coef, 0.0) ** (1.0 / power)
+        fitted = law_noise(law, t, *amplitudes)
+        error = float(np.sum((fitted / noise - 1.0) ** 2))
+        if best is None or error < best[0]:
+            best = (error, law, float(amplitudes[0]), float(amplitudes[1]))
+    assert best is not None
+    return best[1], best[2], best[3]
 
 
-def fitted_t_opt(t, s, n, grid, alpha, beta) -> float:
-    """Optimum of the reward along the chi-squared maximum-likelihood law for sample sds s."""
+def law_noise(law: str, t: np.ndarray, a0: float, a1: float) -> np.ndarray:
+    """Noise(t) of the two-source ``law`` with amplitudes A0, A1."""
+    if law == "inv_sqrt":
+        return _sources(law, t) @ np.array([a0, a1])
+    return np.sqrt(_sources(law, t) @ np.array([a0**2, a1**2]))
+
+
+def fitted_t_opt(t, s, n, grid, alpha, beta, law: str = "quadrature") -> float:
+    """Optimum of the reward along ``law`` fitted to sample sds s (n shots each) by chi-squared
+    maximum likelihood."""
 
     def nll(log_params):
-        a0_sq, a1_sq = np.exp(log_params)
-        var = a1_sq / t + a0_sq
+        var = law_noise(law, t, *np.exp(log_params)) ** 2
         return float(np.sum((n - 1) * (s**2 / var + np.log(var))))
 
-    start = np.log([np.mean(s) ** 2 / 2, np.mean(s**2 * t) / 2])
+    if law == "inv_sqrt":
+        start = np.log([np.mean(s) / 2, np.mean(s * np.sqrt(t)) / 2])
+    else:
+        start = 0.5 * np.log([np.mean(s) ** 2 / 2, np.mean(s**2 * t) / 2])
     best = optimize.minimize(nll, start, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9}).x
-    a0_sq, a1_sq = np.exp(best)
-    return float(grid[np.argmax(-alpha * grid**2 - beta * np.sqrt(a1_sq / grid + a0_sq))])
+    return float(grid[np.argmax(-alpha * grid**2 - beta * law_noise(law, grid, *np.exp(best)))])
 
 
-def simulate(config, noise_law, t_star: float, trials: int) -> np.ndarray:
-    """|t_opt - t*| / t* over ``trials`` campaigns of this design (seed design from the config)."""
-    s, sched, rew = config.space, config.schedule, config.reward
+def _noise_points(config, seed: int, t_star: float, after: bool) -> tuple[np.ndarray, np.ndarray]:
+    """One campaign's noise points: t (s) and shots. Its seed points and the BO points before
+    convergence at t*, ``shots_before`` each; with ``after``, the few-shot points after it too."""
+    sched = config.schedule
+    n_after = max(sched.n_steps - N_BEFORE_CONVERGENCE, 0) if after else 0
+    t = np.concatenate([seed_points(config, seed)[:, 1], np.full(N_BEFORE_CONVERGENCE + n_after, t_star)])
+    n = np.array([sched.shots_before] * (sched.n_seed + N_BEFORE_CONVERGENCE) + [sched.shots_after] * n_after)
+    return t, n
+
+
+def simulate(config, noise_law, t_star: float, trials: int, law: str, campaigns: int = 0) -> np.ndarray:
+    """|t_opt - t*| / t* over ``trials`` campaigns of this design (seed design from the config),
+    or, with ``campaigns`` K > 0, over ``trials`` profiles, each pooling K campaigns' noise points."""
+    s, rew = config.space, config.reward
     grid = np.linspace(s.t_min, s.t_max, 4001)
     rng = np.random.default_rng(0)
-    n_after = max(sched.n_steps - N_BEFORE_CONVERGENCE, 0)
     errors = []
     for trial in range(trials):
-        t = np.concatenate([seed_points(config, trial)[:, 1], np.full(N_BEFORE_CONVERGENCE + n_after, t_star)])
-        n = np.array([sched.shots_before] * (sched.n_seed + N_BEFORE_CONVERGENCE) + [sched.shots_after] * n_after)
+        if campaigns:
+            pieces = [_noise_points(config, trial * campaigns + c, t_star, after=False) for c in range(campaigns)]
+            t, n = (np.concatenate(part) for part in zip(*pieces))
+        else:
+            t, n = _noise_points(config, trial, t_star, after=True)
         true_sd = noise_law(t)
         sd = np.array([np.std(rng.normal(0.0, sigma, k), ddof=1) for sigma, k in zip(true_sd, n)])
-        errors.append(abs(fitted_t_opt(t, sd, n, grid, rew.alpha, rew.beta) / t_star - 1.0))
+        errors.append(abs(fitted_t_opt(t, sd, n, grid, rew.alpha, rew.beta, law) / t_star - 1.0))
     return np.asarray(errors)
+
+
+def _shares(errors: np.ndarray) -> str:
+    return f"{100 * np.median(errors):.1f} % | {100 * np.mean(errors <= 0.05):.0f} % | {100 * np.mean(errors <= 0.10):.0f} %"
 
 
 def main(argv=None) -> int:
@@ -79,21 +130,31 @@ def main(argv=None) -> int:
     base, instrument = benchmark_config(parser, args.config)
     s = base.space
     t_star = law_t_star(base, instrument)
-    a0, a1 = law_amplitudes(instrument.noise_law, s.t_min, s.t_max)
+    law, a0, a1 = law_amplitudes(instrument.noise_law, s.t_min, s.t_max)
+    shown = "A1/sqrt(t) + A0" if law == "inv_sqrt" else "sqrt(A1^2/t + A0^2)"
+    floor = a0**2 / law_noise(law, np.array([t_star]), a0, a1)[0] ** 2
     print(
-        f"{base.name}: t* = {LAW} = {t_star:.4f} s (the optimum with the x-independent noise law); true law ~ sqrt(A1^2/t + A0^2) with A1 = {a1:.3f}, A0 = {a0:.3f} "
-        f"(A0 is {100 * a0**2 / (a1**2 / t_star + a0**2):.0f} % of the noise variance at t*); {args.trials} trials"
+        f"{base.name}: t* = {LAW} = {t_star:.4f} s (the optimum with the x-independent noise law); true law ~ {shown} with A1 = {a1:.3f}, A0 = {a0:.3f} "
+        f"(A0 is {100 * floor:.0f} % of the noise variance at t*); fitted as {law}; {args.trials} trials"
     )
-    print("| seed times | shots before convergence | median abs(t_opt - t*)/t* | within 10 % |\n|---|---|---|---|")
+    print(
+        "| seed times | shots before convergence | median abs(t_opt - t*)/t* | within 5 % | within 10 % |\n|---|---|---|---|---|"
+    )
     for scale in ("log", "log_span"):
         for shots in sorted({base.schedule.shots_before, 30, 50, 100}):
             config = base.with_overrides(schedule={"seed_t_scale": scale, "shots_before": shots})
-            errors = simulate(config, instrument.noise_law, t_star, args.trials)
+            errors = simulate(config, instrument.noise_law, t_star, args.trials, law)
             mark = " (config)" if (scale, shots) == (base.schedule.seed_t_scale, base.schedule.shots_before) else ""
-            print(
-                f"| {scale}{mark} | {shots} | {100 * np.median(errors):.1f} % | {100 * np.mean(errors <= 0.10):.0f} % |",
-                flush=True,
-            )
+            print(f"| {scale}{mark} | {shots} | {_shares(errors)} |", flush=True)
+    sched = base.schedule
+    print(
+        f"\nA profile of K campaigns of the config ({sched.n_seed} seed points ({sched.seed_t_scale}) and "
+        f"{N_BEFORE_CONVERGENCE} at t*, {sched.shots_before} shots each, per campaign), fitted together:"
+    )
+    print("| campaigns | noise points | median abs(t_opt - t*)/t* | within 5 % | within 10 % |\n|---|---|---|---|---|")
+    for k in PROFILE_CAMPAIGNS:
+        errors = simulate(base, instrument.noise_law, t_star, args.trials, law, campaigns=k)
+        print(f"| {k} | {k * (sched.n_seed + N_BEFORE_CONVERGENCE)} | {_shares(errors)} |", flush=True)
     return 0
 
 
