@@ -34,6 +34,9 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
   by ``noisebo noise-profile`` from 3 campaigns of the paper's protocol (15 steps) on the same
   instrument and settings with seeds 1000-1002, none of the benchmark's seeds (the output says
   which); a --profile of another driver or other settings is used with ``profile_check: false``;
+- "budget warm informative": the same profile with the posterior rule and informative noise points
+  of "budget informative" (a profile that leaves t* wider than 5 % is narrowed by the campaign's own
+  noise points);
 - "gpcam": the peer, gpCAM (``benchmarks/_gpcam.py``: how it is set up and why that is fair),
   when the optional extra is installed (``pip install 'noisebo[peers]'``); the output says so when
   it is not.
@@ -92,6 +95,7 @@ INFO_RATE = "info_rate"
 COLD, WARM, GPCAM, BUDGET_RATE = "budget cold", "budget warm", "gpcam", "budget info_rate"
 VALUED, INFORMATIVE = "budget valued", "budget informative"
 RATE_INFORMATIVE = "budget info_rate informative"
+WARM_INFORMATIVE = "budget warm informative"
 PROFILE_SEEDS = (1000, 1001, 1002)  # the warm design's profile campaigns: none of the benchmark's seeds
 # What --help lists: a fixed design's name depends on the config (its t range and t*).
 DESIGNS = (
@@ -106,6 +110,7 @@ DESIGNS = (
     RATE_INFORMATIVE,
     VALUED,
     WARM,
+    WARM_INFORMATIVE,
     GPCAM,
 )
 RENAMED = {"info rate": INFO_RATE}  # a JSON written before the names were one spelling
@@ -182,15 +187,17 @@ BUDGET_DESIGNS = {
     RATE_INFORMATIVE: (LEARNS_T, {"policy": INFO_RATE}),
     VALUED: ({**BUDGET_MODE, "noise_t": "valued"}, {}),
 }
+# The budget designs that start from a noise profile: name -> schedule overrides.
+WARM_DESIGNS = {WARM: BUDGET_MODE, WARM_INFORMATIVE: LEARNS_T}
 
 
 def design_config(base, name: str, fixed: dict[str, float], profile=None):
     if name in BUDGET_DESIGNS:
         schedule, acquisition = BUDGET_DESIGNS[name]
         return base.with_overrides(schedule=schedule, acquisition=acquisition)
-    if name == WARM:
+    if name in WARM_DESIGNS:
         return base.with_overrides(
-            schedule={"mode": "budget"},
+            schedule=WARM_DESIGNS[name],
             noise_model={"profile": profile.model_dump(mode="json"), "profile_check": describes(profile, base)},
         )
     if name in paper_policies():
@@ -419,7 +426,7 @@ def main(argv=None) -> int:
     score = scorer(base, instrument)
     s = base.space
     fixed = fixed_designs(s.t_min, s.t_max, t_star)
-    known = [*paper_policies(), *fixed, INFO_RATE, *BUDGET_DESIGNS, WARM, GPCAM]
+    known = [*paper_policies(), *fixed, INFO_RATE, *BUDGET_DESIGNS, *WARM_DESIGNS, GPCAM]
     names, unknown = resolve(args.designs or known, known)
     if unknown:
         parser.error(
@@ -451,9 +458,10 @@ def main(argv=None) -> int:
             names.remove(GPCAM)
             notes.append(f"gpcam: not run: {missing_peer}")
     profile = None
-    if WARM in names and (not args.report or args.profile is not None):  # a report names a given profile too
+    warm = [name for name in names if name in WARM_DESIGNS]
+    if warm and (not args.report or args.profile is not None):  # a report names a given profile too
         profile, whence = warm_profile(args, base)
-        notes.append(f"budget warm: {whence}")
+        notes.append(f"{', '.join(warm)}: {whence}")
     for name in names:
         if args.report:
             records[name] = done.get("records", {}).get(name, [])
