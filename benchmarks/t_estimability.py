@@ -73,7 +73,7 @@ def law_noise(law: str, t: np.ndarray, a0: float, a1: float) -> np.ndarray:
     return np.sqrt(_sources(law, t) @ np.array([a0**2, a1**2]))
 
 
-def fitted_t_opt(t, s, n, grid, alpha, beta, law: str = "quadrature") -> float:
+def fitted_t_opt(t, s, n, grid, alpha, beta, law: str) -> float:
     """Optimum of the reward along ``law`` fitted to sample sds s (n shots each) by chi-squared
     maximum likelihood."""
 
