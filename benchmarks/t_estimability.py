@@ -9,8 +9,9 @@ from the configured seed design, the other points at t*), fits the law's two amp
 maximum likelihood (s^2 (n-1) / sigma^2 is chi-squared), and reports how far the optimum of the
 fitted law lands from t*. No model, prior or acquisition is involved: this is the accuracy a
 campaign of that design can reach at best, for the configured design and a few alternatives.
-The fitted family is the one of the two-source laws (A1/sqrt(t) + A0, sqrt(A1^2/t + A0^2)) that
-lies closer to the simulator's noise law over [t_min, t_max]; the header names it.
+The fitted family is the installed two-source law (``noisebo.models.noise_laws`` with p = 0.5:
+A1/sqrt(t) + A0, sqrt(A1^2/t + A0^2), ...) closest to the simulator's noise law over
+[t_min, t_max]; the header names it.
 
 A second table does the same for a noise profile (``noisebo noise-profile``): the noise points of
 K campaigns of the config (seed points and the BO points before convergence, no few-shot points:
@@ -33,6 +34,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _ts
 from _config import Parser, benchmark_config  # noqa: E402
 from _tstar import LAW, law_t_star  # noqa: E402
 
+from noisebo import registry  # noqa: E402
 from noisebo.campaign.steps import seed_points  # noqa: E402
 
 N_BEFORE_CONVERGENCE = 3  # BO points measured with shots_before: converged at step 2, the earliest
@@ -41,25 +43,24 @@ N_BEFORE_CONVERGENCE = 3  # BO points measured with shots_before: converged at s
 PROFILE_CAMPAIGNS = (1, 3, 5, 10, 20)  # campaigns pooled in a profile, the second table's rows
 
 
-def _sources(law: str, t: np.ndarray) -> np.ndarray:
-    """Each amplitude's term for ``law`` (m, 2): A0's and A1's, in noise units ("inv_sqrt") or
-    variance units ("quadrature"), so the law is linear in (A0, A1) or (A0^2, A1^2)."""
-    return np.column_stack([np.ones_like(t), 1.0 / np.sqrt(t) if law == "inv_sqrt" else 1.0 / t])
+def _two_source_laws() -> tuple[str, ...]:
+    """The installed noise laws with a fixed exponent (p = 0.5), the ones fitted here."""
+    return tuple(n for n in registry.noise_law_names() if not registry.noise_law(n).infers_exponent)
 
 
 def law_amplitudes(noise_law, t_min: float, t_max: float) -> tuple[str, float, float]:
-    """The two-source law closest to ``noise_law`` on a log grid over [t_min, t_max] (relative
-    least squares): its name ("inv_sqrt": A1/sqrt(t) + A0, "quadrature": sqrt(A1^2/t + A0^2)),
-    A0 and A1 (noise units)."""
+    """The installed two-source law closest to ``noise_law`` on a log grid over [t_min, t_max]
+    (relative least squares; Noise^k = A0^k + (A1 t^-1/2)^k is linear in A0^k, A1^k for the law's
+    ``sources_power`` k): its name (e.g. "inv_sqrt", "quadrature"), A0 and A1 (noise units)."""
     t = np.geomspace(t_min, t_max, 64)
     noise = noise_law(t)
     best = None
-    for law, power in (("inv_sqrt", 1), ("quadrature", 2)):
-        target = noise**power
-        coef, *_ = np.linalg.lstsq(_sources(law, t) / target[:, None], np.ones_like(t), rcond=None)
+    for law in _two_source_laws():
+        power = registry.noise_law(law).sources_power
+        design = np.column_stack([np.ones_like(t), t ** (-0.5 * power)]) / noise[:, None] ** power
+        coef, *_ = np.linalg.lstsq(design, np.ones_like(t), rcond=None)
         amplitudes = np.maximum(coef, 0.0) ** (1.0 / power)
-        fitted = law_noise(law, t, *amplitudes)
-        error = float(np.sum((fitted / noise - 1.0) ** 2))
+        error = float(np.sum((law_noise(law, t, *amplitudes) / noise - 1.0) ** 2))
         if best is None or error < best[0]:
             best = (error, law, float(amplitudes[0]), float(amplitudes[1]))
     assert best is not None
@@ -67,10 +68,8 @@ def law_amplitudes(noise_law, t_min: float, t_max: float) -> tuple[str, float, f
 
 
 def law_noise(law: str, t: np.ndarray, a0: float, a1: float) -> np.ndarray:
-    """Noise(t) of the two-source ``law`` with amplitudes A0, A1."""
-    if law == "inv_sqrt":
-        return _sources(law, t) @ np.array([a0, a1])
-    return np.sqrt(_sources(law, t) @ np.array([a0**2, a1**2]))
+    """Noise(t) (numpy) of the installed noise law ``law`` with amplitudes A0, A1."""
+    return np.asarray(registry.noise_law(law).mean(t, a0, a1), dtype=np.float64)
 
 
 def fitted_t_opt(t, s, n, grid, alpha, beta, law: str) -> float:
@@ -81,10 +80,8 @@ def fitted_t_opt(t, s, n, grid, alpha, beta, law: str) -> float:
         var = law_noise(law, t, *np.exp(log_params)) ** 2
         return float(np.sum((n - 1) * (s**2 / var + np.log(var))))
 
-    if law == "inv_sqrt":
-        start = np.log([np.mean(s) / 2, np.mean(s * np.sqrt(t)) / 2])
-    else:
-        start = 0.5 * np.log([np.mean(s) ** 2 / 2, np.mean(s**2 * t) / 2])
+    power = registry.noise_law(law).sources_power
+    start = np.log([np.mean(s**power) / 2, np.mean(s**power * t ** (power / 2)) / 2]) / power
     best = optimize.minimize(nll, start, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9}).x
     return float(grid[np.argmax(-alpha * grid**2 - beta * law_noise(law, grid, *np.exp(best)))])
 
@@ -131,11 +128,10 @@ def main(argv=None) -> int:
     s = base.space
     t_star = law_t_star(base, instrument)
     law, a0, a1 = law_amplitudes(instrument.noise_law, s.t_min, s.t_max)
-    shown = "A1/sqrt(t) + A0" if law == "inv_sqrt" else "sqrt(A1^2/t + A0^2)"
     floor = a0**2 / law_noise(law, np.array([t_star]), a0, a1)[0] ** 2
     print(
-        f"{base.name}: t* = {LAW} = {t_star:.4f} s (the optimum with the x-independent noise law); true law ~ {shown} with A1 = {a1:.3f}, A0 = {a0:.3f} "
-        f"(A0 is {100 * floor:.0f} % of the noise variance at t*); fitted as {law}; {args.trials} trials"
+        f"{base.name}: t* = {LAW} = {t_star:.4f} s (the optimum with the x-independent noise law); true law ~ {law} (the installed law fitted here) with A1 = {a1:.3f}, A0 = {a0:.3f} "
+        f"(A0 is {100 * floor:.0f} % of the noise variance at t*); {args.trials} trials"
     )
     print(
         "| seed times | shots before convergence | median abs(t_opt - t*)/t* | within 5 % | within 10 % |\n|---|---|---|---|---|"
