@@ -403,10 +403,9 @@ def _profile_summary(record) -> dict | None:
         return None
     steps = record.steps
     dropped = next((int(s) for s, used in zip(steps.step, steps.profile_in_use) if not used), None)
-    law = ", ".join(f"{name} = {p['mean']:.4g} ± {p['sd']:.2g}" for name, p in profile["parameters"].items())
     return {
         "law": profile["law"],
-        "parameters": law,
+        "parameters": noise_profile.law_text(profile),
         "driver": profile["driver"]["name"],
         "campaigns": len(profile.get("campaigns", ())),
         "dropped_at_step": dropped,

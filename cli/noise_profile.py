@@ -87,12 +87,12 @@ def make_profile(files: list[Path]) -> NoiseProfile:
     names = ", ".join(str(f) for f in files)
     try:
         if fields[0] is None:
-            parameters = distil(configs[0], pooled["t"], pooled["shot_std"], pooled["n_shots"], jax_key(0, PROFILE))
+            posterior = distil(configs[0], pooled["t"], pooled["shot_std"], pooled["n_shots"], jax_key(0, PROFILE))
         else:
             parts = [
                 FieldCampaign(cfg, c["x"], c["t"], c["shot_std"], c["n_shots"]) for c, cfg in zip(campaigns, configs)
             ]
-            parameters = distil_field(parts, jax_key(0, PROFILE))
+            posterior = distil_field(parts, jax_key(0, PROFILE))
     except NotDistillable as why:
         raise CampaignFileError(f"no noise profile can be made of {names}: {why}") from None
     driver = campaigns[0]["driver"]
@@ -100,7 +100,8 @@ def make_profile(files: list[Path]) -> NoiseProfile:
         driver=ProfileDriver(name=driver["name"], version=driver["version"], settings=driver["settings"]),
         law=configs[0].noise_model.mean,
         field=None if fields[0] is None else fields[0].varies,
-        parameters=parameters,
+        parameters=posterior.parameters,
+        correlation=posterior.correlation,
         t_range_s=(float(pooled["t"].min()), float(pooled["t"].max())),
         noise_points=int(pooled["t"].size),
         campaigns=tuple(
@@ -117,6 +118,13 @@ def make_profile(files: list[Path]) -> NoiseProfile:
     )
 
 
+def law_text(profile: dict) -> str:
+    """A profile's law in one line, from its JSON form: "a0 = 0.1 ± 0.01, a1 = 2 ± 0.05,
+    correlation a0,a1 -0.82"."""
+    law = ", ".join(f"{name} = {p['mean']:.4g} ± {p['sd']:.2g}" for name, p in profile["parameters"].items())
+    return law + "".join(f", correlation {pair} {r:.2f}" for pair, r in profile.get("correlation", {}).items())
+
+
 def run(args) -> int:
     import yaml
 
@@ -129,7 +137,7 @@ def run(args) -> int:
     partial = out.with_name(out.name + ".partial")
     partial.write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
     os.replace(partial, out)
-    law = ", ".join(f"{name} = {p.mean:.4g} ± {p.sd:.2g}" for name, p in profile.parameters.items())
+    law = law_text(profile.model_dump(mode="json"))
     print(
         f"{out}: {profile.driver.name} {profile.driver.version}, law {profile.law}: {law} "
         f"(from {profile.noise_points} noise measurements in {len(profile.campaigns)} campaigns)"

@@ -558,6 +558,7 @@ class ProfileCampaign(FrozenModel):
 
 
 PROFILE_KIND: Final = "noisebo.noise_profile"
+LAW_PARAMETERS: Final = ("a0", "a1", "p")  # a noise law's parameters a profile may hold, in their order
 
 
 class NoiseProfile(FrozenModel):
@@ -566,7 +567,9 @@ class NoiseProfile(FrozenModel):
     driver (name, version, settings) and the campaigns it came from."""
 
     kind: Literal["noisebo.noise_profile"] = Field(PROFILE_KIND, description="what the file is")
-    schema_version: Literal[1] = Field(1, description="the profile format's version")
+    schema_version: Literal[1, 2] = Field(
+        2, description="the profile format's version (1: without `correlation`, read as no correlation)"
+    )
     driver: ProfileDriver = Field(description="the instrument driver the campaigns ran on")
     law: str = Field(description="the noise law (`noise_model.mean`) the profile describes")
     field: Literal["a0", "a0_a1"] | None = Field(
@@ -580,6 +583,11 @@ class NoiseProfile(FrozenModel):
         "for a0_a1: sd of log A0(x), log A1(x)) and its lengths (g0_length, or g0_length_k per axis; "
         "in the axis's x units)"
     )
+    correlation: dict[str, FiniteFloat] = Field(
+        default_factory=dict,
+        description="the posterior correlation of pairs of the law's parameters, keyed 'a0,a1' "
+        "(a0, a1 and p; a pair not listed: 0)",
+    )
     t_range_s: tuple[FiniteFloat, FiniteFloat] = Field(description="the shortest and longest t measured (s)")
     noise_points: Count = Field(description="the noise measurements the law was fitted on")
     campaigns: tuple[ProfileCampaign, ...] = Field(description="the campaigns it came from")
@@ -587,6 +595,40 @@ class NoiseProfile(FrozenModel):
 
     def __hash__(self) -> int:  # holds mappings: hash its canonical JSON
         return hash(self.model_dump_json())
+
+    @model_validator(mode="after")
+    def _correlation_is_a_correlation(self) -> NoiseProfile:
+        names = self.law_parameters()
+        for pair, r in self.correlation.items():
+            parts = pair.split(",")
+            if len(parts) != 2 or parts[0] == parts[1] or any(part not in names for part in parts):
+                raise ValueError(
+                    f"correlation {pair!r}: a pair of two of the law's parameters {', '.join(names)}, as 'a0,a1'"
+                )
+            if not (math.isfinite(r) and -1.0 < r < 1.0):
+                raise ValueError(f"correlation {pair!r} = {r}: a correlation lies strictly between -1 and 1")
+        if self.correlation and self.schema_version < 2:
+            raise ValueError("correlation needs schema_version 2")
+        try:
+            np.linalg.cholesky(self.law_correlation(names))
+        except np.linalg.LinAlgError:
+            raise ValueError("correlation: the pairs do not make a positive definite correlation matrix") from None
+        return self
+
+    def law_parameters(self) -> tuple[str, ...]:
+        """The law's parameters the profile holds, in the order a0, a1, p."""
+        return tuple(name for name in LAW_PARAMETERS if name in self.parameters)
+
+    def law_correlation(self, names: tuple[str, ...]) -> np.ndarray:
+        """The posterior correlation matrix (k, k) of the law's parameters ``names`` (the
+        identity where the profile records no correlation, and for a name it does not hold)."""
+        matrix = np.eye(len(names))
+        for pair, r in self.correlation.items():
+            first, second = pair.split(",")
+            if first in names and second in names:
+                i, j = names.index(first), names.index(second)
+                matrix[i, j] = matrix[j, i] = r
+        return matrix
 
 
 class NoiseModelConfig(FrozenModel):

@@ -21,8 +21,8 @@ between A0 and A1; ``shift_statistics``).
 Positions are not independent (the field is smooth), so no statistic has a closed-form
 reference distribution; the reference is simulated: ``REPLICATES`` data sets at the campaign's
 own (x, t, shots), each with the law's parameters and spreads drawn from the profile's
-posterior (normal, cut at 0), a field drawn from the GP at the campaign's positions (the
-profile's lengths over the campaign's axis spans) and chi^2 sample sds. Each set's smallest
+posterior (jointly normal with its correlation, cut at 0), a field drawn from the GP at the
+campaign's positions (the profile's lengths over the campaign's axis spans) and chi^2 sample sds. Each set's smallest
 exceedance share over the three statistics is compared with the data's: the p-value is the
 share of all sets, the data included, whose smallest share is at most the data's (so at least
 1/401). The replicates come from one fixed stream, so the p-value is a function of the data
@@ -190,8 +190,11 @@ def replicates(
     (P, d; scaled x) with the profile's lengths, chi^2 sample sds at t (n,) with dof (n,)."""
     profile = _profile(cfg)
     par = profile.parameters
-    draws = {name: _drawn(par[name], count, rng, TINY_NOISE) for name in ("a0", "a1")}
-    p = _drawn(par["p"], count, rng, cfg.p_prior.low) if "p" in par else np.full(count, 0.5)
+    names = profile.law_parameters()
+    z = np.linalg.cholesky(profile.law_correlation(names)) @ np.stack([rng.standard_normal(count) for _ in names])
+    drawn = {name: par[name].mean + par[name].sd * row for name, row in zip(names, z)}
+    draws = {name: np.maximum(drawn[name], TINY_NOISE) for name in ("a0", "a1")}
+    p = np.maximum(drawn["p"], cfg.p_prior.low) if "p" in par else np.full(count, 0.5)
     levels = []
     for prefix in _fields(profile):
         amplitude = _drawn(par[f"{prefix}_amplitude"], count, rng)

@@ -36,6 +36,7 @@ class NoiseData(NamedTuple):
     points of (y_i - y)^2 / rel_var_i; mask: True on real groups; bounds: (3, 2) prior bounds of
     (A0, A1, p) in scaled units. With a noise profile (``noise_model.profile``): prior (3, 2) the
     normal prior's (mean, sd) of (A0, A1, p) in scaled units (a law without p: its row unused),
+    or (3, 5) where the profile records their correlation (its matrix in the last three columns),
     and prior_weight () 1.0 while the profile is in use, 0.0 once dropped (the uniform bounds
     alone); both None without one."""
 
@@ -150,15 +151,23 @@ def profile_factor(data: WithProfile, a0, a1, p, infers_exponent: bool) -> None:
     import numpyro
     import numpyro.distributions as dist
 
-    values = jnp.stack([a0, a1, jnp.asarray(p, dtype=a0.dtype)])[: 3 if infers_exponent else 2]
-    rows = data.prior[: values.shape[0]]
-    numpyro.factor("profile", data.prior_weight * jnp.sum(dist.Normal(rows[:, 0], rows[:, 1]).log_prob(values)))
+    k = 3 if infers_exponent else 2
+    values = jnp.stack([a0, a1, jnp.asarray(p, dtype=a0.dtype)])[:k]
+    rows = data.prior[:k]
+    if rows.shape[1] == 2:  # no correlation recorded (the shape is fixed when the program is traced)
+        log_prior = jnp.sum(dist.Normal(rows[:, 0], rows[:, 1]).log_prob(values))
+    else:
+        covariance = rows[:, 2 : 2 + k] * rows[:, 1:2] * rows[:, 1][None, :]
+        log_prior = dist.MultivariateNormal(rows[:, 0], covariance_matrix=covariance).log_prob(values)
+    numpyro.factor("profile", data.prior_weight * log_prior)
 
 
 def prior_rows(cfg: NoiseModelConfig, scale: float) -> np.ndarray:
     """The profile's normal prior (3, 2): (mean, sd) of A0 and A1 over ``scale`` and of p (a
     law without p: its prior's midpoint, unused); an sd is kept above a millionth of its
-    parameter's bounds, so a profile of sd 0 is a very narrow prior rather than none."""
+    parameter's bounds, so a profile of sd 0 is a very narrow prior rather than none. Where
+    the profile records a correlation, (3, 5): the correlation matrix of (A0, A1, p) follows in
+    the last three columns (p's row and column the identity's for a law without p)."""
     rows = []
     for name, bounds in (("a0", cfg.a0_prior), ("a1", cfg.a1_prior), ("p", cfg.p_prior)):
         unit = scale if name != "p" else 1.0
@@ -166,7 +175,9 @@ def prior_rows(cfg: NoiseModelConfig, scale: float) -> np.ndarray:
         posterior = None if cfg.profile is None else cfg.profile.parameters.get(name)
         mean, sd = (0.5 * (bounds.low + bounds.high), 1.0) if posterior is None else (posterior.mean, posterior.sd)
         rows.append([mean / unit, max(sd / unit, floor)])
-    return np.asarray(rows)
+    if cfg.profile is None or not cfg.profile.correlation:
+        return np.asarray(rows)
+    return np.hstack([np.asarray(rows), cfg.profile.law_correlation(("a0", "a1", "p"))])
 
 
 def prepare(

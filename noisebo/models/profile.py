@@ -30,19 +30,30 @@ from noisebo.config import (  # noqa: F401 - the profile's records, re-exported
 from noisebo.models import field_fit, inference, noise_field, noise_model
 
 LAPLACE_DRAWS = 256  # posterior draws the parameters' mean and sd are taken over
+MAX_CORRELATION = 0.99  # a recorded correlation is kept this far from +-1, so the prior stays a density
 
 
 class NotDistillable(ValueError):
     """Campaigns that no profile can be made of; the message says why."""
 
 
+class Distilled(NamedTuple):
+    """A profile's posterior: each parameter's mean and sd, and the correlation of pairs of the
+    law's parameters keyed "a0,a1" (``NoiseProfile.correlation``)."""
+
+    parameters: dict[str, ParameterPosterior]
+    correlation: dict[str, float]
+
+
 def distil(
     config: CampaignConfig, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray, key: jax.Array
-) -> dict[str, ParameterPosterior]:
+) -> Distilled:
     """The posterior of the noise law of ``config.noise_model`` fitted to pooled noise
     measurements: t (n,) s, the sample sd of each point's shots (n,) in value units, and their
     number (n,). Returns "a0", "a1" (value units) and, for a law with an exponent, "p", each as
-    mean and sd over the MAP fit's Laplace draws (``LAPLACE_DRAWS``, the MAP point first).
+    mean and sd over the MAP fit's Laplace draws (``LAPLACE_DRAWS``, the MAP point first), and
+    their correlation over the same draws (the data pin the noise at the measured t, so a0 and
+    a1 trade against each other: a prior that forgets it admits laws the data ruled out).
     Raises ``NotDistillable`` for fewer than two distinct t or non-finite measurements."""
     t, shot_std, n_shots = (np.asarray(a, dtype=np.float64) for a in (t, shot_std, n_shots))
     if config.noise_model.field is not None:
@@ -56,7 +67,22 @@ def distil(
     guess = noise_model.initial_guess(data, own)
     name, depends_on = noise_model.program_name(own)
     fitted = inference.fit_map(model, data, key, inf.restarts, LAPLACE_DRAWS, [guess], name=name, depends_on=depends_on)
-    return {name: _summary(draws) for name, draws in _law_draws(fitted.params, scale).items()}
+    draws = _law_draws(fitted.params, scale)
+    return Distilled({name: _summary(values) for name, values in draws.items()}, correlation(draws))
+
+
+def correlation(draws: dict[str, np.ndarray]) -> dict[str, float]:
+    """The sample correlation of each pair of the law's draws (equal lengths), keyed "a0,a1" in
+    the order of ``draws``; a pair with a parameter that does not vary (a MAP at its bound)
+    is left out (no correlation)."""
+    names = list(draws)
+    pairs = {}
+    for i, first in enumerate(names):
+        for second in names[i + 1 :]:
+            a, b = draws[first], draws[second]
+            if np.std(a) > 0 and np.std(b) > 0:
+                pairs[f"{first},{second}"] = float(np.clip(np.corrcoef(a, b)[0, 1], -MAX_CORRELATION, MAX_CORRELATION))
+    return pairs
 
 
 def _law_draws(params: dict, scale: float) -> dict[str, np.ndarray]:
@@ -114,7 +140,7 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
     return law, hyper
 
 
-def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> dict[str, ParameterPosterior]:
+def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> Distilled:
     """The posterior of a noise field's law from noise-field campaigns on one instrument, each
     fitted on its own (their positions are different places, perhaps on different samples):
     a0, a1 (and p) pooled over the campaigns' Laplace draws (``LAPLACE_DRAWS`` each, the MAP
@@ -122,9 +148,12 @@ def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> dict[str
     uncertainty and the spread between campaigns; each field's spread over positions
     (g0_amplitude, sd of log A0(x); g1_amplitude for "a0_a1") and lengths (x units) as mean and
     sd over the campaigns' estimates (sd 0 from one campaign). ``key`` is folded with each
-    campaign's index. Raises ``NotDistillable`` as ``distil``."""
+    campaign's index; the law's correlation over the pooled draws. Raises ``NotDistillable`` as
+    ``distil``."""
     if not campaigns:
         raise NotDistillable("no campaign was given")
     laws, hypers = zip(*(_field_fit(c, jax.random.fold_in(key, i)) for i, c in enumerate(campaigns)))
-    pooled = {name: _summary(np.concatenate([law[name] for law in laws])) for name in laws[0]}
-    return pooled | {name: _summary(np.asarray([hyper[name] for hyper in hypers])) for name in hypers[0]}
+    draws = {name: np.concatenate([law[name] for law in laws]) for name in laws[0]}
+    pooled = {name: _summary(values) for name, values in draws.items()}
+    spreads = {name: _summary(np.asarray([hyper[name] for hyper in hypers])) for name in hypers[0]}
+    return Distilled(pooled | spreads, correlation(draws))

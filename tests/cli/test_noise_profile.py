@@ -39,9 +39,13 @@ def campaigns(tmp_path_factory, tiny_config):
 def test_a_profile_pools_the_campaigns_noise_measurements(campaigns, tmp_path, capsys):
     out = tmp_path / "forrester.yaml"
     assert main(["noise-profile", str(campaigns["a"]), str(campaigns["b"]), "--out", str(out)]) == 0
-    assert "law inv_sqrt: a0 = " in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "law inv_sqrt: a0 = " in said
     profile = NoiseProfile.model_validate(yaml.safe_load(out.read_text()))
     assert profile.driver.name == "forrester" and profile.driver.settings["a1"] == 2.0 and profile.law == "inv_sqrt"
+    # the noise measured at a few t pins a0 + a1 / sqrt(t) there: a0 and a1 trade off
+    assert profile.schema_version == 2 and set(profile.correlation) == {"a0,a1"} and profile.correlation["a0,a1"] < 0
+    assert f"correlation a0,a1 {profile.correlation['a0,a1']:.2f}" in said
     measured = []
     for path in (campaigns["a"], campaigns["b"]):
         with h5py.File(path, "r") as f:

@@ -1,12 +1,14 @@
 """``noise_model.profile``: a profile file read into the config, every bad profile one line
 (exit 2 on the command line, nothing created), and a profile of another instrument refused."""
 
+import numpy as np
 import pytest
 import yaml
+from pydantic import ValidationError
 
 from noisebo.cli.main import main
 from noisebo.instruments.registry import driver_info, validated
-from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, load_config, parse_config
+from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, NoiseProfile, load_config, parse_config
 
 SETTINGS = driver_info(InstrumentConfig(kind="forrester", settings={"a0": 0.1, "a1": 2.0})).settings  # complete
 PROFILE = {
@@ -61,7 +63,13 @@ def test_a_profile_path_is_read_relative_to_the_config_and_carried_inline(tmp_pa
             {"parameters": {"a0": {"mean": "0.1", "sd": 0.1}, "a1": {"mean": 2.0, "sd": 0.1}}},
             "expected a number, got the string '0.1'",
         ),
-        ({"schema_version": 2}, "noise_model.profile.schema_version"),
+        ({"schema_version": 3}, "noise_model.profile.schema_version"),
+        ({"correlation": {"a0,a1": -0.5}}, "correlation needs schema_version 2"),
+        ({"schema_version": 2, "correlation": {"a0,p": -0.5}}, "'a0,p': a pair of two of the law's parameters a0, a1"),
+        ({"schema_version": 2, "correlation": {"a1,a1": 0.5}}, "'a1,a1': a pair of two"),
+        ({"schema_version": 2, "correlation": {"a0 a1": 0.5}}, "as 'a0,a1'"),
+        ({"schema_version": 2, "correlation": {"a0,a1": -1.0}}, "a correlation lies strictly between -1 and 1"),
+        ({"schema_version": 2, "correlation": {"a0,a1": "0.5"}}, "expected a number, got the string '0.5'"),
     ],
 )
 def test_a_profile_that_cannot_be_this_campaign_s_prior_is_refused(change, message):
@@ -215,3 +223,26 @@ def test_a_bad_profile_file_is_one_line_exit_2_and_creates_nothing(
     assert len(err.splitlines()) == 1 and err.startswith("noisebo: error: ")
     assert message.format(dir=tmp_path) in err
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
+POWER = PROFILE | {
+    "law": "power",
+    "schema_version": 2,
+    "parameters": PROFILE["parameters"] | {"p": {"mean": 0.5, "sd": 0.05}},
+}
+
+
+def test_a_profile_s_correlation_is_its_law_s_matrix():
+    profile = NoiseProfile.model_validate(POWER | {"correlation": {"a1,p": 0.3, "a0,a1": -0.8}})
+    assert profile.law_parameters() == ("a0", "a1", "p")
+    expected = [[1.0, -0.8, 0.0], [-0.8, 1.0, 0.3], [0.0, 0.3, 1.0]]
+    np.testing.assert_array_equal(profile.law_correlation(("a0", "a1", "p")), expected)
+    np.testing.assert_array_equal(profile.law_correlation(("a1", "p")), [[1.0, 0.3], [0.3, 1.0]])
+    assert NoiseProfile.model_validate(PROFILE).law_correlation(("a0", "a1")).tolist() == [[1, 0], [0, 1]]
+
+
+def test_pairs_that_make_no_correlation_matrix_are_refused():
+    # each pair alone is a correlation, the three together are not: a0 and p both go with a1
+    # (0.9) but against each other (-0.9), det = 1 - 3 * 0.81 - 2 * 0.729 < 0
+    with pytest.raises(ValidationError, match="do not make a positive definite correlation matrix"):
+        NoiseProfile.model_validate(POWER | {"correlation": {"a0,a1": 0.9, "a1,p": 0.9, "a0,p": -0.9}})

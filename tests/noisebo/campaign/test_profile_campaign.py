@@ -23,11 +23,12 @@ ROOT = Path(__file__).resolve().parents[3]
 T_STAR_STALE = 1.9037  # s, A0 = 0.5, A1 = 1
 
 
-def profile_of(a0: float, a1: float, settings: dict) -> dict:
+def profile_of(a0: float, a1: float, settings: dict, r: float | None = None) -> dict:
     return NoiseProfile(
         driver=ProfileDriver(name="forrester", version="1", settings=settings),
         law="inv_sqrt",
         parameters={"a0": ParameterPosterior(mean=a0, sd=0.01), "a1": ParameterPosterior(mean=a1, sd=0.05)},
+        correlation={} if r is None else {"a0,a1": r},
         t_range_s=(0.2, 10.0),
         noise_points=60,
         campaigns=(),
@@ -68,9 +69,10 @@ def test_a_stale_profile_is_caught_early_and_t_still_found(stale):
     assert np.median(caught) <= 0.05 and max(caught) <= 0.06
 
 
-def test_a_true_profile_is_kept_and_skips_the_noise_learning(base):
+@pytest.mark.parametrize("r", [None, -0.8], ids=["independent", "correlated"])
+def test_a_true_profile_is_kept_and_skips_the_noise_learning(base, r):
     cold = base.with_overrides(schedule={"n_steps": 6})
-    warm = cold.with_overrides(noise_model={"profile": profile_of(0.1, 2.0, base.instrument.settings)})
+    warm = cold.with_overrides(noise_model={"profile": profile_of(0.1, 2.0, base.instrument.settings, r)})
     cold_final = run_campaign(cold, build(cold.instrument), 0).final
     warm_final = run_campaign(warm, build(warm.instrument), 0).final
     assert warm_final.data.profile_dropped_step is None

@@ -1,4 +1,5 @@
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -93,3 +94,24 @@ def test_sampling_rel_var_by_hand():
 
     assert float(sampling_rel_var(2)) == pytest.approx(np.pi / 2 - 1, rel=1e-12)
     assert float(sampling_rel_var(1001)) == pytest.approx(1 / 2000, rel=1e-3)
+
+
+def _profile_log_prior(prior: np.ndarray, a0: float, a1: float) -> float:
+    """The profile's factor in a model, for (A0, A1) = (a0, a1) and a (3, 2) or (3, 5) prior."""
+    import numpyro
+
+    data = noise_model.NoiseData(*([None] * 8), prior=jnp.asarray(prior), prior_weight=jnp.asarray(1.0))
+    model = lambda: noise_model.profile_factor(data, jnp.asarray(a0), jnp.asarray(a1), 0.5, False)  # noqa: E731
+    return float(numpyro.handlers.trace(model).get_trace()["profile"]["fn"].log_prob(0.0))
+
+
+def test_a_correlated_profile_prior_is_the_bivariate_normal_by_hand():
+    # means (1, 2), sds (0.5, 0.25), r = -0.6, at (1.5, 1.9): z = (1, -0.4),
+    # log p = -log(2 pi 0.5 0.25 sqrt(1 - 0.36)) - (z0^2 - 2 r z0 z1 + z1^2) / (2 (1 - r^2))
+    #       = -log(0.6283185) - (1 - 0.48 + 0.16) / 1.28 = 0.464708 - 0.53125 = -0.066542
+    rows = np.array([[1.0, 0.5], [2.0, 0.25], [0.5, 1.0]])
+    correlation = np.array([[1.0, -0.6, 0.0], [-0.6, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    assert _profile_log_prior(np.hstack([rows, correlation]), 1.5, 1.9) == pytest.approx(-0.066542, abs=1e-5)
+    # without a correlation: the two normals, log p = -log(2 pi 0.5 0.25) - (1 + 0.16) / 2 = -0.338436
+    assert _profile_log_prior(rows, 1.5, 1.9) == pytest.approx(-0.338436, abs=1e-5)
+    assert _profile_log_prior(np.hstack([rows, np.eye(3)]), 1.5, 1.9) == pytest.approx(-0.338436, abs=1e-5)

@@ -8,7 +8,7 @@ from noisebo.keys import PROFILE, jax_key
 from noisebo.models.noise_model import c4
 from simulated_fields import field_measurements
 
-from noisebo.models.profile import FieldCampaign, NotDistillable, distil, distil_field
+from noisebo.models.profile import FieldCampaign, NotDistillable, correlation, distil, distil_field
 
 CONFIG = CampaignConfig()
 
@@ -24,18 +24,34 @@ def law_measurements(a0=0.1, a1=2.0, n=30, ts=TIMES):
 
 def test_the_law_s_own_values_give_its_parameters():
     t, sd, shots = law_measurements()
-    posterior = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE))
+    distilled = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE))
+    posterior = distilled.parameters
     assert set(posterior) == {"a0", "a1"}
     a0, a1 = posterior["a0"], posterior["a1"]
     assert a1.mean == pytest.approx(2.0, rel=0.05) and 0 < a1.sd < 0.3
     assert abs(a0.mean - 0.1) < 2 * a0.sd + 0.02
+    # the data pin A1/sqrt(t) + A0 at the measured t: a larger a0 needs a smaller a1
+    assert set(distilled.correlation) == {"a0,a1"} and -0.99 <= distilled.correlation["a0,a1"] < -0.5
     again = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE))
-    assert again == posterior  # one key, one profile
+    assert again == distilled  # one key, one profile
+
+
+def test_the_correlation_of_draws_is_pearson_s_r_a_constant_one_left_out():
+    # a = (1, 2, 3), b = (3, 2, 1.5): deviations (-1, 0, 1) and (5/6, -1/6, -2/3), so
+    # r = -1.5 / sqrt(2 * 7/6) = -0.98198; c = 2b is b itself (r 1, kept at 0.99)
+    a, b = np.array([1.0, 2.0, 3.0]), np.array([3.0, 2.0, 1.5])
+    pairs = correlation({"a0": a, "a1": b, "p": 2 * b})
+    assert pairs == {
+        "a0,a1": pytest.approx(-0.98198, abs=1e-5),
+        "a0,p": pytest.approx(-0.98198, abs=1e-5),
+        "a1,p": 0.99,
+    }
+    assert correlation({"a0": np.zeros(3), "a1": b}) == {}
 
 
 def test_a_larger_a0_moves_the_posterior_with_it():
     t, sd, shots = law_measurements(a0=0.5, a1=1.0)
-    posterior = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE))
+    posterior = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE)).parameters
     assert posterior["a0"].mean == pytest.approx(0.5, abs=2 * posterior["a0"].sd + 0.05)
     assert posterior["a1"].mean == pytest.approx(1.0, rel=0.15)
 
@@ -65,9 +81,11 @@ def test_a_field_profile_pools_each_campaign_s_own_fit_with_lengths_in_x_units()
     field = CONFIG.with_overrides(noise_model={"field": {}})
     wide = field.with_overrides(space={"x_max": 10.0})
     x, t, sd, n = field_measurements()
-    posterior = distil_field(
+    distilled = distil_field(
         [FieldCampaign(field, x, t, sd, n), FieldCampaign(wide, 10 * x, t, sd, n)], jax_key(0, PROFILE)
     )
+    posterior = distilled.parameters
+    assert set(distilled.correlation) == {"a0,a1"} and distilled.correlation["a0,a1"] < 0
     assert set(posterior) == {"a0", "a1", "g0_amplitude", "g0_length"}
     length, spread = posterior["g0_length"], posterior["g0_amplitude"]
     one = length.mean / 5.5
