@@ -30,6 +30,7 @@ from noisebo.config import (  # noqa: F401 - the profile's records, re-exported
 from noisebo.models import field_fit, inference, noise_field, noise_model
 
 LAPLACE_DRAWS = 256  # posterior draws the parameters' mean and sd are taken over
+AT_BOUND = 0.01  # scaled units (the data's noise is about 1): a parameter's draws all below this sit at its bound
 MAX_CORRELATION = 0.99  # a recorded correlation is kept this far from +-1, so the prior stays a density
 
 
@@ -53,7 +54,9 @@ def distil(
     number (n,). Returns "a0", "a1" (value units) and, for a law with an exponent, "p", each as
     mean and sd over the MAP fit's Laplace draws (``LAPLACE_DRAWS``, the MAP point first), and
     their correlation over the same draws (the data pin the noise at the measured t, so a0 and
-    a1 trade against each other: a prior that forgets it admits laws the data ruled out).
+    a1 trade against each other: a prior that forgets it admits laws the data ruled out). Where
+    the fit sits at a bound (``at_a_bound``), over NUTS draws instead (``config.inference``'s
+    nuts_warmup, nuts_samples; 10-20 s).
     Raises ``NotDistillable`` for fewer than two distinct t or non-finite measurements."""
     t, shot_std, n_shots = (np.asarray(a, dtype=np.float64) for a in (t, shot_std, n_shots))
     if config.noise_model.field is not None:
@@ -67,8 +70,18 @@ def distil(
     guess = noise_model.initial_guess(data, own)
     name, depends_on = noise_model.program_name(own)
     fitted = inference.fit_map(model, data, key, inf.restarts, LAPLACE_DRAWS, [guess], name=name, depends_on=depends_on)
+    if at_a_bound(fitted.params, np.asarray(data.bounds)):
+        fitted = inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.nuts_samples)
     draws = _law_draws(fitted.params, scale)
     return Distilled({name: _summary(values) for name, values in draws.items()}, correlation(draws))
+
+
+def at_a_bound(params: dict, bounds: np.ndarray) -> bool:
+    """Whether every Laplace draw of a0 or a1 (scaled units) lies within ``AT_BOUND`` of its
+    lower bound (``bounds`` (3, 2), scaled units): a MAP there (an instrument whose A0 is
+    nearly 0) has its Laplace draws, Gaussian in the logit of the uniform prior, squeezed
+    against the bound, a posterior sd of nearly 0 where the data allow a spread."""
+    return any(float(np.max(params[name])) - bounds[row, 0] < AT_BOUND for row, name in enumerate(("a0", "a1")))
 
 
 def correlation(draws: dict[str, np.ndarray]) -> dict[str, float]:

@@ -8,7 +8,7 @@ from noisebo.keys import PROFILE, jax_key
 from noisebo.models.noise_model import c4
 from simulated_fields import field_measurements
 
-from noisebo.models.profile import FieldCampaign, NotDistillable, correlation, distil, distil_field
+from noisebo.models.profile import FieldCampaign, NotDistillable, at_a_bound, correlation, distil, distil_field
 
 CONFIG = CampaignConfig()
 
@@ -54,6 +54,31 @@ def test_a_larger_a0_moves_the_posterior_with_it():
     posterior = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE)).parameters
     assert posterior["a0"].mean == pytest.approx(0.5, abs=2 * posterior["a0"].sd + 0.05)
     assert posterior["a1"].mean == pytest.approx(1.0, rel=0.15)
+
+
+def test_an_instrument_without_a0_gets_an_honest_spread_not_a_pinned_0():
+    # A0 = 0 puts the MAP of a0 at its bound, where the Laplace draws (Gaussian in the logit of
+    # the uniform prior) squeeze to a0 = 0.0001 +- 0.0002; NUTS's posterior spreads over what
+    # the data allow, a0 >= 0 pulling a1 a little below 2 along the ridge
+    t, sd, shots = law_measurements(a0=0.0)
+    distilled = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE))
+    a0, a1 = distilled.parameters["a0"], distilled.parameters["a1"]
+    assert 0.03 < a0.sd < 0.15 and 0.0 < a0.mean < 0.2
+    assert a1.mean == pytest.approx(2.0, rel=0.1) and a1.sd > 0.07
+    assert distilled.correlation["a0,a1"] < -0.3
+
+
+@pytest.mark.parametrize(
+    ("a0", "a1", "low", "expected"),
+    [
+        ([0.001, 0.009], [1.0, 2.0], 0.0, True),  # every a0 draw within 0.01 of 0
+        ([0.001, 0.011], [1.0, 2.0], 0.0, False),  # one draw beyond it
+        ([0.6, 0.7], [0.505, 0.509], 0.5, True),  # a1 at a lower bound of 0.5 (both share it here)
+    ],
+)
+def test_a_fit_is_at_a_bound_when_every_draw_is(a0, a1, low, expected):
+    bounds = np.array([[low, 10.0], [low, 10.0], [0.1, 1.0]])
+    assert at_a_bound({"a0": np.array(a0), "a1": np.array(a1)}, bounds) is expected
 
 
 @pytest.mark.parametrize(
