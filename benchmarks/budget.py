@@ -30,10 +30,11 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
 - "budget valued": the budget mode with ``schedule.noise_t: valued`` (a point leaves the policy's
   t where what its noise measurement teaches about t* is worth more to the later points than the
   reward it loses), the config's policy, no profile;
-- "budget warm": the budget mode with ``noise_model.profile``: --profile, or else a profile made here
-  by ``noisebo noise-profile`` from 3 campaigns of the paper's protocol (15 steps) on the same
-  instrument and settings with seeds 1000-1002, none of the benchmark's seeds (the output says
-  which); a --profile of another driver or other settings is used with ``profile_check: false``;
+- "budget warm": the budget mode with ``noise_model.profile``: --profile, or else the profile an
+  earlier run kept beside --json, or else one made here by ``noisebo noise-profile`` from 3
+  campaigns of the paper's protocol (15 steps) on the same instrument and settings with seeds
+  1000-1002, none of the benchmark's seeds, and kept there (the output says which); a --profile of
+  another driver or other settings is used with ``profile_check: false``;
 - "budget warm informative": the same profile with the posterior rule and informative noise points
   of "budget informative" (a profile that leaves t* wider than 5 % is narrowed by the campaign's own
   noise points);
@@ -245,10 +246,11 @@ def made_profile(base, folder: Path):
 
 
 def warm_profile(args, base):
-    """(the warm design's profile, where it came from): --profile, or one made here (kept in a
-    folder beside --json, so a rerun reuses its campaigns)."""
+    """(the warm design's profile, where it came from): --profile, or the one kept beside --json
+    by an earlier run, or one made here (kept in a folder beside --json with its campaigns)."""
     import yaml
 
+    from noisebo.cli.noise_profile import law_text
     from noisebo.config import read_profile
     from noisebo.models.profile import NoiseProfile
 
@@ -265,14 +267,20 @@ def warm_profile(args, base):
             f"profile {args.profile} ({len(profile.campaigns)} campaigns of {configs} on {profile.driver.name}: {same})",
         )
     folder = (args.json.parent / f"{args.json.stem}_profile") if args.json else Path("budget_profile")
+    kept = folder / "profile.yaml"
+    if kept.exists():  # an earlier run's: the same profile, so its seeds are measured alike
+        profile = NoiseProfile.model_validate(read_profile(kept, "the kept profile"))
+        return (
+            profile,
+            f"profile kept from an earlier run: {law_text(profile.model_dump(mode='json'))} ({kept}; remove it to make a new one)",
+        )
     folder.mkdir(parents=True, exist_ok=True)
     profile = made_profile(base, folder)
-    (folder / "profile.yaml").write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
-    law = ", ".join(f"{k} = {p.mean:.4g} ± {p.sd:.2g}" for k, p in profile.parameters.items())
+    kept.write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
     return profile, (
         f"profile made here from 3 paper-protocol campaigns (15 steps) of {base.name} with the same "
-        f"instrument and settings, seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}: {law} "
-        f"({folder / 'profile.yaml'})"
+        f"instrument and settings, seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}: "
+        f"{law_text(profile.model_dump(mode='json'))} ({kept})"
     )
 
 
@@ -405,8 +413,9 @@ def main(argv=None) -> int:
         type=Path,
         default=None,
         metavar="PROFILE.yaml",
-        help="the warm design's noise profile (default: made here from 3 paper-protocol campaigns, "
-        f"seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}, kept beside --json)",
+        help="the warm design's noise profile (default: the one an earlier run kept beside --json, "
+        f"or one made here from 3 paper-protocol campaigns, seeds {PROFILE_SEEDS[0]}-{PROFILE_SEEDS[-1]}, "
+        "and kept there)",
     )
     parser.add_argument(
         "--report", action="store_true", help="measure nothing: report every seed --json holds for each design"

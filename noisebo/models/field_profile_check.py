@@ -22,11 +22,11 @@ Positions are not independent (the field is smooth), so no statistic has a close
 reference distribution; the reference is simulated: ``REPLICATES`` data sets at the campaign's
 own (x, t, shots), each with the law's parameters and spreads drawn from the profile's
 posterior (jointly normal with its correlation, cut at 0), a field drawn from the GP at the
-campaign's positions (the profile's lengths over the campaign's axis spans) and chi^2 sample sds. Each set's smallest
-exceedance share over the three statistics is compared with the data's: the p-value is the
-share of all sets, the data included, whose smallest share is at most the data's (so at least
-1/401). The replicates come from one fixed stream, so the p-value is a function of the data
-alone.
+campaign's positions (the profile's lengths over the campaign's axis spans) and chi^2 sample
+sds. Each set's smallest exceedance share over the three statistics is compared with the data's:
+the p-value is the share of all sets, the data included, whose smallest share is at most the
+data's (so at least 1/401). The replicates come from one fixed stream, so the p-value is a
+function of the data alone.
 
 Measured (1-D, inv_sqrt, t log-uniform over [0.2, 10] s; a profile A0 = 0.1 +- 0.01, A1 = 2 +-
 0.05, spread 0.5, length 0.15; 100 data sets each; ``tests/noisebo/models/test_field_profile_check.py``

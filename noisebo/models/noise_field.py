@@ -155,8 +155,8 @@ class FieldData(NamedTuple):
     of g in log units; lengths in scaled x), fixed during a MAP fit (``set_field``).
     With a noise profile (``noise_model.profile``), as ``noise_model.NoiseData``: prior (3, 2)
     the normal prior of the levels a0, a1 (scaled units) and p ((3, 5) with their correlation,
-    ``noise_model.prior_rows``), prior_weight () 1 while the
-    profile is in use, 0 once dropped; both None without one."""
+    ``noise_model.prior_rows``), prior_weight () 1 while the profile is in use, 0 once dropped;
+    both None without one."""
 
     t: jnp.ndarray
     ts: jnp.ndarray
