@@ -247,7 +247,8 @@ def made_profile(base, folder: Path):
 
 def warm_profile(args, base):
     """(the warm design's profile, where it came from): --profile, or the one kept beside --json
-    by an earlier run, or one made here (kept in a folder beside --json with its campaigns)."""
+    by an earlier run on the same driver and settings, or one made here (kept in a folder beside
+    --json with its campaigns)."""
     import yaml
 
     from noisebo.cli.noise_profile import law_text
@@ -270,10 +271,11 @@ def warm_profile(args, base):
     kept = folder / "profile.yaml"
     if kept.exists():  # an earlier run's: the same profile, so its seeds are measured alike
         profile = NoiseProfile.model_validate(read_profile(kept, "the kept profile"))
-        return (
-            profile,
-            f"profile kept from an earlier run: {law_text(profile.model_dump(mode='json'))} ({kept}; remove it to make a new one)",
-        )
+        if describes(profile, base):  # else another config's: made anew below
+            return (
+                profile,
+                f"profile kept from an earlier run: {law_text(profile.model_dump(mode='json'))} ({kept}; remove it to make a new one)",
+            )
     folder.mkdir(parents=True, exist_ok=True)
     profile = made_profile(base, folder)
     kept.write_text(yaml.safe_dump(profile.model_dump(mode="json"), sort_keys=False))
