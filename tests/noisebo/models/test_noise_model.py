@@ -115,3 +115,30 @@ def test_a_correlated_profile_prior_is_the_bivariate_normal_by_hand():
     # without a correlation: the two normals, log p = -log(2 pi 0.5 0.25) - (1 + 0.16) / 2 = -0.338436
     assert _profile_log_prior(rows, 1.5, 1.9) == pytest.approx(-0.338436, abs=1e-5)
     assert _profile_log_prior(np.hstack([rows, np.eye(3)]), 1.5, 1.9) == pytest.approx(-0.338436, abs=1e-5)
+
+
+def test_the_prior_rows_carry_the_correlation_only_where_the_profile_records_one():
+    # a version-1 profile (no correlation) keeps the (3, 2) prior and so the programs it had;
+    # with one, the matrix of (A0, A1, p) follows, p's row the identity's for a law without p
+    from noisebo.config import NoiseProfile, ParameterPosterior, ProfileDriver
+
+    def config(correlation):
+        profile = NoiseProfile(
+            schema_version=2 if correlation else 1,
+            driver=ProfileDriver(name="forrester", version="1", settings={}),
+            law="inv_sqrt",
+            parameters={"a0": ParameterPosterior(mean=0.2, sd=0.1), "a1": ParameterPosterior(mean=2.0, sd=0.4)},
+            correlation=correlation,
+            t_range_s=(0.2, 10.0),
+            noise_points=30,
+            campaigns=(),
+            made_utc="2026-11-25T00:00:00+00:00",
+        )
+        return NoiseModelConfig(profile=profile)
+
+    plain = noise_model.prior_rows(config({}), scale=2.0)
+    assert plain.shape == (3, 2)
+    np.testing.assert_allclose(plain[:2], [[0.1, 0.05], [1.0, 0.2]])  # over the scale 2
+    joint = noise_model.prior_rows(config({"a0,a1": -0.7}), scale=2.0)
+    np.testing.assert_allclose(joint[:, :2], plain)
+    np.testing.assert_allclose(joint[:, 2:], [[1.0, -0.7, 0.0], [-0.7, 1.0, 0.0], [0.0, 0.0, 1.0]])
