@@ -179,6 +179,13 @@ def test_a_profile_of_another_driver_or_settings_is_refused_unless_the_check_is_
     assert message in str(info.value) and "profile_check: false" in str(info.value)
 
 
+WRITTEN = yaml.safe_dump(  # what `noisebo noise-profile` writes now: schema 2, with its correlation
+    NoiseProfile.model_validate(PROFILE | {"schema_version": 2, "correlation": {"a0,a1": -0.8}}).model_dump(
+        mode="json"
+    ),
+    sort_keys=False,
+)
+
 BAD_PROFILES = [  # file name, its content (None: no file), what the one line says
     (
         "absent.yaml",
@@ -199,6 +206,16 @@ BAD_PROFILES = [  # file name, its content (None: no file), what the one line sa
     ),
     ("foreign.yaml", "kind: bluesky.plan\n", "is not a noise profile (kind 'bluesky.plan'"),
     ("list.yaml", "- 1\n- 2\n", "is not a noise profile"),
+    (
+        "cut_short.yaml",  # a written profile cut off after its correlation's key
+        WRITTEN[: WRITTEN.index("correlation:") + len("correlation:\n")],
+        "noise_model.profile.correlation: Input should be a valid dictionary",
+    ),
+    (
+        "bad_correlation.yaml",
+        WRITTEN.replace("a0,a1: -0.8", "a0,a1: 1.5"),
+        "correlation 'a0,a1' = 1.5: a correlation lies strictly between -1 and 1",
+    ),
     (
         "missing_law.yaml",
         yaml.safe_dump({k: v for k, v in PROFILE.items() if k != "law"}),
