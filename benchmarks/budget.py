@@ -255,8 +255,11 @@ def warm_profile(args, base):
     from noisebo.config import read_profile
     from noisebo.models.profile import NoiseProfile
 
+    def read(path: Path, what: str) -> NoiseProfile:
+        return NoiseProfile.model_validate(read_profile(path, what))
+
     if args.profile is not None:
-        profile = NoiseProfile.model_validate(read_profile(args.profile, "--profile"))
+        profile = read(args.profile, "--profile")
         configs = ", ".join(sorted({c.config for c in profile.campaigns})) or "unnamed configs"
         same = (
             "the same driver and settings"
@@ -270,7 +273,7 @@ def warm_profile(args, base):
     folder = (args.json.parent / f"{args.json.stem}_profile") if args.json else Path("budget_profile")
     kept = folder / "profile.yaml"
     if kept.exists():  # an earlier run's: the same profile, so its seeds are measured alike
-        profile = NoiseProfile.model_validate(read_profile(kept, "the kept profile"))
+        profile = read(kept, "the kept profile")
         if describes(profile, base):  # else another config's: made anew below
             return (
                 profile,

@@ -47,7 +47,7 @@ from scipy.special import chdtr, gammaln, logsumexp, ndtri
 
 from noisebo import keys
 from noisebo.config import NoiseModelConfig, NoiseProfile, field_length_names
-from noisebo.models.profile_check import NO_PROFILE, TINY_NOISE, ProfileCheck, law_sigma
+from noisebo.models.profile_check import NO_PROFILE, TINY_NOISE, ProfileCheck, law_sigma, law_values
 
 GRID = 41  # nodes of each position's field, one field
 GRID_2D = 15  # nodes per field, two fields
@@ -190,9 +190,7 @@ def replicates(
     (P, d; scaled x) with the profile's lengths, chi^2 sample sds at t (n,) with dof (n,)."""
     profile = _profile(cfg)
     par = profile.parameters
-    names = profile.law_parameters()
-    z = np.linalg.cholesky(profile.law_correlation(names)) @ np.stack([rng.standard_normal(count) for _ in names])
-    drawn = {name: par[name].mean + par[name].sd * row for name, row in zip(names, z)}
+    drawn = law_values(profile, np.stack([rng.standard_normal(count) for _ in profile.law_parameters()]))
     draws = {name: np.maximum(drawn[name], TINY_NOISE) for name in ("a0", "a1")}
     p = np.maximum(drawn["p"], cfg.p_prior.low) if "p" in par else np.full(count, 0.5)
     levels = []

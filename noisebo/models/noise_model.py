@@ -21,7 +21,7 @@ from scipy import optimize
 from scipy.special import gammaln
 
 from noisebo import registry
-from noisebo.config import NoiseModelConfig
+from noisebo.config import LAW_PARAMETERS, NoiseModelConfig
 from noisebo.models.inputs import Grouped, capacity_for, merge
 from noisebo.models.kernels import masked_covariance, matern52
 
@@ -177,7 +177,7 @@ def prior_rows(cfg: NoiseModelConfig, scale: float) -> np.ndarray:
         rows.append([mean / unit, max(sd / unit, floor)])
     if cfg.profile is None or not cfg.profile.correlation:
         return np.asarray(rows)
-    return np.hstack([np.asarray(rows), cfg.profile.law_correlation(("a0", "a1", "p"))])
+    return np.hstack([np.asarray(rows), cfg.profile.law_correlation(LAW_PARAMETERS)])
 
 
 def prepare(

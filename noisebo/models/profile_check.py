@@ -55,22 +55,24 @@ def _profile(cfg: NoiseModelConfig) -> NoiseProfile:
     return cfg.profile
 
 
-def _nodes(cfg: NoiseModelConfig) -> tuple[list[dict[str, float]], np.ndarray]:
-    """The profile's parameter sets (a grid of ``NODES`` per parameter, turned by the Cholesky
-    factor of the profile's correlation) and their weights."""
-    profile = _profile(cfg)
+def law_values(profile: NoiseProfile, z: np.ndarray) -> dict[str, np.ndarray]:
+    """The law's parameters (``profile.law_parameters()``) at standard-normal scores z (k, ...):
+    mean + sd * (L z), L the Cholesky factor of the profile's correlation (the identity without
+    one), so independent scores give draws of the profile's joint normal posterior."""
     names = profile.law_parameters()
-    mean = np.asarray([profile.parameters[n].mean for n in names])
-    sd = np.asarray([profile.parameters[n].sd for n in names])
-    turn = np.linalg.cholesky(profile.law_correlation(names))
+    turned = np.tensordot(np.linalg.cholesky(profile.law_correlation(names)), z, axes=1)
+    return {n: profile.parameters[n].mean + profile.parameters[n].sd * row for n, row in zip(names, turned)}
+
+
+def _nodes(cfg: NoiseModelConfig) -> tuple[list[dict[str, float]], np.ndarray]:
+    """The profile's parameter sets (a grid of ``NODES`` per parameter, turned by its
+    correlation: ``law_values``) and their weights."""
+    profile = _profile(cfg)
     z, w = np.polynomial.hermite_e.hermegauss(NODES)
-    w = w / w.sum()
-    sets, weights = [], []
-    for index in product(range(NODES), repeat=len(names)):
-        values = mean + sd * (turn @ z[list(index)])
-        sets.append({n: max(float(v), 0.0) for n, v in zip(names, values)})
-        weights.append(float(np.prod([w[i] for i in index])))
-    return sets, np.asarray(weights)
+    grid = np.asarray(list(product(range(NODES), repeat=len(profile.law_parameters())))).T  # (k, NODES^k)
+    values = {n: np.maximum(v, 0.0) for n, v in law_values(profile, z[grid]).items()}
+    sets = [{n: float(v[j]) for n, v in values.items()} for j in range(grid.shape[1])]
+    return sets, np.prod((w / w.sum())[grid], axis=0)
 
 
 def _log_likelihood(sigma: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
