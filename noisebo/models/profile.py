@@ -132,7 +132,9 @@ class FieldCampaign(NamedTuple):
 
 def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.ndarray], dict[str, float]]:
     """One campaign's noise field fitted on its own: the law's Laplace draws (a0, a1 in value
-    units; p) and the fields' spreads and lengths (lengths in x units)."""
+    units; p), or NUTS draws given the fields' fitted hyperparameters where the fit sits at a
+    bound (``at_a_bound``, as ``distil``; 10-20 s), and the fields' spreads and lengths (lengths
+    in x units)."""
     config = campaign.config
     nm, s, inf = config.noise_model, config.space, config.inference
     field = nm.field
@@ -145,6 +147,10 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
     own = nm.model_copy(update={"profile": None})  # the campaign's data alone, not its prior
     data, scale, _ = noise_field.prepare(x, t, shot_std, n_shots, own, field, t_min, t_max, inf.max_inputs)
     samples, data = noise_field.fit(data, own, field, key, field_fit.FIELD_RESTARTS, LAPLACE_DRAWS)
+    if at_a_bound(samples.params, np.asarray(data.bounds)):  # the fields' hyperparameters as fitted
+        model = noise_field.make_model(own, field, data.freq.shape[1])
+        keep = LAPLACE_DRAWS + 1  # as many draws as a Laplace fit's, so the pooled campaigns weigh alike
+        samples = inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, keep)
     law = _law_draws(samples.params, scale)
     hyper = noise_field.field_hyperparameters(data)
     for prefix in noise_field.field_names(field):
@@ -160,7 +166,8 @@ def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> Distille
     point first; the level a0 of A0(x) = a0 exp(g0(x))), so their sd holds both each fit's
     uncertainty and the spread between campaigns; each field's spread over positions
     (g0_amplitude, sd of log A0(x); g1_amplitude for "a0_a1") and lengths (x units) as mean and
-    sd over the campaigns' estimates (sd 0 from one campaign). ``key`` is folded with each
+    sd over the campaigns' estimates (sd 0 from one campaign); a fit at a bound takes NUTS
+    draws, as in ``distil``. ``key`` is folded with each
     campaign's index; the law's correlation over the pooled draws. Raises ``NotDistillable`` as
     ``distil``."""
     if not campaigns:

@@ -132,3 +132,14 @@ def test_field_campaigns_no_law_can_be_fitted_to_say_why(campaigns, message):
     field = CONFIG.with_overrides(noise_model={"field": {}})
     with pytest.raises(NotDistillable, match=message):
         distil_field(campaigns(field, field_measurements(positions=5)), jax_key(0, PROFILE))
+
+
+def test_a_field_campaign_without_a0_gets_an_honest_spread_not_a_pinned_0():
+    # As for one law: A0 = 0 puts the MAP of the level a0 at its bound (Laplace: 0.00015 +- 0.00019);
+    # NUTS, given the field's fitted hyperparameters, spreads a0 over what the data allow
+    field = CONFIG.with_overrides(noise_model={"field": {}})
+    distilled = distil_field([FieldCampaign(field, *field_measurements(a0=0.0))], jax_key(0, PROFILE))
+    a0, a1 = distilled.parameters["a0"], distilled.parameters["a1"]
+    assert 0.02 < a0.sd < 0.15 and 0.0 < a0.mean < 0.2
+    assert a1.mean == pytest.approx(2.0, rel=0.1) and a1.sd > 0.07
+    assert distilled.correlation["a0,a1"] < -0.2
