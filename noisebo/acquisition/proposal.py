@@ -78,11 +78,15 @@ def _propose_nd_compiled(
     field_kind: str | None = None,
     overhead_s: float = 0.0,
 ):
-    """For d > 1: the policy's map on the reference points, then ``search.refine`` from its best
-    ``STARTS`` entries (each keeps its t); with a noise field (its law ``field_kind``) each
-    candidate is scored with the noise predicted where it lies. Returns the map's maximum over t
-    at each reference point (m,), the proposal's scaled x (d,), its t index, score and the
-    noise there at that t."""
+    """For d > 1: the policy's map on the reference points for each shot count, then
+    ``search.refine`` from the best ``STARTS`` entries over all counts (each keeps its t), a
+    candidate scored at its best count; with a noise field (its law ``field_kind``) each
+    candidate is scored with the noise predicted where it lies. Takes the counts ``shots``
+    (n_s,) and the t each may use ``allowed`` (n_s, n_t) bool. Returns the maps' maximum over t
+    and counts at each reference point (m,), the proposal's scaled x (d,), its t index, score,
+    the noise there at that t and the index of its count. One count is the map and search of
+    that count alone; several cost one search, not one each (the fit and prediction they share
+    dominate less as n_s grows)."""
     g = space_grids(space)
     xs = jnp.asarray(scaled(space, g.x))
     xi = jnp.asarray(integration_points(space))
@@ -90,8 +94,16 @@ def _propose_nd_compiled(
     n_t = g.t.size
     uses_spread = policy_of(acq).uses_spread
 
+    def each_count(fn, shots, allowed):  # fn(count, its allowed t) for every count, stacked
+        if shots.shape[0] == 1:
+            return fn(shots[0], allowed[0])[None]
+        return jax.vmap(fn)(shots, allowed)
+
     def propose(post: Posterior, shots, fitted: Fitted, key, allowed):
-        values = jnp.where(allowed[None, :], acquisition_map(post, shots, acq, rew, overhead_s), -jnp.inf)
+        def masked_map(n, ok):
+            return jnp.where(ok[None, :], acquisition_map(post, n, acq, rew, overhead_s), -jnp.inf)
+
+        values = jnp.max(each_count(masked_map, shots, allowed), axis=0)
         _, flat = jax.lax.top_k(values.ravel(), STARTS)
         i, j = flat // n_t, flat % n_t
         std = fitted.standardisation
@@ -100,7 +112,7 @@ def _propose_nd_compiled(
             rows = field_rows(field_kind, space, rew, fitted, flat)
             return NoiseRows(rows.mean, rows.var)
 
-        def score(candidates):  # (K, P, d) scaled -> (K, P)
+        def scores(candidates):  # (K, P, d) scaled -> (n_s, K, P), each count's
             k, p, d = candidates.shape
             flat = candidates.reshape(k * p, d)
             mean, var = inference.combine(
@@ -114,26 +126,24 @@ def _propose_nd_compiled(
                 rows = noise_rows(flat)
                 noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t))
             q = spread(fitted, flat, xi, primary_first).reshape(k, p) if uses_spread else None
-            return point_scores(
-                post,
-                raw_mean.reshape(k, p),
-                raw_var.reshape(k, p),
-                jnp.broadcast_to(j[:, None], (k, p)),
-                shots,
-                acq,
-                rew,
-                noise,
-                q,
-                overhead_s,
-            )
+            at = jnp.broadcast_to(j[:, None], (k, p))
 
-        best_x, best_s = refine(score, xs[i], key, spacing)
+            def of_count(n, ok):
+                found = point_scores(
+                    post, raw_mean.reshape(k, p), raw_var.reshape(k, p), at, n, acq, rew, noise, q, overhead_s
+                )
+                return jnp.where(ok[at], found, -jnp.inf)
+
+            return each_count(of_count, shots, allowed)
+
+        best_x, best_s = refine(lambda c: jnp.max(scores(c), axis=0), xs[i], key, spacing)
         best = jnp.argmax(best_s)
+        count = jnp.argmax(scores(best_x[:, None, :])[:, best, 0])
         if field_kind is None:
             noise_at = post.noise_mean[j[best]]
         else:
             noise_at = noise_rows(best_x[best][None, :]).mean[0, j[best]]
-        return jnp.max(values, axis=1), best_x[best], j[best], best_s[best], noise_at
+        return jnp.max(values, axis=1), best_x[best], j[best], best_s[best], noise_at, count
 
     name = (
         f"propose_nd/{acq.model_dump_json()}/{rew.model_dump_json()}/{space.model_dump_json()}/"
@@ -192,19 +202,19 @@ def acquire(
     sched = config.schedule
     t_opt, t_map, spread_t, now_converged = convergence
     key = propose_key(0, step) if key is None else key
-    options = [shots_for(now_converged, sched)]
-    if policy_of(config.acquisition).chooses_shots and now_converged:
-        options = list(information.shot_options(sched.shots_before, sched.shots_after))
-    best = None
-    for wanted in options:
-        allowed, shots = affordable(config, wanted, budget_left)
-        if shots != wanted and len(options) > 1 and shots in options:
-            continue  # the budget's cut to this count is tried as itself
-        found = _propose(config, fitted, post, key, shots, jnp.asarray(allowed))
-        if best is None or found[2] > best[2]:
-            best = found + (shots,)
-    assert best is not None  # options is never empty: it holds the wanted count
-    x, j, acq_value, acq_map, noise_at_t, shots = best
+    choices = shot_choices(config, now_converged, budget_left)
+    if config.space.dimensions == 1:  # each count's map maximised exactly; the best count kept
+        best = None
+        for shots, allowed in choices:
+            if allowed.any():
+                found = _propose(config, fitted, post, key, shots, jnp.asarray(allowed))
+                if best is None or found[2] > best[2]:
+                    best = found + (shots,)
+        assert best is not None  # the wanted count's row always allows a t
+        x, j, acq_value, acq_map, noise_at_t, shots = best
+    else:  # one search over x, t and the counts together
+        x, j, acq_value, acq_map, noise_at_t, k = _propose_nd(config, fitted, post, key, choices)
+        shots = choices[k][0]
     g = grids(config)
     rule = noise_t.rule_of(sched)
     if rule.applies(config, convergence, shots):
@@ -239,22 +249,52 @@ def acquire(
     return decision
 
 
+def shot_choices(
+    config: CampaignConfig, now_converged: bool, budget_left: float | None
+) -> list[tuple[int, np.ndarray]]:
+    """The shot counts a proposal chooses among, each with the t-grid entries (n_t,) bool it may
+    use within ``budget_left`` (``affordable``): the schedule's count, or, for a policy that
+    chooses shots once the noise model has converged, each of ``information.shot_options``. A
+    count the budget cuts to another of the options allows no t (that one is tried as itself),
+    so the list keeps its length as the budget runs out."""
+    sched = config.schedule
+    options = [shots_for(now_converged, sched)]
+    if policy_of(config.acquisition).chooses_shots and now_converged:
+        options = list(information.shot_options(sched.shots_before, sched.shots_after))
+    choices = []
+    for wanted in options:
+        allowed, shots = affordable(config, wanted, budget_left)
+        if shots != wanted and len(options) > 1 and shots in options:
+            allowed = np.zeros_like(allowed)
+        choices.append((shots, allowed))
+    return choices
+
+
 def _propose(config: CampaignConfig, fitted: Fitted, post: Posterior, key, shots: int, allowed) -> tuple:
-    """The policy's proposal for points of ``shots`` shots at the allowed t: x (a tuple), its t
-    index, acquisition value, the acquisition map, and the noise model's sd there."""
-    g, s = grids(config), config.space
+    """One axis: the policy's proposal for points of ``shots`` shots at the allowed t: x (a
+    tuple), its t index, acquisition value, the acquisition map, and the noise model's sd there."""
+    g = grids(config)
     noise_grid = np.asarray(post.noise_mean)
-    if s.dimensions == 1:
-        values, i, j = _propose_program(config)(post, float(shots), allowed)
-        i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
-        noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
-        return (float(g.x[i]),), j, float(acq_map[i, j]), acq_map, noise_at_t
-    acq_map, x_scaled, j, acq_value, noise_at = _propose_nd_program(config, fitted)(
-        post, float(shots), fitted, key, allowed
+    values, i, j = _propose_program(config)(post, float(shots), allowed)
+    i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
+    noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
+    return (float(g.x[i]),), j, float(acq_map[i, j]), acq_map, noise_at_t
+
+
+def _propose_nd(config: CampaignConfig, fitted: Fitted, post: Posterior, key, choices) -> tuple:
+    """d > 1 axes: the policy's proposal over x, t and the shot counts of ``choices``
+    (``shot_choices``) in one search: x (a tuple), its t index, acquisition value, the map (the
+    best over t and counts at each reference point), the noise model's sd there, and the index
+    of the chosen count in ``choices``."""
+    s = config.space
+    shots = jnp.asarray([float(n) for n, _ in choices])
+    allowed = jnp.asarray(np.stack([a for _, a in choices]))
+    acq_map, x_scaled, j, acq_value, noise_at, k = _propose_nd_program(config, fitted)(
+        post, shots, fitted, key, allowed
     )
     lows, highs = np.asarray(s.lows), np.asarray(s.highs)
     x = tuple(float(v) for v in np.clip(lows + np.asarray(x_scaled) * (highs - lows), lows, highs))
-    return x, int(j), float(acq_value), acq_map, float(noise_at)
+    return x, int(j), float(acq_value), acq_map, float(noise_at), int(k)
 
 
 def noise_point_shots(post: Posterior, j: int, x: tuple, g: Grids, sched) -> int:

@@ -10,9 +10,10 @@ import threading
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from noisebo.acquisition.policies import policy_of
-from noisebo.acquisition.proposal import _propose_nd_program, affordable, propose_key
+from noisebo.acquisition.proposal import _propose_nd_program, propose_key, shot_choices
 from noisebo.acquisition.records import Decision
 from noisebo.campaign.steps import seed_points
 from noisebo.config import CampaignConfig
@@ -97,12 +98,13 @@ def compile_ahead(
         fitted = fit_models(config, state, fit_key(0, 0), previous, False, capacities)
         posterior = predict(config, fitted, state, policy_of(config.acquisition).uses_spread).posterior
         if config.space.dimensions > 1:  # the refinement's program depends on the capacity too
+            choices = shot_choices(config, state.is_converged, None)  # as many counts as the next decision's
             posterior = _propose_nd_program(config, fitted)(
                 posterior,
-                float(config.schedule.shots_before),
+                jnp.asarray([float(n) for n, _ in choices]),
                 fitted,
                 propose_key(0, 0),
-                jnp.asarray(affordable(config, 1, None)[0]),
+                jnp.asarray(np.stack([a for _, a in choices])),
             )
         jax.block_until_ready(posterior)
     finally:
