@@ -84,9 +84,8 @@ def _propose_nd_compiled(
     candidate is scored with the noise predicted where it lies. Takes the counts ``shots``
     (n_s,) and the t each may use ``allowed`` (n_s, n_t) bool. Returns the maps' maximum over t
     and counts at each reference point (m,), the proposal's scaled x (d,), its t index, score,
-    the noise there at that t and the index of its count. One count is the map and search of
-    that count alone; several cost one search, not one each (the fit and prediction they share
-    dominate less as n_s grows)."""
+    the noise there at that t and the index of its count. With one count it is that count's map
+    and search alone."""
     g = space_grids(space)
     xs = jnp.asarray(scaled(space, g.x))
     xi = jnp.asarray(integration_points(space))
@@ -210,7 +209,7 @@ def acquire(
                 found = _propose(config, fitted, post, key, shots, jnp.asarray(allowed))
                 if best is None or found[2] > best[2]:
                     best = found + (shots,)
-        assert best is not None  # the wanted count's row always allows a t
+        assert best is not None  # some count fits: the engine checked the cheapest point does
         x, j, acq_value, acq_map, noise_at_t, shots = best
     else:  # one search over x, t and the counts together
         x, j, acq_value, acq_map, noise_at_t, k = _propose_nd(config, fitted, post, key, choices)
