@@ -285,6 +285,7 @@ def _propose_nd(config: CampaignConfig, fitted: Fitted, post: Posterior, key, ch
     (``shot_choices``) in one search: x (a tuple), its t index, acquisition value, the map (the
     best over t and counts at each reference point), the noise model's sd there, and the index
     of the chosen count in ``choices``."""
+    assert any(allowed.any() for _, allowed in choices)  # the engine checked the cheapest point fits
     s = config.space
     shots = jnp.asarray([float(n) for n, _ in choices])
     allowed = jnp.asarray(np.stack([a for _, a in choices]))

@@ -97,16 +97,21 @@ def compile_ahead(
     try:
         fitted = fit_models(config, state, fit_key(0, 0), previous, False, capacities)
         posterior = predict(config, fitted, state, policy_of(config.acquisition).uses_spread).posterior
-        if config.space.dimensions > 1:  # the refinement's program depends on the capacity too
-            choices = shot_choices(config, state.is_converged, None)  # as many counts as the next decision's
-            posterior = _propose_nd_program(config, fitted)(
-                posterior,
-                jnp.asarray([float(n) for n, _ in choices]),
-                fitted,
-                propose_key(0, 0),
-                jnp.asarray(np.stack([a for _, a in choices])),
-            )
         jax.block_until_ready(posterior)
+        if config.space.dimensions > 1:  # the refinement's program depends on the capacity too
+            # one program per number of shot counts: a policy that chooses them has two, before
+            # and after the noise model converges
+            chooses = policy_of(config.acquisition).chooses_shots
+            for converged in (False, True) if chooses else (False,):
+                choices = shot_choices(config, converged, None)
+                proposal = _propose_nd_program(config, fitted)(
+                    posterior,
+                    jnp.asarray([float(n) for n, _ in choices]),
+                    fitted,
+                    propose_key(0, 0),
+                    jnp.asarray(np.stack([a for _, a in choices])),
+                )
+                jax.block_until_ready(proposal)
     finally:
         done.set()
         with _COMPILING_LOCK:

@@ -809,8 +809,8 @@ def program_name(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int
 
 
 @lru_cache(maxsize=None)
-def _cached_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
-    """One model per configuration, so ``inference.fit_map`` compiles its programs once."""
+def cached_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
+    """One model per configuration, so ``inference.fit_map`` (and a profile's NUTS) compiles its programs once."""
     return make_model(cfg, field, dimensions)
 
 
@@ -845,7 +845,7 @@ def fit(
 
     Returns the samples (sample 0 the MAP point) and the data holding the hyperparameters used
     (predict with these data, not the ones passed in)."""
-    model = _cached_model(cfg, field, data.freq.shape[1])
+    model = cached_model(cfg, field, data.freq.shape[1])
     name, depends_on = program_name(cfg, field, data.freq.shape[1])
 
     def completed(guess: dict) -> dict:  # a law without its fields' weights gets them by ridge

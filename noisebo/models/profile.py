@@ -148,8 +148,8 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
     data, scale, _ = noise_field.prepare(x, t, shot_std, n_shots, own, field, t_min, t_max, inf.max_inputs)
     samples, data = noise_field.fit(data, own, field, key, field_fit.FIELD_RESTARTS, LAPLACE_DRAWS)
     if at_a_bound(samples.params, np.asarray(data.bounds)):  # the fields' hyperparameters as fitted
-        model = noise_field.make_model(own, field, data.freq.shape[1])
-        keep = LAPLACE_DRAWS + 1  # as many draws as a Laplace fit's, so the pooled campaigns weigh alike
+        model = noise_field.cached_model(own, field, data.freq.shape[1])  # one sampler for every campaign
+        keep = LAPLACE_DRAWS + 1  # as many draws as a Laplace fit's (nuts_samples allowing), so campaigns weigh alike
         samples = inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, keep)
     law = _law_draws(samples.params, scale)
     hyper = noise_field.field_hyperparameters(data)
@@ -162,8 +162,8 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
 def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> Distilled:
     """The posterior of a noise field's law from noise-field campaigns on one instrument, each
     fitted on its own (their positions are different places, perhaps on different samples):
-    a0, a1 (and p) pooled over the campaigns' Laplace draws (``LAPLACE_DRAWS`` each, the MAP
-    point first; the level a0 of A0(x) = a0 exp(g0(x))), so their sd holds both each fit's
+    a0, a1 (and p) pooled over the campaigns' Laplace draws (the MAP point and ``LAPLACE_DRAWS``
+    more each; the level a0 of A0(x) = a0 exp(g0(x))), so their sd holds both each fit's
     uncertainty and the spread between campaigns; each field's spread over positions
     (g0_amplitude, sd of log A0(x); g1_amplitude for "a0_a1") and lengths (x units) as mean and
     sd over the campaigns' estimates (sd 0 from one campaign); a fit at a bound takes NUTS

@@ -73,7 +73,7 @@ def test_one_search_over_the_counts_is_as_good_as_each_count_s_map(area):
     # the map is the best over the counts at each reference point, and the proposal scores at
     # least its best entry
     np.testing.assert_array_equal(np.asarray(joint[3]), np.max([np.asarray(a[3]) for a in alone], axis=0))
-    assert joint[2] >= float(np.max(joint[3])) - 1e-12
+    assert joint[2] >= float(np.max(joint[3])) * (1 - 1e-12)
     # the count is chosen by its score, not by its place in the list
     backwards = _propose_nd(config, fitted, post, key, choices[::-1])
     assert choices[joint[5]][0] == choices[::-1][backwards[5]][0]

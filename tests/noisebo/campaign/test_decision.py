@@ -156,3 +156,30 @@ def test_peak_t_stays_within_half_a_step_of_the_best_point():
     values = np.array([[0.0, 0.0, 0.0, 1.0, 0.9, -5.0, -5.0, -5.0, -5.0, -5.0, -5.0]])  # not a parabola
     got = float(peak_t(t, values)[0])
     assert 0.3 <= got <= 0.35
+
+
+def test_two_axes_compiled_ahead_a_policy_that_chooses_its_shots_compiles_nothing_once_converged():
+    """info_rate's proposal takes every shot count once the noise model has converged, one
+    before: compiled ahead, neither decision compiles."""
+    config = CampaignConfig(
+        space={
+            "axes": [{"name": "u", "low": 0, "high": 1, "n": 10}, {"name": "v", "low": -1, "high": 1, "n": 8}],
+            "n_t": 12,
+        },
+        primary_model={"length_scale": 0.55},
+        acquisition={"policy": "info_rate"},
+    )
+    rng = np.random.default_rng(2)
+    state = CampaignState()
+    for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(grids(config).t, 5)):
+        sd = 2.0 / np.sqrt(t) + 0.1
+        shots = np.sin(3 * x[0]) * x[1] + sd * rng.standard_normal(10)
+        std = float(shots.std(ddof=1))
+        state = state.with_point(Point(tuple(x), float(t), float(shots.mean()), std, 10, std, True))
+    compile_ahead(config, state, None, capacities_needed(config, state))
+    before_count = compile_count()
+    made, _ = decide(config, state, 0, 0)
+    converged = state.with_t_opt(made.t_opt, True)
+    again, _ = decide(config, converged, 0, 1)
+    assert compile_count() == before_count
+    assert not made.converged and again.converged and again.shots in (1, 2, 3, 5, 8)

@@ -468,7 +468,7 @@ def test_the_hessian_outside_the_laplace_basis_is_the_priors():
     samples, data, _ = fit(
         x[:, None], t, measure(x, t, np.sqrt(1 / t + np.where(x > 0.6, 1.0, 0.01)), rng), laplace=0, estimate=False
     )
-    model = noise_field._cached_model(QUADRATURE, noise_field.NoiseFieldConfig(), 1)
+    model = noise_field.cached_model(QUADRATURE, noise_field.NoiseFieldConfig(), 1)
     point = {k: v[0] for k, v in samples.params.items()}
     template = inference._unconstrained(model, data, point)
     flat = ravel_pytree(template)[0]
