@@ -31,6 +31,27 @@ def grid_state(n: int, seed: int = 4) -> CampaignState:
     return state
 
 
+AREA = CampaignConfig(
+    space={
+        "axes": [{"name": "u", "low": 0, "high": 1, "n": 10}, {"name": "v", "low": -1, "high": 1, "n": 8}],
+        "n_t": 12,
+    },
+    primary_model={"length_scale": 0.55},
+)
+
+
+def area_state(config: CampaignConfig) -> CampaignState:
+    """5 points at random over ``config``'s two axes (at its t grid), 10 shots each."""
+    rng = np.random.default_rng(2)
+    state = CampaignState()
+    for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(grids(config).t, 5)):
+        sd = 2.0 / np.sqrt(t) + 0.1
+        shots = np.sin(3 * x[0]) * x[1] + sd * rng.standard_normal(10)
+        std = float(shots.std(ddof=1))
+        state = state.with_point(Point(tuple(x), float(t), float(shots.mean()), std, 10, std, True))
+    return state
+
+
 @pytest.fixture(scope="module")
 def crossing():
     """A state whose x inputs just crossed 32 distinct values: the primary GP pads to 64."""
@@ -116,20 +137,8 @@ def test_compiled_ahead_the_crossing_compiles_nothing():
 
 def test_two_axes_compiled_ahead_the_first_decision_compiles_nothing():
     """The refinement over the area is compiled ahead too (with the fits and the prediction)."""
-    config = CampaignConfig(
-        space={
-            "axes": [{"name": "u", "low": 0, "high": 1, "n": 10}, {"name": "v", "low": -1, "high": 1, "n": 8}],
-            "n_t": 12,
-        },
-        primary_model={"length_scale": 0.55},
-    )
-    rng = np.random.default_rng(2)
-    state = CampaignState()
-    for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(grids(config).t, 5)):
-        sd = 2.0 / np.sqrt(t) + 0.1
-        shots = np.sin(3 * x[0]) * x[1] + sd * rng.standard_normal(10)
-        std = float(shots.std(ddof=1))
-        state = state.with_point(Point(tuple(x), float(t), float(shots.mean()), std, 10, std, True))
+    config = AREA
+    state = area_state(config)
     compile_ahead(config, state, None, capacities_needed(config, state))
     before_count = compile_count()
     made, _ = decide(config, state, 0, 0)
@@ -161,21 +170,8 @@ def test_peak_t_stays_within_half_a_step_of_the_best_point():
 def test_two_axes_compiled_ahead_a_policy_that_chooses_its_shots_compiles_nothing_once_converged():
     """info_rate's proposal takes every shot count once the noise model has converged, one
     before: compiled ahead, neither decision compiles."""
-    config = CampaignConfig(
-        space={
-            "axes": [{"name": "u", "low": 0, "high": 1, "n": 10}, {"name": "v", "low": -1, "high": 1, "n": 8}],
-            "n_t": 12,
-        },
-        primary_model={"length_scale": 0.55},
-        acquisition={"policy": "info_rate"},
-    )
-    rng = np.random.default_rng(2)
-    state = CampaignState()
-    for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(grids(config).t, 5)):
-        sd = 2.0 / np.sqrt(t) + 0.1
-        shots = np.sin(3 * x[0]) * x[1] + sd * rng.standard_normal(10)
-        std = float(shots.std(ddof=1))
-        state = state.with_point(Point(tuple(x), float(t), float(shots.mean()), std, 10, std, True))
+    config = AREA.with_overrides(acquisition={"policy": "info_rate"})
+    state = area_state(config)
     compile_ahead(config, state, None, capacities_needed(config, state))
     before_count = compile_count()
     made, _ = decide(config, state, 0, 0)
