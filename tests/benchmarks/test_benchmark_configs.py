@@ -326,3 +326,12 @@ def test_the_other_objective_runs_on_the_same_instrument(half, whole):
     other, same = validated(load_config(BENCHMARKS / "configs" / f"{half}.yaml")), validated(load_config(whole))
     assert other.instrument == same.instrument
     assert (other.space.x_min, other.space.x_max) == (0.0, 0.5) and (same.space.x_min, same.space.x_max) == (0.0, 1.0)
+
+
+def test_the_capped_inputs_check_changes_the_2d_area_s_cap_alone():
+    """benchmarks/configs/pfm2d_max_inputs_1024.yaml: data/configs/pfm2d.yaml with the GPs' input
+    cap raised, so its rows differ from the budget table's by the cap alone."""
+    raised = validated(load_config(BENCHMARKS / "configs" / "pfm2d_max_inputs_1024.yaml"))
+    area = validated(load_config(ROOT / "data" / "configs" / "pfm2d.yaml"))
+    assert raised.inference.max_inputs == 1024 and area.inference.max_inputs == 256
+    assert raised.with_overrides(name=area.name, inference={"max_inputs": 256}) == area
