@@ -9,11 +9,9 @@ from __future__ import annotations
 import threading
 
 import jax
-import jax.numpy as jnp
-import numpy as np
 
 from noisebo.acquisition.policies import policy_of
-from noisebo.acquisition.proposal import _propose_nd_program, propose_key, shot_choices
+from noisebo.acquisition.proposal import _propose_nd, propose_key, shot_choices
 from noisebo.acquisition.records import Decision
 from noisebo.campaign.steps import seed_points
 from noisebo.config import CampaignConfig
@@ -103,15 +101,7 @@ def compile_ahead(
             # and after the noise model converges
             chooses = policy_of(config.acquisition).chooses_shots
             for converged in (False, True) if chooses else (False,):
-                choices = shot_choices(config, converged, None)
-                proposal = _propose_nd_program(config, fitted)(
-                    posterior,
-                    jnp.asarray([float(n) for n, _ in choices]),
-                    fitted,
-                    propose_key(0, 0),
-                    jnp.asarray(np.stack([a for _, a in choices])),
-                )
-                jax.block_until_ready(proposal)
+                _propose_nd(config, fitted, posterior, propose_key(0, 0), shot_choices(config, converged, None))
     finally:
         done.set()
         with _COMPILING_LOCK:
