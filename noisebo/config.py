@@ -742,6 +742,13 @@ def _field_kind(varies: str | None) -> str:
     return f"the config's noise_model.field varies {varies} (make the profile of campaigns with the same field)"
 
 
+# On one axis a campaign's proposals lie on its grid, so its GPs see at most the grid's inputs;
+# over two or more every proposal is an input of its own, and 256 bins (16 x 16 on two axes) are
+# coarser than the features a scan resolves. 512 keeps a warm step near 0.2 s on two axes, where
+# 1 024 costs 0.4 s or more at 1 000 points (benchmarks/scaling.py).
+MAX_INPUTS_ONE_AXIS, MAX_INPUTS_SEVERAL_AXES = 256, 512
+
+
 class InferenceConfig(FrozenModel):
     """How model hyperparameters are inferred.
 
@@ -756,7 +763,12 @@ class InferenceConfig(FrozenModel):
     dimension, instead of the mode alone.
     ``max_inputs``: each GP merges the points measured at the same input into one observation
     (exact); beyond this many distinct inputs it merges them by equal-width bins of the input
-    range instead, this many bins (an approximation, recorded with each decision).
+    range instead, this many bins (an approximation, recorded with each decision). Unset: 256
+    over one axis (and for the noise model over t), 512 over two or more, where every proposal
+    is an input of its own (``max_inputs_for``).
+    ``search_inputs``: a multi-start fit of the GP for f on more distinct inputs than this runs
+    its starts on the inputs merged into this many bins, then refines the best on all of them (a
+    warm step starts from the previous fit on all of them).
     """
 
     mode: Literal["map", "nuts"] = Field(
@@ -785,12 +797,20 @@ class InferenceConfig(FrozenModel):
         "quadrature over the f GP's hyperparameter posterior (map mode); 0: off, the "
         "mode alone",
     )
-    max_inputs: Count = Field(
-        256,
+    max_inputs: Count | None = Field(
+        None,
         ge=8,
         le=8192,
         description="distinct inputs a GP takes exactly; beyond, it merges "
-        "points into this many equal-width bins (an approximation, recorded per step)",
+        "points into this many equal-width bins (an approximation, recorded per step). "
+        "Unset: 256 over one axis and for the noise model over t, 512 over two or more axes",
+    )
+    search_inputs: Count = Field(
+        256,
+        ge=8,
+        le=8192,
+        description="a multi-start fit of the GP for f on more distinct inputs than this "
+        "searches on them merged into this many bins, then refines its best start on all of them",
     )
     restart_every: Count = Field(
         8,
@@ -798,6 +818,13 @@ class InferenceConfig(FrozenModel):
         description="after convergence every this-many-th step multi-starts, the "
         "others start from the previous fit (1: every step multi-starts)",
     )
+
+    def max_inputs_for(self, axes: int) -> int:
+        """The distinct inputs a GP over ``axes`` input axes takes exactly (``max_inputs``, or
+        its default for that many axes); the noise model's over t is one axis."""
+        if self.max_inputs is not None:
+            return self.max_inputs
+        return MAX_INPUTS_ONE_AXIS if axes == 1 else MAX_INPUTS_SEVERAL_AXES
 
 
 class ScheduleConfig(FrozenModel):

@@ -48,15 +48,15 @@ AHEAD_FILL = 0.75  # compile the next capacity once a training set fills this mu
 def capacities_ahead(config: CampaignConfig, decision: Decision) -> tuple[int, int] | None:
     """The (primary, noise) capacities a campaign is about to need after ``decision``: a
     training set past ``AHEAD_FILL`` of its capacity will soon cross into the next (never beyond
-    what ``inference.max_inputs`` needs). None when neither is close."""
-    limit = capacity_for(config.inference.max_inputs)
+    what ``inference.max_inputs`` needs for each). None when neither is close."""
+    inf = config.inference
 
-    def ahead(n: int) -> int:
+    def ahead(n: int, axes: int) -> int:
         capacity = capacity_for(n)
-        return min(2 * capacity, limit) if n >= AHEAD_FILL * capacity else capacity
+        return min(2 * capacity, capacity_for(inf.max_inputs_for(axes))) if n >= AHEAD_FILL * capacity else capacity
 
     now = (capacity_for(decision.primary_inputs), capacity_for(decision.noise_inputs))
-    wanted = (ahead(decision.primary_inputs), ahead(decision.noise_inputs))
+    wanted = (ahead(decision.primary_inputs, config.space.dimensions), ahead(decision.noise_inputs, 1))
     return wanted if wanted != now else None
 
 

@@ -122,13 +122,24 @@ def fit_field(
     (``field_profile_check``; while the profile is in use its means are one more start)."""
     nm, s, inf = config.noise_model, config.space, config.inference
     x, t, std, shots = training_inputs(config, state, scaled_positions)
-    distinct = min(int(np.unique(t).size), inf.max_inputs)
+    distinct = min(int(np.unique(t).size), inf.max_inputs_for(1))
     field = nm.field
     assert field is not None  # fit_field runs for a noise field only
     spans = np.asarray(s.highs) - np.asarray(s.lows)
     check = field_profile_check.verdict(nm, state.profile_dropped_step is not None, x, spans, t, std, shots)
     data, scale, groups = noise_field.prepare(
-        x, t, std, shots, nm, field, s.t_min, s.t_max, inf.max_inputs, capacity, t_capacity(distinct), check.in_use
+        x,
+        t,
+        std,
+        shots,
+        nm,
+        field,
+        s.t_min,
+        s.t_max,
+        inf.max_inputs_for(1),
+        capacity,
+        t_capacity(distinct),
+        check.in_use,
     )
     hyper = previous_field(previous, data)
     if hyper is not None:

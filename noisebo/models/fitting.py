@@ -67,14 +67,16 @@ def _fit_one(
     laplace: int,
     quadrature: int,
     warm: bool,
+    search_data=None,
 ) -> inference.Samples:
-    """``named``: the model's program name and the plugins it calls (``inference.fit_map``)."""
+    """``named``: the model's program name and the plugins it calls; ``search_data``: the
+    stand-in a multi-start searches on (``inference.fit_map``)."""
     inf = config.inference
     if inf.mode == "nuts":
         return inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.predict_samples)
     name, depends_on = named
     return inference.fit_map(
-        model, data, key, inf.restarts, laplace, guesses, quadrature, not warm, None, name, depends_on
+        model, data, key, inf.restarts, laplace, guesses, quadrature, not warm, None, name, depends_on, search_data
     )
 
 
@@ -199,7 +201,7 @@ def fit_noise_model(
     t_train, std_train, n_train = t[train], state.column("shot_std")[train], n_shots[train]
     check = profile_check.verdict(cfg, state.profile_dropped_step is not None, t_train, std_train, n_train)
     data, scale, groups = noise_model.prepare(
-        t_train, std_train, n_train, cfg, s.t_min, s.t_max, inf.max_inputs, capacity, check.in_use
+        t_train, std_train, n_train, cfg, s.t_min, s.t_max, inf.max_inputs_for(1), capacity, check.in_use
     )
     n_warm = _previous_guesses(previous, "noise", scale, np.asarray(data.bounds))
     warm = warm and bool(n_warm)
@@ -220,16 +222,20 @@ def fit_gp(
     """Fit the primary GP of f on every point, each with its measurement variance noise^2 /
     shots (measured, or the noise model's where it stood when the point was taken), from the
     ``key`` (the GP's half of the step's fit key: ``fit_keys``); warm when the noise model's fit
-    was (``noise.warm``)."""
+    was (``noise.warm``). A multi-start on more than ``inference.search_inputs`` distinct inputs
+    searches on them merged into that many bins and refines the best on all of them."""
     s, inf = config.space, config.inference
     x, _, value, n_shots, point_noise = _columns(config, state)
-    data, std, groups = primary.prepare(x, value, point_noise**2 / n_shots, s.lows, s.highs, inf.max_inputs, capacity)
-    k_primary = key
+    var = point_noise**2 / n_shots
+    data, std, groups = primary.prepare(x, value, var, s.lows, s.highs, inf.max_inputs_for(s.dimensions), capacity)
+    search = None
+    if inf.mode == "map" and not noise.warm and groups.count.size > inf.search_inputs:
+        search = primary.prepare(x, value, var, s.lows, s.highs, inf.search_inputs)[0]
     p_warm = _previous_guesses(previous, "primary", 1.0)
     guesses = p_warm if noise.warm else [primary.prior_median(config.primary_model, s.dimensions)] + p_warm
     named = (primary.program_name(config.primary_model, s.dimensions), ())
     samples = _fit_one(
-        config, _models(config)[0], named, data, k_primary, guesses, 0, inf.primary_quadrature, noise.warm
+        config, _models(config)[0], named, data, key, guesses, 0, inf.primary_quadrature, noise.warm, search
     )
     return PrimaryFit(samples, data, std, groups.count.size, groups.binned)
 
@@ -286,11 +292,14 @@ def _primary_x(state: CampaignState, s: SpaceConfig) -> np.ndarray:
 
 def capacities_needed(config: CampaignConfig, state: CampaignState) -> tuple[int, int]:
     """The (primary, noise) capacities a decision on ``state`` pads to (see ``fit_models``)."""
-    s, limit = config.space, config.inference.max_inputs
+    s, inf = config.space, config.inference
+    limit = inf.max_inputs_for(s.dimensions)
     primary_count = int(group_ids(scaled(s, _primary_x(state, s)), 0.0, 1.0, limit)[0].max(initial=-1)) + 1
     if config.noise_model.field is not None:
         noise_count = field_fit.groups_needed(config, state, scaled(s, state.positions(s.dimensions)))
     else:
         train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
-        noise_count = int(group_ids(state.column("t")[train], s.t_min, s.t_max, limit)[0].max(initial=-1)) + 1
+        noise_count = (
+            int(group_ids(state.column("t")[train], s.t_min, s.t_max, inf.max_inputs_for(1))[0].max(initial=-1)) + 1
+        )
     return capacity_for(primary_count), capacity_for(noise_count)

@@ -248,6 +248,18 @@ def _block_basis(template: dict, bases: dict) -> jnp.ndarray:
     return out
 
 
+def _best_of(value_and_grad, starts: list, data) -> np.ndarray:
+    """The lowest finite end of an L-BFGS-B minimisation from each of ``starts``."""
+    best, best_value = None, np.inf
+    for x0 in starts:
+        x, value = _minimise(value_and_grad, x0, data)
+        if np.isfinite(value) and value < best_value:
+            best, best_value = x, value
+    if best is None:
+        raise FloatingPointError("every MAP restart ended at a non-finite objective")
+    return best
+
+
 def _minimise(value_and_grad, x0: np.ndarray, data) -> tuple[np.ndarray, float]:
     def fun(flat):
         value, grad = value_and_grad(flat, data)
@@ -287,6 +299,7 @@ def fit_map(
     laplace_basis: Callable | None = None,
     name: str | None = None,
     depends_on: tuple = (),
+    search_data=None,
 ) -> Samples:
     """MAP of ``model(data)``: L-BFGS-B from each ``guess`` (a dict of constrained values of every
     latent site, or a sequence of them, tried first) and, with ``draws``, from ``restarts``
@@ -302,22 +315,24 @@ def fit_map(
 
     ``name``: what identifies ``model`` across processes (the configs it was made from), so its
     programs are kept traced between them (``noisebo.programs``), with ``depends_on`` the plugin
-    classes it calls; None: kept in this process only."""
+    classes it calls; None: kept in this process only.
+
+    ``search_data``: a smaller stand-in for ``data`` (the same model's data, its latent sites of
+    the same shapes: the same points merged into fewer inputs) on which every start is minimised;
+    the best is then minimised on ``data`` from there. A search costs the stand-in's evaluations
+    and one refinement on ``data`` instead of every start's on ``data``."""
     guesses = [] if guess is None else [guess] if isinstance(guess, dict) else list(guess)
     if not guesses and not draws:
         raise ValueError("a MAP fit needs a guess or the prior draws")
     program = _map_program(model, restarts, laplace_samples, quadrature_nodes, laplace_basis, name, depends_on)
     k_start, k_laplace = split_key(key)
+    search = data if search_data is None else search_data
     starts = [np.asarray(program.flatten({k: jnp.asarray(v) for k, v in g.items()}, data)) for g in guesses]
     if draws:
-        starts += list(np.asarray(program.starts(k_start, data)))
-    best, best_value = None, np.inf
-    for x0 in starts:
-        x, value = _minimise(program.value_and_grad, x0, data)
-        if np.isfinite(value) and value < best_value:
-            best, best_value = x, value
-    if best is None:
-        raise FloatingPointError("every MAP restart ended at a non-finite objective")
+        starts += list(np.asarray(program.starts(k_start, search)))
+    best = _best_of(program.value_and_grad, starts, search)
+    if search_data is not None:
+        best = _best_of(program.value_and_grad, [best], data)
     if quadrature_nodes:
         params, weights = program.quadrature(jnp.asarray(best), data)
         return Samples(params, map_first=False, weights=weights)

@@ -65,7 +65,7 @@ def distil(
     s, inf = config.space, config.inference
     t_min, t_max = min(s.t_min, float(t.min())), max(s.t_max, float(t.max()))
     own = config.noise_model.model_copy(update={"profile": None})  # the campaigns' data alone, not their prior
-    data, scale, _ = noise_model.prepare(t, shot_std, n_shots, own, t_min, t_max, inf.max_inputs)
+    data, scale, _ = noise_model.prepare(t, shot_std, n_shots, own, t_min, t_max, inf.max_inputs_for(1))
     model = noise_model.make_model(own)
     guess = noise_model.initial_guess(data, own)
     name, depends_on = noise_model.program_name(own)
@@ -145,7 +145,7 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
     x = (np.asarray(campaign.x, dtype=np.float64).reshape(t.size, -1) - lows) / spans
     t_min, t_max = min(s.t_min, float(t.min())), max(s.t_max, float(t.max()))
     own = nm.model_copy(update={"profile": None})  # the campaign's data alone, not its prior
-    data, scale, _ = noise_field.prepare(x, t, shot_std, n_shots, own, field, t_min, t_max, inf.max_inputs)
+    data, scale, _ = noise_field.prepare(x, t, shot_std, n_shots, own, field, t_min, t_max, inf.max_inputs_for(1))
     samples, data = noise_field.fit(data, own, field, key, field_fit.FIELD_RESTARTS, LAPLACE_DRAWS)
     if at_a_bound(samples.params, np.asarray(data.bounds)):  # the fields' hyperparameters as fitted
         model = noise_field.cached_model(own, field, data.freq.shape[1])  # one sampler for every campaign

@@ -328,10 +328,11 @@ def test_the_other_objective_runs_on_the_same_instrument(half, whole):
     assert (other.space.x_min, other.space.x_max) == (0.0, 0.5) and (same.space.x_min, same.space.x_max) == (0.0, 1.0)
 
 
-def test_the_capped_inputs_check_changes_the_2d_area_s_cap_alone():
-    """benchmarks/configs/pfm2d_max_inputs_1024.yaml: data/configs/pfm2d.yaml with the GPs' input
-    cap raised, so its rows differ from the budget table's by the cap alone."""
-    raised = validated(load_config(BENCHMARKS / "configs" / "pfm2d_max_inputs_1024.yaml"))
+def test_the_former_cap_on_the_2d_area_changes_the_cap_alone():
+    """benchmarks/configs/pfm2d_max_inputs_256.yaml: data/configs/pfm2d.yaml with the GPs' input
+    cap at 256, as every config had it before the default grew with the axes, so its rows differ
+    from the budget table's by the cap alone."""
+    former = validated(load_config(BENCHMARKS / "configs" / "pfm2d_max_inputs_256.yaml"))
     area = validated(load_config(ROOT / "data" / "configs" / "pfm2d.yaml"))
-    assert raised.inference.max_inputs == 1024 and area.inference.max_inputs == 256
-    assert raised.with_overrides(name=area.name, inference={"max_inputs": 256}) == area
+    assert former.inference.max_inputs_for(2) == 256 and area.inference.max_inputs_for(2) == 512
+    assert former.with_overrides(name=area.name, inference={"max_inputs": None}) == area

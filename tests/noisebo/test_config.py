@@ -97,6 +97,8 @@ BAD = [
     ({"acquisition": {"f_acquisition": "pi"}}, "acquisition.f_acquisition"),
     ({"noise_model": {"a1_prior": {"low": 5, "high": 1}}}, "noise_model.a1_prior"),
     ({"inference": {"mode": "hmc"}}, "inference.mode"),
+    ({"inference": {"max_inputs": 4}}, "inference.max_inputs: Input should be greater than or equal to 8"),
+    ({"inference": {"search_inputs": 0}}, "inference.search_inputs: Input should be greater than or equal to 8"),
     ({"schema_version": 99}, "schema_version"),
 ]
 
@@ -173,6 +175,10 @@ STRICT = [
         "noise_model.field.basis_per_axis: expected a whole number, got the string '32'",
     ),
     ({"inference": {"restarts": True}}, "inference.restarts: expected a whole number, got the boolean true"),
+    (
+        {"inference": {"max_inputs": "1024"}},
+        "inference.max_inputs: expected a whole number, got the string '1024'",
+    ),
     (
         {"inference": {"laplace_samples": "32"}},
         "inference.laplace_samples: expected a whole number, got the string '32'",
@@ -273,3 +279,18 @@ def test_the_config_of_a_schema_1_file_still_loads():
         cfg = parse_config(json.loads(f.attrs["config_json"]), "journal")
     assert cfg.schema_version == 2 and cfg.instrument.settings == {"a0": 0.1, "a1": 2.0}
     assert (cfg.space.n_x, cfg.schedule.n_steps, cfg.acquisition.maximize) == (40, 4, True)
+
+
+@pytest.mark.parametrize(
+    "max_inputs, axes, cap",
+    [
+        (None, 1, 256),  # one axis (and the noise model's t): proposals lie on the grid
+        (None, 2, 512),  # over an area every proposal is an input of its own
+        (None, 4, 512),
+        (512, 1, 512),  # set: the same for every GP
+        (512, 3, 512),
+    ],
+)
+def test_max_inputs_unset_grows_with_the_axes(max_inputs, axes, cap):
+    inference = parse_config({"inference": {"max_inputs": max_inputs}}).inference
+    assert inference.max_inputs_for(axes) == cap

@@ -40,11 +40,11 @@ AREA = CampaignConfig(
 )
 
 
-def area_state(config: CampaignConfig) -> CampaignState:
-    """5 points at random over ``config``'s two axes (at its t grid), 10 shots each."""
+def area_state(config: CampaignConfig, n: int = 5) -> CampaignState:
+    """n points at random over ``config``'s two axes (at its t grid), 10 shots each."""
     rng = np.random.default_rng(2)
     state = CampaignState()
-    for x, t in zip(rng.uniform([0, -1], [1, 1], (5, 2)), rng.choice(grids(config).t, 5)):
+    for x, t in zip(rng.uniform([0, -1], [1, 1], (n, 2)), rng.choice(grids(config).t, n)):
         sd = 2.0 / np.sqrt(t) + 0.1
         shots = np.sin(3 * x[0]) * x[1] + sd * rng.standard_normal(10)
         std = float(shots.std(ddof=1))
@@ -85,6 +85,29 @@ def test_beyond_max_inputs_the_decision_says_it_binned(crossing):
     assert d.binned and d.primary_inputs <= 16 and d.noise_inputs <= 16
 
 
+def test_a_multi_start_beyond_search_inputs_searches_on_bins_and_fits_what_a_full_one_does(monkeypatch):
+    from noisebo.models import inference
+
+    state, searched_on = area_state(AREA, 60), []
+    best_of = inference._best_of
+
+    def spy(value_and_grad, starts, data):
+        if getattr(data, "x", None) is not None and data.x.ndim == 2:  # the GP for f's
+            searched_on.append((len(starts), int(np.asarray(data.mask).sum())))
+        return best_of(value_and_grad, starts, data)
+
+    monkeypatch.setattr(inference, "_best_of", spy)
+    full = fit_models(AREA, state, fit_key(0, 0))
+    assert searched_on == [(7, 60)]  # the prior median and 6 prior draws, each on all 60 inputs
+    searched_on.clear()
+    searched = fit_models(AREA.with_overrides(inference={"search_inputs": 16}), state, fit_key(0, 0))
+    assert searched_on[0][0] == 7 and searched_on[0][1] <= 16  # every start on at most 16 bins
+    assert searched_on[1:] == [(1, 60)]  # then the best of them on all 60 inputs
+    assert (searched.primary_inputs, searched.binned) == (60, False)
+    for name, values in full.primary.params.items():
+        assert float(searched.primary.params[name][0]) == pytest.approx(float(values[0]), rel=1e-3)
+
+
 @pytest.mark.parametrize(
     "inputs, ahead",
     [
@@ -93,9 +116,12 @@ def test_beyond_max_inputs_the_decision_says_it_binned(crossing):
         ((24, 90), (64, 128)),  # 90 of 128 is not close (< 96)
         ((24, 100), (64, 256)),  # 100 of 128 is
         ((200, 250), None),  # both at the largest capacity max_inputs = 256 needs
+        ((200, 250, "area"), (512, 256)),  # over two axes the GP for f goes on to 512 inputs
+        ((500, 20, "area"), None),  # and no further
     ],
 )
 def test_capacities_ahead(inputs, ahead):
+    config = AREA if inputs[2:] == ("area",) else CONFIG
     d = Decision(
         0,
         0.5,
@@ -115,7 +141,7 @@ def test_capacities_ahead(inputs, ahead):
         primary_inputs=inputs[0],
         noise_inputs=inputs[1],
     )
-    assert capacities_ahead(CONFIG, d) == ahead
+    assert capacities_ahead(config, d) == ahead
 
 
 def test_compiled_ahead_the_crossing_compiles_nothing():

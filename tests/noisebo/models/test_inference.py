@@ -84,3 +84,31 @@ def test_quadrature_integrates_a_known_posterior():
     assert abs(w.sum() - 1.0) < 1e-9
     assert abs(np.sum(w * s) - np.exp(0.125)) < 2e-3
     assert abs(np.sum(w * np.log(s) ** 2) - 0.25) < 2e-3
+
+
+def _area(n: int, max_inputs: int):
+    """A GP of f on n points over two axes, merged up to ``max_inputs`` inputs."""
+    from noisebo.config import PrimaryModelConfig
+    from noisebo.models import primary
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 1, (n, 2))
+    value = np.sin(6 * x[:, 0]) * np.cos(4 * x[:, 1]) + 0.1 * rng.standard_normal(n)
+    data = primary.prepare(x, value, np.full(n, 0.01), (0, 0), (1, 1), max_inputs)[0]
+    return primary.make_model(PrimaryModelConfig(), 2), data
+
+
+def test_a_search_on_fewer_inputs_then_a_refinement_reaches_the_full_data_optimum():
+    model, full = _area(150, 1024)
+    _, stand_in = _area(150, 36)  # the same points in 6 x 6 bins
+    key, guess = jax.random.PRNGKey(1), {"amplitude": 1.0, "length_0": 0.3, "length_1": 0.3}
+    exact = inference.fit_map(model, full, key, 4, 0, guess)
+    searched = inference.fit_map(model, full, key, 4, 0, guess, search_data=stand_in)
+    coarse = inference.fit_map(model, stand_in, key, 4, 0, guess)
+    for name in ("amplitude", "length_0", "length_1"):
+        found, wanted = float(searched.params[name][0]), float(exact.params[name][0])
+        assert found == pytest.approx(wanted, rel=1e-3)
+        assert abs(float(coarse.params[name][0]) - wanted) > 10 * abs(found - wanted)  # bins alone are off
+    program = inference._map_program(model, 4, 0)
+    best = program.flatten({k: v[0] for k, v in searched.params.items()}, full)
+    assert np.max(np.abs(np.asarray(program.value_and_grad(best, full)[1]))) < 1e-2  # an optimum on all points
