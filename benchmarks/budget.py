@@ -60,7 +60,10 @@ the instrument time spent when it was made, and at the end the final model. It p
 design, the median RMSE [IQR] once a given time is spent (the last model made within it), the
 median time to first reach --target (when every seed reaches it), and the final predicted t
 against t*(law) (and against t*(x-avg) too where the simulator's noise depends on x and the two
-differ; the output names both); and plots the median curves with their IQR (--figure). A seed still measuring its
+differ; the output names both); then each design's median as a multiple of the best fixed t in
+hindsight's at each checkpoint, and the targets' verdicts for "budget cold" and "budget warm"
+against the fixed designs and gpCAM, those present (``benchmarks/_targets.py``: which targets, how
+they are judged); and plots the median curves with their IQR (--figure). A seed still measuring its
 seed points has no model yet: it counts as the worst error, so a median needs half the seeds to
 have one ("-" where fewer do). Results are written to --json after every seed, and a run given
 the same --json measures only the seeds it lacks: a long run interrupted keeps what it has
@@ -80,6 +83,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
 
+import _targets  # noqa: E402
 from _config import Parser, benchmark_config  # noqa: E402
 from _tstar import LAW, X_AVG, describe, differ, t_stars  # noqa: E402
 
@@ -364,6 +368,88 @@ def best_in_hindsight(records: dict, at) -> list[tuple[float, str] | None]:
     return out
 
 
+def medians(recs: list, at) -> list[float]:
+    """The median RMSE over seeds at each time in ``at``: inf where half the seeds have no model."""
+    return [float(quartiles([rmse_at(r, b) for r in recs])[0]) for b in at]
+
+
+def median_time(recs: list, target: float) -> float:
+    """The median time (s) to first reach ``target``, a seed that never does counting as never (inf)."""
+    return float(np.median([np.inf if np.isnan(v) else v for v in (time_to(r, target) for r in recs)]))
+
+
+def against_best(records: dict, at) -> list[str]:
+    """Markdown rows: each learning design's median over the best fixed t in hindsight's."""
+    fixed_shown = [n for n, recs in records.items() if is_fixed(n) and recs]
+    if len(fixed_shown) < 2:
+        return []
+    best = [np.nan if b is None else b[0] for b in best_in_hindsight({n: records[n] for n in fixed_shown}, at)]
+    rows = ["| design | " + " | ".join(f"{v:g} s" for v in at) + " |", "|---" * (len(at) + 1) + "|"]
+    for name, recs in records.items():
+        if recs and not is_fixed(name):
+            cells = ["-" if not np.isfinite(r) else f"{r:.2f}" for r in _targets.ratios(medians(recs, at), best)]
+            rows.append(f"| {name} | " + " | ".join(cells) + " |")
+    return rows
+
+
+def target_lines(records: dict, at, target: float, t_star_name: str, t_star: float) -> list[str]:
+    """The targets' verdicts (``benchmarks/_targets.py``) for the cold and warm designs present,
+    each against the fixed designs and gpCAM where those are present too."""
+    present = {n: r for n, r in records.items() if r}
+    learners = [n for n in (WARM, COLD) if n in present]
+    if not learners:
+        return []
+    fixed_shown = [n for n in present if is_fixed(n)]
+    lines = []
+    mine = {n: medians(present[n], at) for n in learners}
+    if len(fixed_shown) > 1:
+        best = [np.nan if b is None else b[0] for b in best_in_hindsight({n: present[n] for n in fixed_shown}, at)]
+        typical = _targets.median_of_designs([medians(present[n], at) for n in fixed_shown])
+        if WARM in mine:
+            lines.append(
+                f"- {WARM} at or below the best fixed t in hindsight at every checkpoint: {_targets.verdict(mine[WARM], best, at)}"
+            )
+        if COLD in mine:
+            within = _targets.scaled(best, _targets.WITHIN_BEST)
+            lines.append(
+                f"- {COLD} within 10 % of the best fixed t in hindsight at every checkpoint: {_targets.verdict(mine[COLD], within, at)}"
+            )
+        bound = _targets.scaled(typical, _targets.OF_MEDIAN_FIXED)
+        shown = ", ".join(f"{v:.4g}" for v in bound)
+        for n in learners:
+            lines.append(
+                f"- {n} at most 0.8 x the median of the {len(fixed_shown)} fixed designs ({shown}): "
+                + _targets.verdict(mine[n], bound, at)
+            )
+    if COLD in mine and GPCAM in present:
+        peer = medians(present[GPCAM], at)
+        lines.append(
+            f"- {COLD} below {GPCAM} at every checkpoint: {_targets.verdict(mine[COLD], peer, at, strict=True)}"
+        )
+    times = ", ".join(
+        f"{n} {'never' if not np.isfinite(m) else f'{m:.0f} s'}"
+        for n in learners
+        for m in [median_time(present[n], target)]
+    )
+    lines.append(
+        f"- time to RMSE {target:g}, median over seeds (a seed that never reaches it counts as never): {times}"
+    )
+    judged = "; ".join(
+        f"{n} " + _targets.t_verdict([relative_error(r["t_opt"], t_star) for r in present[n]]) for n in learners
+    )
+    lines.append(f"- final t within 5 % of {t_star_name} in 95 % of seeds: {judged}")
+    latency = ", ".join(f"{n} {_latency(present[n])}" for n in learners)
+    lines.append(
+        f"- decision latency, the median over seeds of each seed's median (as loaded as the machine was): {latency}"
+    )
+    return lines
+
+
+def _latency(recs: list) -> str:
+    values = [r["latency_s"] for r in recs if np.isfinite(r.get("latency_s", np.nan))]
+    return f"{np.median(values):.3f} s" if values else "not recorded"
+
+
 def figure(records: dict, budget: float, path: Path, title: str) -> None:
     from matplotlib.figure import Figure
 
@@ -588,6 +674,14 @@ def main(argv=None) -> int:
             f"\n{BEST_FIXED}: at each time the lowest median over the {len(fixed_shown)} fixed designs above "
             "(which one in brackets), chosen after the fact: no campaign could have known which t to fix."
         )
+    ratio_rows = against_best(records, at)
+    if ratio_rows:
+        print("\nEach design's median RMSE as a multiple of the best fixed t in hindsight's (below 1: lower):\n")
+        print("\n".join(ratio_rows))
+    verdicts = target_lines(records, at, args.target, LAW, t_star)
+    if verdicts:
+        print("\nTargets, judged on the medians above:\n")
+        print("\n".join(verdicts))
     if args.figure:
         figure(
             {n: r for n, r in records.items() if r},
