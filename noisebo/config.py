@@ -965,6 +965,13 @@ class ScheduleConfig(FrozenModel):
         return self.shots_after if self.mode == "budget" else self.shots_before
 
     @property
+    def intact_noise_shots(self) -> int | None:
+        """In the budget mode, the shots (2) a point must keep, losing none to rejection, to
+        inform the noise law through its replicate scatter, whatever it was planned with (a
+        policy that chooses shots may plan fewer than ``shots_after``); None in the paper mode."""
+        return 2 if self.mode == "budget" else None
+
+    @property
     def draws_t_star(self) -> bool:
         """Whether a decision needs the noise model's draws of the optimal t: the posterior
         rule tests their interval and ``noise_t: valued`` weighs them (``informative``, which

@@ -42,13 +42,16 @@ class CampaignState:
     """Points in measurement order (seed points first), the predicted optimal t of each BO step
     (with a noise field, also its t*(x) on the reference points, (m,) per step), and the first
     BO step at which the noise model converged (None until it does); with a noise profile, the
-    first BO step whose check dropped it (None while it is in use)."""
+    first BO step whose check dropped it (None while it is in use). ``rejected``: how many of each
+    point's shots its reduction rejected, in the order of ``points``; () where not recorded (a
+    state made from points alone), and then no point counts as ``intact``."""
 
     points: tuple[Point, ...] = ()
     t_opt_history: tuple[float, ...] = ()
     converged_step: int | None = None
     t_opt_maps: tuple[np.ndarray, ...] = ()
     profile_dropped_step: int | None = None
+    rejected: tuple[int, ...] = ()
 
     def with_profile(self, in_use: bool, step: int) -> CampaignState:
         """``state`` with the profile dropped at ``step`` if this step's check dropped it first."""
@@ -56,8 +59,20 @@ class CampaignState:
             return self
         return replace(self, profile_dropped_step=step)
 
-    def with_point(self, point: Point) -> CampaignState:
-        return replace(self, points=self.points + (point,))
+    def with_point(self, point: Point, rejected: int = 0) -> CampaignState:
+        """``state`` with ``point``, ``rejected`` of whose shots its reduction rejected."""
+        recorded = len(self.rejected) == len(self.points)
+        return replace(
+            self,
+            points=self.points + (point,),
+            rejected=self.rejected + (int(rejected),) if recorded else self.rejected,
+        )
+
+    def intact(self) -> np.ndarray:
+        """(n,) bool: the points none of whose shots was rejected (all False where not recorded)."""
+        if len(self.rejected) != len(self.points):
+            return np.zeros(len(self.points), dtype=bool)
+        return np.asarray(self.rejected, dtype=np.int64).reshape(-1) == 0
 
     def with_t_opt(self, t_opt: float, is_converged: bool, t_opt_map: np.ndarray | None = None) -> CampaignState:
         step = len(self.t_opt_history)
@@ -83,11 +98,19 @@ class CampaignState:
         """Every point's x as an array (n, d)."""
         return np.asarray([p.x for p in self.points], dtype=np.float64).reshape(len(self.points), dimensions)
 
-    def noise_training_mask(self, include_unmeasured: bool, full_shots: int = 2) -> np.ndarray:
+    def noise_training_mask(
+        self, include_unmeasured: bool, full_shots: int = 2, intact_shots: int | None = None
+    ) -> np.ndarray:
         """Which points train the noise model: those whose noise was measured, and (optionally)
         the few-shot ones that kept at least ``full_shots`` (and two) ok shots: a point that lost
-        shots to rejection may hide an outlier its few remaining shots cannot expose."""
-        measured = self.column("noise_measured").astype(bool)
-        if include_unmeasured:
-            return measured | (self.column("n_shots") >= max(2, full_shots))
-        return measured
+        shots to rejection may hide an outlier its few remaining shots cannot expose. With
+        ``intact_shots`` also those that kept at least that many (and two) and lost none
+        (``intact``): a point planned with fewer shots than ``full_shots``."""
+        measured = self.column("noise_measured").astype(bool).reshape(-1)
+        if not include_unmeasured:
+            return measured
+        kept = self.column("n_shots").reshape(-1)
+        mask = measured | (kept >= max(2, full_shots))
+        if intact_shots is not None:
+            mask |= (kept >= max(2, intact_shots)) & self.intact()
+        return mask

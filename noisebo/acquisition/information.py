@@ -44,10 +44,10 @@ def rate_map(
     return variance_reduction(q, f_var, noise_sd**2 / shots) / (overhead_s + shots * t[None, :])
 
 
-def shot_options(shots_before: int, shots_after: int) -> tuple[int, ...]:
-    """The shot counts a converged campaign chooses from: ``SHOT_OPTIONS`` up to
+def shot_options(shots_before: int, shots_after: int, least: int = 1) -> tuple[int, ...]:
+    """The shot counts a converged campaign chooses from: ``SHOT_OPTIONS`` from ``least`` up to
     ``shots_before``, and ``shots_after`` itself."""
-    return tuple(sorted({n for n in SHOT_OPTIONS if n <= shots_before} | {shots_after}))
+    return tuple(sorted({n for n in SHOT_OPTIONS if least <= n <= shots_before} | {shots_after}))
 
 
 def t_opt_rate(

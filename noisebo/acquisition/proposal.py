@@ -253,13 +253,15 @@ def shot_choices(
 ) -> list[tuple[int, np.ndarray]]:
     """The shot counts a proposal chooses among, each with the t-grid entries (n_t,) bool it may
     use within ``budget_left`` (``affordable``): the schedule's count, or, for a policy that
-    chooses shots once the noise model has converged, each of ``information.shot_options``. A
+    chooses shots once the noise model has converged, each of ``information.shot_options`` (from
+    2 in the budget mode, where every point's replicate scatter informs the noise law). A
     count the budget cuts to another of the options allows no t (that one is tried as itself),
     so the list keeps its length as the budget runs out."""
     sched = config.schedule
     options = [shots_for(now_converged, sched)]
     if policy_of(config.acquisition).chooses_shots and now_converged:
-        options = list(information.shot_options(sched.shots_before, sched.shots_after))
+        least = sched.intact_noise_shots or 1  # the budget mode: every point informs the noise law
+        options = list(information.shot_options(sched.shots_before, sched.shots_after, least))
     choices = []
     for wanted in options:
         allowed, shots = affordable(config, wanted, budget_left)

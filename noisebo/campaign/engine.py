@@ -157,7 +157,7 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
         rejected = sum(1 for v in event.values if not v.ok)
         return replace(
             state,
-            data=state.data.with_point(event.point),
+            data=state.data.with_point(event.point, rejected),
             points=state.points + (PointEntry(event, state.taken),),
             taken=(),
             wanted=None,

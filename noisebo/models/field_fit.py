@@ -50,10 +50,19 @@ def t_capacity(distinct: int) -> int:
     return capacity_for(distinct)
 
 
+def training_mask(config: CampaignConfig, state: CampaignState) -> np.ndarray:
+    """(n,) bool: the points that train the noise law or field (``CampaignState.noise_training_mask``
+    with the config's ``learn_after_convergence``, ``shots_after`` and ``intact_noise_shots``)."""
+    sched = config.schedule
+    return state.noise_training_mask(
+        config.noise_model.learn_after_convergence, sched.shots_after, sched.intact_noise_shots
+    )
+
+
 def training_inputs(config: CampaignConfig, state: CampaignState, scaled_positions: np.ndarray):
-    """The points that train the noise model (``CampaignState.noise_training_mask``): scaled
-    positions (k, d), t (k,) s, sample sd (k,) and shots (k,)."""
-    train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
+    """The points that train the noise model (``training_mask``): scaled positions (k, d), t (k,)
+    s, sample sd (k,) and shots (k,)."""
+    train = training_mask(config, state)
     return (
         scaled_positions[train],
         state.column("t")[train],

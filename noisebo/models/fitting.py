@@ -197,7 +197,7 @@ def fit_noise_model(
         )
         return NoiseFit(samples, field_data, scale, inputs, binned, warm, profile=check)
     cfg = config.noise_model
-    train = state.noise_training_mask(cfg.learn_after_convergence, config.schedule.shots_after)
+    train = field_fit.training_mask(config, state)
     t_train, std_train, n_train = t[train], state.column("shot_std")[train], n_shots[train]
     check = profile_check.verdict(cfg, state.profile_dropped_step is not None, t_train, std_train, n_train)
     data, scale, groups = noise_model.prepare(
@@ -298,7 +298,7 @@ def capacities_needed(config: CampaignConfig, state: CampaignState) -> tuple[int
     if config.noise_model.field is not None:
         noise_count = field_fit.groups_needed(config, state, scaled(s, state.positions(s.dimensions)))
     else:
-        train = state.noise_training_mask(config.noise_model.learn_after_convergence, config.schedule.shots_after)
+        train = field_fit.training_mask(config, state)
         noise_count = (
             int(group_ids(state.column("t")[train], s.t_min, s.t_max, inf.max_inputs_for(1))[0].max(initial=-1)) + 1
         )

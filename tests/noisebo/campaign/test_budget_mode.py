@@ -36,6 +36,26 @@ def test_the_noise_model_trains_on_every_point_s_replicate_scatter(final):
     assert int(np.sum(np.asarray(noise.data.count))) == len(state.data.points)
 
 
+def test_a_policy_that_chooses_shots_takes_two_or_more_and_each_point_informs_the_noise(tiny_config):
+    """info_rate chooses each point's shots; in the budget mode from 2 up (not 1, whose point
+    tells nothing of the noise), and a point of 2 intact shots trains the noise model though
+    shots_after is 3."""
+    from noisebo.acquisition.information import shot_options
+
+    config = tiny_config.with_overrides(
+        schedule={"mode": "budget", "budget_s": 60.0, "n_steps": 12}, acquisition={"policy": "info_rate"}
+    )
+    sched = config.schedule
+    assert shot_options(sched.shots_before, sched.shots_after) == (1, 2, 3, 5, 8)
+    assert shot_options(sched.shots_before, sched.shots_after, sched.intact_noise_shots) == (2, 3, 5, 8)
+    state = run_campaign(config, ForresterInstrument(), 3).final
+    assert state.decisions and all(d.shots >= 2 for d in state.decisions)
+    points = state.data.points
+    assert all(p.n_shots >= 2 for p in points) and state.data.intact().all()
+    noise = fit_noise_model(config, state.data, fit_key(1, 0))
+    assert int(np.sum(np.asarray(noise.data.count))) == len(points)
+
+
 def test_the_paper_mode_is_the_default_and_measures_noise_with_shots_before(tiny_config):
     assert tiny_config.schedule.mode == "paper"
     assert tiny_config.schedule.seed_shots == tiny_config.schedule.shots_before

@@ -143,3 +143,37 @@ def test_few_shot_points_that_lost_shots_do_not_train_the_noise_model():
     assert state.noise_training_mask(False).tolist() == [True, True, False, False, False]
     assert state.noise_training_mask(True, 3).tolist() == [True, True, True, False, False]
     assert state.noise_training_mask(True, 2).tolist() == [True, True, True, True, False]
+
+
+@pytest.mark.parametrize(
+    ("rejected", "intact_shots", "expected"),
+    [
+        # kept shots: 30 (measured), 2, 3, 2, 1; the 2-shot points train when intact (budget mode)
+        ((0, 0, 0, 0, 0), 2, [True, True, True, True, False]),
+        ((0, 0, 0, 1, 0), 2, [True, True, True, False, False]),  # the 4th lost a shot: its 2 may hide an outlier
+        ((1, 1, 1, 0, 0), 2, [True, False, True, True, False]),  # measured, or kept shots_after: trains as before
+        ((0, 0, 0, 0, 0), None, [True, False, True, False, False]),  # the paper mode: shots_after as before
+        ((0, 0, 0, 0, 0), 3, [True, False, True, False, False]),
+    ],
+)
+def test_in_the_budget_mode_intact_two_shot_points_train_the_noise_model(rejected, intact_shots, expected):
+    from noisebo.state import CampaignState, Point
+
+    state = CampaignState()
+    for (n, measured), lost in zip([(30, True), (2, False), (3, False), (2, False), (1, False)], rejected):
+        state = state.with_point(Point(0.5, 1.0, 1.0, 0.3, n, 0.3, measured), lost)
+    assert state.rejected == rejected
+    assert state.intact().tolist() == [lost == 0 for lost in rejected]
+    assert state.noise_training_mask(True, 3, intact_shots).tolist() == expected
+
+
+def test_a_state_made_from_points_alone_knows_of_no_intact_point():
+    from noisebo.state import CampaignState, Point
+
+    points = tuple(Point(0.5, 1.0, 1.0, 0.3, 2, 0.3, False) for _ in range(3))
+    state = CampaignState(points=points)
+    assert state.intact().tolist() == [False] * 3
+    assert state.noise_training_mask(True, 3, 2).tolist() == [False] * 3
+    grown = state.with_point(Point(0.5, 1.0, 1.0, 0.3, 2, 0.3, False))  # still unknown for the first three
+    assert grown.rejected == () and grown.intact().tolist() == [False] * 4
+    assert CampaignState().with_point(points[0]).intact().tolist() == [True]

@@ -108,6 +108,7 @@ def test_a_point_short_of_usable_shots_wants_more_and_rejected_shots_count_again
     state, events = engine.tell(state, engine.ask(state), {3: Reading(2.0)})
     assert isinstance(events[-1], PointCommitted) and events[-1].point.value == 1.5
     assert state.failure_counts() == (2, 4) and state.wanted is None
+    assert state.data.rejected == (2,) and state.data.intact().tolist() == [False]  # its two may hide an outlier
 
 
 def test_after_the_seed_points_a_decision_is_due_and_tell_makes_it():
