@@ -378,12 +378,21 @@ def median_time(recs: list, target: float) -> float:
     return float(np.median([np.inf if np.isnan(v) else v for v in (time_to(r, target) for r in recs)]))
 
 
-def against_best(records: dict, at) -> list[str]:
-    """Markdown rows: each learning design's median over the best fixed t in hindsight's."""
+def fixed_baseline(records: dict, at) -> tuple[list[str], list[float]]:
+    """The fixed designs with seeds in ``records`` and, at each time in ``at``, the best fixed t in
+    hindsight's median (NaN where none has one; empty with fewer than two fixed designs)."""
     fixed_shown = [n for n, recs in records.items() if is_fixed(n) and recs]
     if len(fixed_shown) < 2:
+        return fixed_shown, []
+    found = best_in_hindsight({n: records[n] for n in fixed_shown}, at)
+    return fixed_shown, [np.nan if b is None else b[0] for b in found]
+
+
+def against_best(records: dict, at) -> list[str]:
+    """Markdown rows: each learning design's median over the best fixed t in hindsight's."""
+    fixed_shown, best = fixed_baseline(records, at)
+    if len(fixed_shown) < 2:
         return []
-    best = [np.nan if b is None else b[0] for b in best_in_hindsight({n: records[n] for n in fixed_shown}, at)]
     rows = ["| design | " + " | ".join(f"{v:g} s" for v in at) + " |", "|---" * (len(at) + 1) + "|"]
     for name, recs in records.items():
         if recs and not is_fixed(name):
@@ -399,11 +408,10 @@ def target_lines(records: dict, at, target: float, t_star_name: str, t_star: flo
     learners = [n for n in (WARM, COLD) if n in present]
     if not learners:
         return []
-    fixed_shown = [n for n in present if is_fixed(n)]
+    fixed_shown, best = fixed_baseline(present, at)
     lines = []
     mine = {n: medians(present[n], at) for n in learners}
     if len(fixed_shown) > 1:
-        best = [np.nan if b is None else b[0] for b in best_in_hindsight({n: present[n] for n in fixed_shown}, at)]
         typical = _targets.median_of_designs([medians(present[n], at) for n in fixed_shown])
         if WARM in mine:
             lines.append(
