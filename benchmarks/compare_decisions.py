@@ -5,7 +5,9 @@
 Runs, in this process and without Prefect, a few BO steps of: Forrester seeds 0-2 under the
 policies reward and double, PFM (data/configs/pfm.yaml) seed 0, Branin seed 0, a budgeted
 info_rate campaign, and Forrester campaigns with the noise laws power and quadrature (the latter
-also with a noise field, data/configs/forrester_patch.yaml). Writes every point (x, t, value,
+also with a noise field, data/configs/forrester_patch.yaml), the posterior convergence rule
+(data/configs/forrester_posterior.yaml) with noise_t informative and, in the budget mode, valued,
+and an info_rate campaign in the budget mode over Branin's two axes. Writes every point (x, t, value,
 noise, shots), every decision's proposal, acquisition value, predicted optimal t and noise at t,
 and the final predicted optimal t, as exact floats (``float.hex``). ``--compare`` reads an earlier
 file and exits 1 naming the first difference, 0 when every number is identical.
@@ -57,6 +59,26 @@ def campaigns() -> list[tuple[str, CampaignConfig, int]]:
             "forrester_patch-quadrature-field-s0",
             load_config(CONFIGS / "forrester_patch.yaml").with_overrides(
                 space={"n_x": 60, "n_t": 40}, schedule={"n_steps": 3}
+            ),
+            0,
+        )
+    )
+    posterior = load_config(CONFIGS / "forrester_posterior.yaml").with_overrides(
+        space={"n_x": 60, "n_t": 40}, schedule={"n_steps": 6}
+    )
+    out.append(("forrester_posterior-informative-s0", posterior, 0))
+    out.append(
+        (
+            "forrester_posterior-valued-budget-s0",
+            posterior.with_overrides(schedule={"mode": "budget", "noise_t": "valued", "budget_s": 300.0}),
+            0,
+        )
+    )
+    out.append(
+        (
+            "branin-info_rate-budget_mode-s0",
+            load_config(CONFIGS / "branin.yaml").with_overrides(
+                acquisition={"policy": "info_rate"}, schedule={"mode": "budget", "n_steps": 4, "budget_s": 200.0}
             ),
             0,
         )
