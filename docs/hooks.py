@@ -4,11 +4,8 @@ page says ``<!-- generated: NAME -->``, and the repository files that pages link
 
 from __future__ import annotations
 
-import atexit
 import re
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 from mkdocs.plugins import event_priority
@@ -16,7 +13,7 @@ from mkdocs.plugins import event_priority
 DOCS = Path(__file__).resolve().parent
 sys.path.insert(0, str(DOCS))
 
-from generate import bridge_reference, cli_reference, config_reference, hdf5_reference, package_layout  # noqa: E402
+from generate import bridge_reference, cli_reference, config_reference, hdf5_reference  # noqa: E402
 from generate.outside_files import outside_links, pointed_into_site, repository_file  # noqa: E402
 
 GENERATORS = {
@@ -37,11 +34,9 @@ def generated(match: re.Match) -> str:
 
 @event_priority(100)  # before mkdocstrings builds its handlers from their config
 def on_config(config):
-    """The API pages read the package as a wheel lays it out (generate/package_layout.py)."""
-    folder = Path(tempfile.mkdtemp(prefix="noisebo-docs-"))
-    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    """The API pages read the package from the checkout, which lays it out as it installs."""
     python = config["plugins"]["mkdocstrings"].config["handlers"].setdefault("python", {})
-    python["paths"] = [str(package_layout.assemble(folder))]
+    python["paths"] = [str(Path(config["docs_dir"]).parent)]
     return config
 
 

@@ -1,16 +1,15 @@
 """The lint rules of pyproject.toml ([tool.ruff.lint]) and its format ([tool.ruff]) hold for the whole repository, the
-whole installed package type-checks with [tool.mypy]'s settings (the core, and the adapters mapped into the namespace
-with it: one mypy run covers both), a plain `mypy` checks the core, and a breach of each is caught: CI runs them
-through this test. The whole-package type check (a minute of mypy over the package and what it imports) is in the
-end-to-end tier (`-m e2e`, which CI runs), so the default run stays short."""
+whole package type-checks with [tool.mypy]'s settings (a plain `mypy` in the checkout checks the package, the linked
+folders flows/, tasks/ and instruments/ with it), and a breach of each is caught: CI runs them through this test. The
+whole-package type check (a minute of mypy over the package and what it imports) is in the end-to-end tier (`-m e2e`,
+which CI runs), so the default run stays short."""
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-
-from installed_layout import assemble
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -73,32 +72,25 @@ def test_a_type_error_in_the_core_is_caught(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory) -> tuple[Path, Path]:
-    """The package as a wheel lays it out, beside a copy of pyproject.toml (its [tool.mypy]
-    ``files`` names the core; ``-p noisebo`` on the command line takes its place), and a mypy
-    cache the tests share."""
-    where = tmp_path_factory.mktemp("installed")
-    site = assemble(where / "site")
-    (site / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text())
-    return site, where / "cache"
+def cache(tmp_path_factory) -> Path:
+    """A mypy cache the whole-package checks share."""
+    return tmp_path_factory.mktemp("mypy") / "cache"
 
 
 @pytest.mark.e2e
-def test_the_installed_package_type_checks(installed):
-    site, cache = installed
-    out = mypy("-p", "noisebo", cwd=site, cache=cache)
+def test_the_package_type_checks(cache):
+    out = mypy(cache=cache)
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.startswith("Success: no issues found")
 
 
 @pytest.mark.e2e
-def test_a_type_error_in_an_adapter_is_caught(installed):
-    site, cache = installed
-    wrong = site / "noisebo" / "view" / "wrong.py"
+def test_a_type_error_in_an_adapter_is_caught(tmp_path, cache):
+    site = tmp_path / "site"  # a copy, the linked folders copied as folders: the checkout is left alone
+    shutil.copytree(ROOT / "noisebo", site / "noisebo", ignore=shutil.ignore_patterns("__pycache__"))
+    (site / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text())
+    wrong = site / "noisebo" / "flows" / "wrong.py"
     wrong.write_text("def half(x: float) -> float:\n    return x / 2\n\n\nhalf('one')\n")
-    try:
-        out = mypy("-p", "noisebo", cwd=site, cache=cache)
-    finally:
-        wrong.unlink()
+    out = mypy(cwd=site, cache=cache)
     assert out.returncode == 1
-    assert 'noisebo/view/wrong.py:5: error: Argument 1 to "half" has incompatible type "str"' in out.stdout
+    assert 'noisebo/flows/wrong.py:5: error: Argument 1 to "half" has incompatible type "str"' in out.stdout

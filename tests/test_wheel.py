@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from installed_layout import build_wheel
+from wheel_build import build_wheel
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -45,7 +45,7 @@ def too_long_line(tmp_path_factory) -> tuple[Path, str]:
         [
             sys.executable,
             "-c",
-            "import sys; from cli.main import main; sys.exit(main(sys.argv[1:]))",
+            "import sys; from noisebo.cli.main import main; sys.exit(main(sys.argv[1:]))",
             "run",
             str(path),
             "--out",

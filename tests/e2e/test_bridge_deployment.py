@@ -7,7 +7,7 @@ import subprocess
 import pytest
 
 from noisebo.flows.processes import BIN, start, stop, wait_for
-from tests.bridge.kills import assert_same_campaign, free_port, reference, start_client, write_remote_config
+from tests.noisebo.bridge.kills import assert_same_campaign, free_port, reference, start_client, write_remote_config
 
 pytestmark = pytest.mark.e2e
 SEED = 4

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from tests.bridge.kills import (
+from tests.noisebo.bridge.kills import (
     assert_same_campaign,
     free_port,
     reference,

@@ -11,9 +11,9 @@ import time
 
 import pytest
 
-from tests.bridge.conftest import call
-from tests.bridge.kills import free_port, write_remote_config
-from tests.bridge.test_signals import ABORT_WITHIN_S, journaled_status
+from tests.noisebo.bridge.conftest import call
+from tests.noisebo.bridge.kills import free_port, write_remote_config
+from tests.noisebo.bridge.test_signals import ABORT_WITHIN_S, journaled_status
 
 pytestmark = pytest.mark.e2e
 CLI = [sys.executable, "-m", "noisebo.cli.main"]

@@ -25,7 +25,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from installed_layout import build_wheel
+from wheel_build import build_wheel
 
 pytestmark = pytest.mark.e2e
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,10 +1,9 @@
 """The import-linter contracts of pyproject.toml ([tool.importlinter]) hold, and would catch a breach.
 
-Contracts: noisebo.campaign above noisebo.acquisition above noisebo.models (a lower layer never
-imports a higher one), and the core (every module of noisebo/) imports no adapter (noisebo.flows,
-noisebo.storage, ...) nor any orchestration, storage, view or network package. They are checked on
-the package as a wheel installs it (tests/installed_layout.py): the checkout keeps the adapters in
-folders beside noisebo/.
+Two contracts: the whole package in layers (entry points above adapters above the core, the core
+one way down), naming every subpackage and module of noisebo; and the core importing no
+orchestration, storage, view or network package. `lint-imports` checks them on the checkout as
+it is, which lays the package out as it installs; the breaches are added to a copy of it.
 """
 
 import shutil
@@ -14,88 +13,133 @@ from pathlib import Path
 
 import pytest
 from importlinter.api import read_configuration
-from installed_layout import adapters, assemble
 
 ROOT = Path(__file__).resolve().parents[2]
 PYPROJECT = ROOT / "pyproject.toml"
-ADAPTERS = adapters()
+LAYERS = "Layers: entry points over adapters over the core"
+FORBIDDEN = "The core imports no orchestration, storage, view or network package"
 EXTERNAL = ["prefect", "h5py", "rerun", "fastapi", "starlette", "uvicorn", "matplotlib", "httpx", "dask"]
-LAYERS = "Core layers: campaign above acquisition above models"
-FORBIDDEN = "The core imports no adapter, orchestration, storage, view or network package"
+ENTRY_POINTS_AND_ADAPTERS = {"cli", "bridge", "flows", "tasks", "view", "storage", "instruments"}
+DATA = {"configs", "scans"}
 
 
 def lint(cwd: Path) -> subprocess.CompletedProcess:
-    """`lint-imports` on the pyproject.toml in cwd, in a fresh interpreter (it puts cwd on sys.path)."""
+    """`lint-imports` on the pyproject.toml in cwd, in a fresh interpreter that finds noisebo in cwd."""
     code = (
-        "import sys\nfrom importlinter.cli import lint_imports\n"
+        "import sys\nsys.path.insert(0, '.')\nfrom importlinter.cli import lint_imports\n"
         "sys.exit(lint_imports(config_filename='pyproject.toml', no_cache=True, no_logo=True))"
     )
     return subprocess.run(
-        [sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=120, check=False
+        [sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=300, check=False
     )
 
 
-def test_the_contracts_are_the_documented_ones():
-    contracts = {c["name"]: c for c in read_configuration(str(PYPROJECT))["contracts_options"]}
-    assert contracts[LAYERS]["type"] == "layers"
-    assert contracts[LAYERS]["layers"] == ["noisebo.campaign", "noisebo.acquisition", "noisebo.models"]
-    assert contracts[FORBIDDEN]["type"] == "forbidden"
-    core = sorted(
-        f"noisebo.{p.stem}"
-        for p in (ROOT / "noisebo").iterdir()
+def children() -> set[str]:
+    """The names of noisebo's subpackages and top-level modules, as the checkout lays them out."""
+    package = ROOT / "noisebo"
+    return {
+        p.stem
+        for p in package.iterdir()
         if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").exists()
-    )
-    assert sorted(contracts[FORBIDDEN]["source_modules"]) == core  # a new core module is covered too
-    assert set(ADAPTERS + EXTERNAL) <= set(contracts[FORBIDDEN]["forbidden_modules"])
-    assert "ignore_imports" not in contracts[FORBIDDEN] and "ignore_imports" not in contracts[LAYERS]
+    }
 
 
-def test_the_project_keeps_its_contracts(tmp_path):
-    shutil.copy(PYPROJECT, assemble(tmp_path) / "pyproject.toml")
-    out = lint(tmp_path)
+def contracts() -> dict:
+    return {c["name"]: c for c in read_configuration(str(PYPROJECT))["contracts_options"]}
+
+
+def layered(contract: dict) -> list[set[str]]:
+    return [{name.strip() for name in layer.replace("|", ":").split(":")} for layer in contract["layers"]]
+
+
+def test_the_layers_name_the_whole_package_once():
+    layers = contracts()[LAYERS]
+    assert layers["type"] == "layers" and layers["containers"] == ["noisebo"] and layers["exhaustive"] in (True, "True")
+    named = [name for layer in layered(layers) for name in layer]
+    assert sorted(named) == sorted(children())  # every module once; a new one has to be placed
+    assert "ignore_imports" not in layers and "exhaustive_ignores" not in layers
+
+
+def test_the_entry_points_and_adapters_sit_above_the_whole_core():
+    levels = layered(contracts()[LAYERS])
+    lowest_adapter = max(k for k, layer in enumerate(levels) if layer & ENTRY_POINTS_AND_ADAPTERS)
+    assert set().union(*levels[: lowest_adapter + 1]) == ENTRY_POINTS_AND_ADAPTERS
+
+
+def test_the_forbidden_packages_are_forbidden_to_the_whole_core():
+    forbidden = contracts()[FORBIDDEN]
+    assert forbidden["type"] == "forbidden"
+    core = children() - ENTRY_POINTS_AND_ADAPTERS - DATA
+    assert sorted(forbidden["source_modules"]) == sorted(f"noisebo.{name}" for name in core)
+    assert set(EXTERNAL) <= set(forbidden["forbidden_modules"])
+    assert "ignore_imports" not in forbidden
+
+
+def test_the_checkout_keeps_its_contracts():
+    out = lint(ROOT)
     assert out.returncode == 0, out.stdout + out.stderr
-    assert f"{LAYERS} KEPT" in out.stdout and f"{FORBIDDEN} KEPT" in out.stdout
+    assert f"{FORBIDDEN} KEPT" in out.stdout and "2 kept, 0 broken" in out.stdout
 
 
-@pytest.fixture
-def core_copy(tmp_path):
-    """The real core and the real contracts in tmp_path, with empty adapter packages in it."""
-    shutil.copytree(ROOT / "noisebo", tmp_path / "noisebo", ignore=shutil.ignore_patterns("__pycache__"))
-    shutil.copy(PYPROJECT, tmp_path / "pyproject.toml")
-    for name in ADAPTERS:
-        package = tmp_path.joinpath(*name.split("."))
-        package.mkdir()
-        (package / "__init__.py").write_text("")
-    return tmp_path
+@pytest.fixture(scope="module")
+def package_copy(tmp_path_factory) -> Path:
+    """A copy of the package (its linked folders copied as folders) beside the real contracts."""
+    where = tmp_path_factory.mktemp("copy")
+    shutil.copytree(ROOT / "noisebo", where / "noisebo", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(PYPROJECT, where / "pyproject.toml")
+    return where
 
 
-def test_the_copy_of_the_core_keeps_the_contracts(core_copy):
-    out = lint(core_copy)
+def test_the_copy_keeps_the_contracts(package_copy):
+    out = lint(package_copy)
     assert out.returncode == 0, out.stdout + out.stderr
 
 
 @pytest.mark.parametrize(
-    ("where", "source", "broken"),
+    ("where", "source", "broken", "reported"),
     [
-        ("models", "from noisebo.acquisition import records\n", LAYERS),
-        ("models", "def f():\n    from noisebo.campaign import engine\n", LAYERS),
-        ("acquisition", "import noisebo.campaign.driver\n", LAYERS),
-        ("models", "def f():\n    import h5py\n", FORBIDDEN),
-        ("acquisition", "from prefect import flow\n", FORBIDDEN),
-        ("campaign", "import noisebo.storage\n", FORBIDDEN),
+        ("models", "from noisebo.acquisition import records\n", LAYERS, "noisebo.acquisition.records"),
+        ("models", "def f():\n    from noisebo.campaign import engine\n", LAYERS, "noisebo.campaign.engine"),
+        ("acquisition", "import noisebo.campaign.driver\n", LAYERS, "noisebo.campaign.driver"),
+        ("campaign", "import noisebo.storage\n", LAYERS, "noisebo.storage"),
+        ("storage", "from noisebo.instruments import registry\n", LAYERS, "noisebo.instruments.registry"),
+        ("storage", "from noisebo.view import frames\n", LAYERS, "noisebo.view.frames"),
+        ("tasks", "from noisebo.flows import campaign\n", LAYERS, "noisebo.flows.campaign"),
+        ("flows", "from noisebo.cli import main\n", LAYERS, "noisebo.cli.main"),
+        ("models", "def f():\n    import h5py\n", FORBIDDEN, "h5py"),
+        ("acquisition", "from prefect import flow\n", FORBIDDEN, "prefect"),
     ],
 )
-def test_a_violating_module_breaks_a_contract(core_copy, where, source, broken):
-    (core_copy / "noisebo" / where / "violation.py").write_text(source)
-    out = lint(core_copy)
+def test_a_violating_module_breaks_a_contract(package_copy, where, source, broken, reported):
+    violation = package_copy / "noisebo" / where / "violation.py"
+    violation.write_text(source)
+    try:
+        out = lint(package_copy)
+    finally:
+        violation.unlink()
     assert out.returncode == 1, out.stdout + out.stderr
     assert f"{broken} BROKEN" in out.stdout
-    assert f"noisebo.{where}.violation" in out.stdout  # the copy was linted, not the installed core
+    assert f"noisebo.{where}.violation -> {reported}" in out.stdout  # the copy was linted
 
 
-def test_a_top_level_core_module_importing_an_adapter_breaks_a_contract(core_copy):
-    with (core_copy / "noisebo" / "metrics.py").open("a") as module:
-        module.write("\n\ndef breach():\n    from noisebo.flows import campaign\n")
-    out = lint(core_copy)
+def test_a_top_level_core_module_importing_an_adapter_breaks_the_layers(package_copy):
+    metrics = package_copy / "noisebo" / "metrics.py"
+    original = metrics.read_text()
+    metrics.write_text(original + "\n\ndef breach():\n    from noisebo.flows import campaign\n")
+    try:
+        out = lint(package_copy)
+    finally:
+        metrics.write_text(original)
     assert out.returncode == 1, out.stdout + out.stderr
-    assert f"{FORBIDDEN} BROKEN" in out.stdout and "noisebo.metrics -> noisebo.flows" in out.stdout
+    assert "noisebo.metrics -> noisebo.flows.campaign" in out.stdout
+
+
+def test_a_module_placed_in_no_layer_breaks_the_layers(package_copy):
+    stray = package_copy / "noisebo" / "stray.py"
+    stray.write_text("")
+    try:
+        out = lint(package_copy)
+    finally:
+        stray.unlink()
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "noisebo.stray" in out.stdout

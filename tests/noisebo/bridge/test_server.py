@@ -11,7 +11,7 @@ import pytest
 from noisebo.bridge.remote import RemoteInstrument, RemoteSettings
 from noisebo.config import ConfigError
 from noisebo.failures import InstrumentUnavailable
-from tests.bridge.conftest import TOKEN, call, post_value, remote_config, served
+from tests.noisebo.bridge.conftest import TOKEN, call, post_value, remote_config, served
 
 SMALL = {"space": {"n_x": 40, "n_t": 30}, "schedule": {"n_seed": 2, "n_steps": 0, "shots_before": 2}}
 MIB = 2**20

@@ -1,5 +1,5 @@
 """The shipped configs: listed and printed by `noisebo config`, run by name from any folder, and
-their scan found without the checkout (cli/configs.py, instruments/pfm_scan.resolve)."""
+their scan found without the checkout (noisebo/cli/configs.py, instruments/pfm_scan.resolve)."""
 
 import subprocess
 import sys
@@ -12,7 +12,7 @@ from noisebo.cli.configs import config_path, shipped
 from noisebo.instruments.pfm_scan import read_scan, resolve
 from noisebo.config import ConfigError
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 CHECKOUT = sorted(p.stem for p in (ROOT / "data" / "configs").glob("*.yaml"))
 
 

@@ -28,7 +28,7 @@ from noisebo.storage.hdf5 import (
 )
 from noisebo.storage.recorder import Recorder
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SMALL = CampaignConfig().with_overrides(
     name="small", space={"n_x": 40, "n_t": 30}, schedule={"n_steps": 500, "shots_before": 5, "shots_after": 2}
 )
@@ -138,7 +138,7 @@ import os, sys
 from pathlib import Path
 from benchmarks.storage import point_commits, started
 from noisebo.storage.recorder import Recorder
-from tests.storage.test_hdf5 import SMALL, FAIL_EVERY, REJECT_EVERY
+from tests.noisebo.storage.test_hdf5 import SMALL, FAIL_EVERY, REJECT_EVERY
 path, n, at = Path(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 recorder = Recorder.create(path, started(SMALL))
 for i in range(n + 1):

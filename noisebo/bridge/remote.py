@@ -229,7 +229,7 @@ class RemoteInstrument:
         where = f"${TOKEN_ENV}" if os.environ.get(TOKEN_ENV, "").strip() else str(Path(s.token_file).expanduser())
         print(
             f"bridge: serving {url}{exposed}; API at {url}/docs; waiting for the instrument PC "
-            f"(bridge/client.py: serve_instrument({url!r}, TOKEN, measure), TOKEN from {where})",
+            f"(noisebo/bridge/client.py: serve_instrument({url!r}, TOKEN, measure), TOKEN from {where})",
             flush=True,
         )
 

@@ -1,4 +1,4 @@
-"""The typed read side (storage/record.py): a campaign file read back as a CampaignRecord holds
+"""The typed read side (noisebo/storage/record.py): a campaign file read back as a CampaignRecord holds
 what the campaign's state held, and a column an older schema lacks reads as its empty value."""
 
 import dataclasses

@@ -1,4 +1,4 @@
-"""The storage protocol (storage/store.py): the recorder writes a campaign through any store, and
+"""The storage protocol (noisebo/storage/store.py): the recorder writes a campaign through any store, and
 the in-memory store reads back the record the HDF5 file does for the same campaign."""
 
 import dataclasses

@@ -1,4 +1,4 @@
-"""The bridge's answers have exactly the shapes its API description (bridge/answers.py) gives
+"""The bridge's answers have exactly the shapes its API description (noisebo/bridge/answers.py) gives
 them: every answer of a small campaign, from start to end, is checked against its model."""
 
 import threading

@@ -13,7 +13,7 @@ import pytest
 
 from noisebo.cli.main import main
 from noisebo.storage import journal
-from tests.storage.test_damage import finished, killed
+from tests.noisebo.storage.test_damage import finished, killed
 
 ANSWER_S = 5.0  # CPU seconds of the command: the work it does, whatever else shares the cores
 HANG_S = 60.0  # wall seconds: a command that waits (a lock, a read that never returns) hangs

@@ -5,8 +5,8 @@ import signal
 
 import numpy as np
 
-from tests.bridge.conftest import remote_config, served
-from tests.bridge.kills import (
+from tests.noisebo.bridge.conftest import remote_config, served
+from tests.noisebo.bridge.kills import (
     OVERRIDES,
     SOURCE,
     assert_same_campaign,

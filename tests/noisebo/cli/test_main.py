@@ -207,7 +207,7 @@ def test_a_schema_1_file_opens_for_inspect_report_and_replay(tmp_path, capsys):
     from pathlib import Path
 
     old = tmp_path / "forrester_schema1.h5"
-    shutil.copy(Path(__file__).resolve().parents[1] / "data" / "forrester_schema1.h5", old)
+    shutil.copy(Path(__file__).resolve().parents[2] / "data" / "forrester_schema1.h5", old)
     assert main(["inspect", str(old), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["schema_version"] == 1 and data["status"] == "completed" and len(data["points"]) == 7
@@ -221,7 +221,7 @@ def test_a_schema_3_file_and_its_campaign_written_anew_inspect_the_same(tmp_path
     the same campaign written anew from its journal (schema 4) stores the shown steps."""
     from pathlib import Path
 
-    data = Path(__file__).resolve().parents[1] / "data"
+    data = Path(__file__).resolve().parents[2] / "data"
     old, new = tmp_path / "old" / "forrester_schema3.h5", tmp_path / "new" / "forrester_schema3.h5"
     old.parent.mkdir(), new.parent.mkdir()
     shutil.copy(data / "forrester_schema3.h5", old)

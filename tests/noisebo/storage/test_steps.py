@@ -17,7 +17,7 @@ from noisebo.storage.hdf5 import read_campaign
 from noisebo.storage.layout import SCHEMA_VERSION
 from noisebo.storage.recorder import rebuild_file
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+DATA = Path(__file__).resolve().parents[2] / "data"
 POINT_STEPS = [0, 0, 0, 1, 2, 3, 4]  # 3 seed points, then BO steps 1..4
 STEP_STEPS = [1, 2, 3, 4]
 CONVERGED = 3  # the engine's index 2

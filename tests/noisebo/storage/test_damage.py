@@ -22,9 +22,9 @@ from noisebo.events import Status, StatusChanged
 from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_failures, read_shot_fits, spectra_reader
 from noisebo.storage.isolated import call_isolated
 from noisebo.storage.recorder import Recorder, rebuild_file
-from tests.storage.test_hdf5 import SMALL, assert_same
+from tests.noisebo.storage.test_hdf5 import SMALL, assert_same
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 ANSWER_S = 5.0  # CPU seconds of a read (under a full test run's load wall time runs 1.5-2x over)
 HANG_S = 60.0  # wall seconds: a read that takes longer hangs
 TRUNCATE_AT = (0.01, 0.05, 0.1, 0.3, 0.5, 0.7, 0.9, 0.95, 0.99, 0.999)
@@ -36,7 +36,7 @@ import os, sys
 sys.path.insert(0, {root!r})
 from benchmarks.storage import point_commits, started
 from noisebo.storage.recorder import Recorder
-from tests.storage.test_hdf5 import SMALL
+from tests.noisebo.storage.test_hdf5 import SMALL
 r = Recorder.create({path!r}, started(SMALL))
 for i in range({n}):
     for batch in point_commits(SMALL, i, 0, spectra={spectra}):

@@ -117,7 +117,7 @@ def test_a_failing_flow_is_one_line_without_prefects_traceback(tiny_config, tmp_
 def test_a_bridge_port_in_use_is_one_line_without_prefects_traceback(tiny_config, tmp_path, prefect_harness):
     from noisebo.config import load_config
 
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[3]
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()

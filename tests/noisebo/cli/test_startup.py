@@ -1,5 +1,5 @@
 """The commands that need no model start without Prefect, JAX or numpyro: each imports what it
-uses when it runs (cli/main.py). Checked in fresh interpreters; benchmarks/cli.py times them."""
+uses when it runs (noisebo/cli/main.py). Checked in fresh interpreters; benchmarks/cli.py times them."""
 
 import importlib.metadata
 import json
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 HEAVY = ["jax", "prefect", "numpyro", "fastapi", "matplotlib", "rerun"]
 LOADED_AFTER = (
     """

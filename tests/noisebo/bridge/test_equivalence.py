@@ -11,7 +11,7 @@ from noisebo.instruments import build
 from noisebo.instruments.registry import validated
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
-from tests.bridge.conftest import remote_config, served
+from tests.noisebo.bridge.conftest import remote_config, served
 
 CASES = {
     "forrester": {"space": {"n_x": 40, "n_t": 30}, "schedule": {"n_steps": 3, "shots_before": 10}},

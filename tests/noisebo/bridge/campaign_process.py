@@ -1,7 +1,7 @@
 """A bridged campaign in a process of its own, driven as `noisebo run` drives it (the journal and
 HDF5 recorder, the campaign loop, SIGINT/SIGTERM asking it to stop) but without Prefect:
 
-    python -m tests.bridge.campaign_process CONFIG.yaml FILE.h5
+    python -m tests.noisebo.bridge.campaign_process CONFIG.yaml FILE.h5
 
 It prints the bridge's lines, then the final status and reason."""
 

@@ -18,7 +18,7 @@ from noisebo.storage.recorder import rebuild_file
 from noisebo.view.frames import frames
 from noisebo.view.report import _first_converged, figures_from_file, write_summary
 
-DATA = Path(__file__).resolve().parents[1] / "data"
+DATA = Path(__file__).resolve().parents[2] / "data"
 
 
 @pytest.fixture(scope="module")

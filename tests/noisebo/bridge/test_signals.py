@@ -15,8 +15,8 @@ import yaml
 from noisebo.instruments.registry import validated
 from noisebo.config import load_config
 from noisebo.storage import journal, records
-from tests.bridge.conftest import call
-from tests.bridge.kills import OVERRIDES, SOURCE
+from tests.noisebo.bridge.conftest import call
+from tests.noisebo.bridge.kills import OVERRIDES, SOURCE
 
 ABORT_WITHIN_S = 2.0
 
@@ -45,7 +45,7 @@ def test_sigterm_while_waiting_for_an_instrument_pc_that_never_connected_aborts_
         [
             sys.executable,
             "-m",
-            "tests.bridge.campaign_process",
+            "tests.noisebo.bridge.campaign_process",
             str(remote_yaml(tmp_path / "waiting.yaml", token_file)),
             str(path),
         ],

@@ -1,6 +1,6 @@
 """What the bridge answers, as models for its API description (``/openapi.json``, ``/docs`` and
 the documentation's protocol page). The answers themselves are built as plain dicts by
-``bridge.exchange`` and ``bridge.wire``; ``tests/bridge/test_answers.py`` holds them to these
+``bridge.exchange`` and ``bridge.wire``; ``tests/noisebo/bridge/test_answers.py`` holds them to these
 models, field for field."""
 
 from __future__ import annotations

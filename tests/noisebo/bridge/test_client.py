@@ -14,7 +14,7 @@ from noisebo.bridge.client import (
     reading_body,
     serve_instrument,
 )
-from tests.bridge.conftest import TOKEN, remote_config, served
+from tests.noisebo.bridge.conftest import TOKEN, remote_config, served
 
 CLIENT = Path(client.__file__)
 SMALL = {"space": {"n_x": 40, "n_t": 30}, "schedule": {"n_seed": 2, "n_steps": 0, "shots_before": 2}}

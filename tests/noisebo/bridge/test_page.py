@@ -1,4 +1,4 @@
-"""The operator's page (bridge/page.py): what a person at the instrument reads, from a campaign's
+"""The operator's page (noisebo/bridge/page.py): what a person at the instrument reads, from a campaign's
 state, with its two pictures; no Python reprs, nothing fetched from elsewhere."""
 
 import re
