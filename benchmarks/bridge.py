@@ -12,6 +12,7 @@ interval through the bridge minus the median in-process. Two kinds of shot: a sc
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import os
 import subprocess

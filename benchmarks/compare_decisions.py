@@ -15,6 +15,7 @@ file and exits 1 naming the first difference, 0 when every number is identical.
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import json
 from pathlib import Path

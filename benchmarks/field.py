@@ -26,6 +26,7 @@ config, with these changes, is validated as ``noisebo run`` validates it before 
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import json
 import sys
 import time

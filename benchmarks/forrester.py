@@ -17,6 +17,7 @@ YAML), e.g. the paper's other protocols: ``--set acquisition.f_acquisition=ei`` 
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import json
 import sys
 import time

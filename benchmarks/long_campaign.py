@@ -18,6 +18,7 @@ lines, artifacts or events) and with them, and prints a table for each.
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import json
 import os

@@ -17,6 +17,7 @@ NOISEBO_PREFECT_REPORTS=0 turns them off), so the two columns compare them in on
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import os
 import tempfile

@@ -15,6 +15,7 @@ the simulator's noise law against the scatter of fitted amplitudes it actually p
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import json
 import sys
 import time

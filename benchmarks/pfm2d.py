@@ -19,6 +19,7 @@ the scan's extent). ``--latency`` times decisions on states of that many points 
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import json
 import subprocess
 import sys

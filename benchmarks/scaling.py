@@ -29,6 +29,7 @@ again with the cache the first run left, with Prefect's temporary server and wit
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import json
 import os

@@ -26,6 +26,7 @@ campaign and Chromium are stopped at the end, however the script ends (SIGTERM i
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import html
 import io

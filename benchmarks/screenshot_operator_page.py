@@ -19,6 +19,7 @@ tests/e2e/test_operator_page.py drives the same campaign and the same Chromium c
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import html
 import json

@@ -25,6 +25,7 @@ medians and their ratio.
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import json
 import statistics

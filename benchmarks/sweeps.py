@@ -11,6 +11,7 @@ The config is validated as ``noisebo run`` validates it before any server starts
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import json
 import subprocess
 import sys

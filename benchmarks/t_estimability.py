@@ -22,6 +22,7 @@ law is what is fitted. The config is validated as ``noisebo run`` validates it (
 
 from __future__ import annotations
 
+import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import sys
 from pathlib import Path
 

@@ -29,6 +29,7 @@ from pydantic import (
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from noisebo import registry
+from noisebo.schedule_modes import SCHEDULE_MODES, ScheduleMode
 
 SCHEMA_VERSION = 2
 MIN_T_DRAWS = 16  # posterior draws of the optimal t for its 95 % interval
@@ -960,16 +961,21 @@ class ScheduleConfig(FrozenModel):
     )
 
     @property
+    def rule(self) -> ScheduleMode:
+        """The mode as the object that says what it means (``noisebo.schedule_modes``)."""
+        return SCHEDULE_MODES[self.mode]
+
+    @property
     def seed_shots(self) -> int:
         """Shots a seed point takes: ``shots_before`` (paper), ``shots_after`` (budget)."""
-        return self.shots_after if self.mode == "budget" else self.shots_before
+        return self.rule.seed_shots(self.shots_before, self.shots_after)
 
     @property
     def intact_noise_shots(self) -> int | None:
         """In the budget mode, the shots (2) a point must keep, losing none to rejection, to
         inform the noise law through its replicate scatter, whatever it was planned with (a
         policy that chooses shots may plan fewer than ``shots_after``); None in the paper mode."""
-        return 2 if self.mode == "budget" else None
+        return self.rule.intact_noise_shots
 
     @property
     def draws_t_star(self) -> bool:
@@ -979,16 +985,8 @@ class ScheduleConfig(FrozenModel):
         return self.convergence == "posterior" or self.noise_t == "valued"
 
     @model_validator(mode="after")
-    def _budget_mode_measures_scatter(self) -> ScheduleConfig:
-        if self.mode == "budget" and self.shots_after < 2:
-            raise ValueError(
-                "mode: budget learns the noise from each point's replicate scatter; set shots_after to at least 2"
-            )
-        if self.mode == "budget" and self.adaptive_shots:
-            raise ValueError(
-                "mode: budget gives every point shots_after shots; adaptive_shots belongs to the paper "
-                "mode's noise-measuring points"
-            )
+    def _mode_settings(self) -> ScheduleConfig:
+        self.rule.check(self.shots_after, self.adaptive_shots)
         return self
 
 
@@ -1053,7 +1051,7 @@ class CampaignConfig(FrozenModel):
         return self
 
     def _valued_needs(self, load_plugins: bool) -> None:
-        if self.schedule.mode != "budget":
+        if not self.schedule.rule.every_point_teaches_noise:
             raise ValueError(
                 "schedule.noise_t: valued weighs each budget-mode point's noise measurement; set schedule.mode: budget"
             )
@@ -1065,7 +1063,7 @@ class CampaignConfig(FrozenModel):
 
     @model_validator(mode="after")
     def _budget_mode_learns(self) -> CampaignConfig:
-        if self.schedule.mode == "budget" and not self.noise_model.learn_after_convergence:
+        if self.schedule.rule.every_point_teaches_noise and not self.noise_model.learn_after_convergence:
             raise ValueError(
                 "schedule.mode: budget learns the noise from every point's replicate scatter; set "
                 "noise_model.learn_after_convergence: true"

@@ -10,6 +10,7 @@ from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
+from noisebo.precision import float64
 
 if TYPE_CHECKING:
     import jax
@@ -34,6 +35,7 @@ def numpy_rng(seed: int, purpose: int, *path: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(_checked((seed, purpose, *path))))
 
 
+@float64
 def jax_key(seed: int, purpose: int, *path: int) -> jax.Array:
     """A JAX PRNG key for one (seed, purpose, *path) address: ``jax.random.PRNGKey(seed)``
     folded in with each of purpose and path in turn, in one compiled program."""
@@ -41,6 +43,7 @@ def jax_key(seed: int, purpose: int, *path: int) -> jax.Array:
     return _derive_program()(np.int64(parts[0]), np.asarray(parts[1:], dtype=np.uint32))
 
 
+@float64
 def split_key(key: jax.Array) -> tuple[jax.Array, jax.Array]:
     """``jax.random.split(key)``'s two keys, in one compiled program."""
     first, second = _split_program()(key)

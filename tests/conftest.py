@@ -29,6 +29,15 @@ from noisebo.flows import runtime  # noqa: E402
 
 runtime.configure()
 
+# The tests compute expected values with JAX themselves (kernels, likelihoods, posteriors by hand),
+# in float64 as the core does: this process turns JAX's 64-bit mode on for everything, as a lab's
+# process may. The processes a test starts do not inherit it (it is no environment variable), so
+# the command line, the flows and the bridge run as they do for a user, with the core's own
+# float64 (noisebo.precision); tests/noisebo/test_precision.py checks a process left in float32.
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
 from noisebo.config import CampaignConfig  # noqa: E402
 
 TINY = CampaignConfig().with_overrides(

@@ -46,12 +46,13 @@ from noisebo.models.prediction import (
     spread,
 )
 from noisebo.programs import persisted
+from noisebo.precision import float64
 
 
 def shots_for(is_converged: bool, schedule: ScheduleConfig) -> int:
     """Shots the next point gets: ``shots_before`` until convergence, ``shots_after`` from then
     (in the budget mode, ``shots_after`` always)."""
-    return schedule.shots_after if is_converged or schedule.mode == "budget" else schedule.shots_before
+    return schedule.rule.shots(is_converged, schedule.shots_before, schedule.shots_after)
 
 
 def _propose_program(config: CampaignConfig):
@@ -184,6 +185,7 @@ def affordable(config: CampaignConfig, shots: int, left: float | None) -> tuple[
     return allowed & (fewer * g.t <= room), fewer
 
 
+@float64
 def acquire(
     config: CampaignConfig,
     fitted: Fitted,
@@ -227,7 +229,7 @@ def acquire(
         t=float(g.t[j]),
         acq_value=acq_value,
         shots=shots,
-        measure_noise=sched.mode == "paper" and not now_converged and shots >= 2,
+        measure_noise=sched.rule.measures_noise(now_converged, shots),
         noise_at_t=noise_at_t,
         t_opt=t_opt,
         converged=now_converged,

@@ -19,6 +19,7 @@ from noisebo.models.fitting import capacities_needed, fit_key, fit_models
 from noisebo.models.inputs import capacity_for
 from noisebo.models.prediction import predict
 from noisebo.state import CampaignState, Point
+from noisebo.precision import float64
 
 
 def stand_in_seeds(config: CampaignConfig, seed: int) -> CampaignState:
@@ -32,6 +33,7 @@ def stand_in_seeds(config: CampaignConfig, seed: int) -> CampaignState:
     return CampaignState(points=points)
 
 
+@float64
 def compile_first_decision(config: CampaignConfig, seed: int) -> None:
     """Compile (or load from the persistent cache) the programs of the campaign's first decision
     on stand-in seed points, so the real one need not: for a thread started while Prefect and
@@ -82,6 +84,7 @@ def programs_key(config: CampaignConfig, capacities: tuple[int, int] | None) -> 
     )
 
 
+@float64
 def compile_ahead(
     config: CampaignConfig, state: CampaignState, previous: dict | None, capacities: tuple[int, int]
 ) -> None:

@@ -39,6 +39,7 @@ from noisebo.models.fitting import (
 )
 from noisebo.models.prediction import predict
 from noisebo.state import CampaignState
+from noisebo.precision import float64
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,7 @@ class StepInputs:
 # stages (plain calls, or Prefect tasks whose bookkeeping is the orchestration's, not the decision's).
 
 
+@float64
 def noise_stage(step: StepInputs) -> NoiseFit:
     """The fit noise model stage of ``step``, timed."""
     started = time.perf_counter()
@@ -79,6 +81,7 @@ def noise_stage(step: StepInputs) -> NoiseFit:
     return noise._replace(seconds=time.perf_counter() - started)
 
 
+@float64
 def gp_stage(step: StepInputs, noise: NoiseFit) -> PrimaryFit:
     """The fit GP stage of ``step``, timed."""
     started = time.perf_counter()
@@ -86,6 +89,7 @@ def gp_stage(step: StepInputs, noise: NoiseFit) -> PrimaryFit:
     return gp._replace(seconds=time.perf_counter() - started)
 
 
+@float64
 def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision:
     """Predict, assess and acquire for ``step``: the decision, its ``latency_s`` the three
     stages' own time."""
@@ -96,6 +100,7 @@ def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision
     return replace(decision, latency_s=noise.seconds + gp.seconds + time.perf_counter() - started)
 
 
+@float64
 def decide_on(
     config: CampaignConfig,
     fitted: Fitted,
@@ -112,6 +117,7 @@ def decide_on(
     return decision, convergence.recorded(state)
 
 
+@float64
 def decide(
     config: CampaignConfig,
     state: CampaignState,

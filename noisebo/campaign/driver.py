@@ -32,6 +32,7 @@ from noisebo.events import (
 from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
 from noisebo.keys import MEASURE, numpy_rng
 from noisebo.state import CampaignState
+from noisebo.precision import float64
 
 Commit = Callable[[EngineState, Sequence[Event]], EngineState]
 Measure = Callable[[object, int, Request], Outcome]
@@ -94,6 +95,7 @@ def in_memory(state: EngineState, events: Sequence[Event]) -> EngineState:
     return after
 
 
+@float64
 def drive(
     state: EngineState,
     instrument,
@@ -172,6 +174,7 @@ def now_utc() -> str:
     return dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
 
 
+@float64
 def run_campaign(
     config: CampaignConfig,
     instrument,

@@ -20,6 +20,7 @@ from noisebo.reduction import (
     usable,
 )
 from noisebo.state import CampaignState, Point, as_position
+from noisebo.precision import float64
 
 
 def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
@@ -94,6 +95,7 @@ def make_point(
     ), shots
 
 
+@float64
 def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summary:
     """Fit both models on every point (key for the step after the last decision: ``n_steps``
     unless the instrument-time budget ended the campaign sooner) and summarise them."""

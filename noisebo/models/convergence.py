@@ -69,7 +69,7 @@ class Convergence(NamedTuple):
         an interval that narrowed early can widen again as shots come in, and a budget-mode
         point takes its few shots either way (narrowing t* costs no extra shots), whereas the
         paper's protocol leaves its 30-shot points for good once converged."""
-        if schedule.mode == "budget" and schedule.convergence == "posterior":
+        if schedule.rule.rechecks_interval(schedule.convergence == "posterior"):
             return not self.t_interval <= schedule.t_interval_rel
         return not self.converged
 

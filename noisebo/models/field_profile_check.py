@@ -48,6 +48,7 @@ from scipy.special import chdtr, gammaln, logsumexp, ndtri
 from noisebo import keys
 from noisebo.config import NoiseModelConfig, NoiseProfile, field_length_names
 from noisebo.models.profile_check import NO_PROFILE, TINY_NOISE, ProfileCheck, law_sigma, law_values
+from noisebo.precision import float64
 
 GRID = 41  # nodes of each position's field, one field
 GRID_2D = 15  # nodes per field, two fields
@@ -127,6 +128,7 @@ def _on_nodes(cfg: NoiseModelConfig, t: np.ndarray, smooth: bool = False) -> tup
     return law_sigma(cfg.mean, t[:, None], a0[None, :], a1[None, :], mean.get("p", 0.5)), log_w
 
 
+@float64
 def discrepancy(cfg: NoiseModelConfig, ids: np.ndarray, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
     """D for data sets s (R, n) (sample sds at t (n,) with dof (n,) = shots - 1 at positions
     ``ids`` (n,), sorted), under the profile's means: (R,)."""
@@ -144,6 +146,7 @@ def discrepancy(cfg: NoiseModelConfig, ids: np.ndarray, t: np.ndarray, s: np.nda
     return out
 
 
+@float64
 def normal_scores(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
     """Each point's sample sd as a standard-normal score (R, n) of its predictive distribution
     under the profile's means, the field integrated out on the nodes (as ``discrepancy``, but
@@ -160,6 +163,7 @@ def normal_scores(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.n
     return out
 
 
+@float64
 def shift_statistics(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
     """Two statistics per data set (R, 2) from the points' ``normal_scores`` z: |mean z|, the
     whole level off (noise higher or lower than the profile's everywhere), and |the slope of z
@@ -175,6 +179,7 @@ def _drawn(posterior, size: int, rng: np.random.Generator, low: float = 0.0) -> 
     return np.maximum(posterior.mean + posterior.sd * rng.standard_normal(size), low)
 
 
+@float64
 def replicates(
     cfg: NoiseModelConfig,
     positions: np.ndarray,
@@ -204,6 +209,7 @@ def replicates(
     return sigma * np.sqrt(rng.chisquare(np.broadcast_to(dof, sigma.shape)) / dof)
 
 
+@float64
 def p_value(
     cfg: NoiseModelConfig,
     x: np.ndarray,

@@ -27,6 +27,7 @@ from noisebo.models import field_fit, inference, noise_field, noise_model, prima
 from noisebo.models.grids import scaled
 from noisebo.models.inputs import capacity_for, group_ids
 from noisebo.state import CampaignState
+from noisebo.precision import float64
 
 
 class Fitted(NamedTuple):
@@ -173,6 +174,7 @@ def _columns(config: CampaignConfig, state: CampaignState):
     return x, t, value, n_shots, noise
 
 
+@float64
 def fit_noise_model(
     config: CampaignConfig,
     state: CampaignState,
@@ -211,6 +213,7 @@ def fit_noise_model(
     return NoiseFit(samples, data, scale, groups.count.size, groups.binned, warm, profile=check)
 
 
+@float64
 def fit_gp(
     config: CampaignConfig,
     state: CampaignState,

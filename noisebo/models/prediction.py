@@ -19,6 +19,7 @@ from noisebo.models.grids import N_FINE, integration_points, scaled, space_grids
 from noisebo.models.reward import optimal_index, reward
 from noisebo.programs import persisted
 from noisebo.state import CampaignState
+from noisebo.precision import float64
 
 
 class Posterior(NamedTuple):
@@ -250,6 +251,7 @@ def _predict_compiled(
     return persisted(name, predict, static_argnums=(1, 2), depends_on=(registry.noise_law(kind),))
 
 
+@float64
 def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState, uses_spread: bool = False) -> Prediction:
     """Predictions of f on the x grid and of Noise on the t grids, from fitted models; with
     ``uses_spread`` (a policy that integrates the variance of f) also the spread weights q(x)."""

@@ -28,6 +28,7 @@ from noisebo.config import (  # noqa: F401 - the profile's records, re-exported
     field_length_names,
 )
 from noisebo.models import field_fit, inference, noise_field, noise_model
+from noisebo.precision import float64
 
 LAPLACE_DRAWS = 256  # posterior draws the parameters' mean and sd are taken over
 AT_BOUND = 0.01  # scaled units (the data's noise is about 1): a parameter's draws all below this sit at its bound
@@ -46,6 +47,7 @@ class Distilled(NamedTuple):
     correlation: dict[str, float]
 
 
+@float64
 def distil(
     config: CampaignConfig, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray, key: jax.Array
 ) -> Distilled:
@@ -159,6 +161,7 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
     return law, hyper
 
 
+@float64
 def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> Distilled:
     """The posterior of a noise field's law from noise-field campaigns on one instrument, each
     fitted on its own (their positions are different places, perhaps on different samples):

@@ -31,6 +31,7 @@ from scipy import optimize
 from noisebo import registry
 from noisebo.config import NoiseModelConfig, NoiseProfile
 from noisebo.models.inputs import capacity_for
+from noisebo.precision import float64
 
 NODES = 5  # Gauss-Hermite nodes per profile parameter
 TINY_NOISE = 1e-12  # a law's noise is kept above this (a profile with A0 = A1 = 0 predicts none)
@@ -87,6 +88,7 @@ def _law_program(kind: str):
     return jax.jit(law.mean)
 
 
+@float64
 def law_sigma(kind: str, t, a0, a1, p=0.5) -> np.ndarray:
     """The noise sd of the law ``kind`` (numpy in and out, broadcasting), kept above
     ``TINY_NOISE``. Run as one compiled program per padded size (``capacity_for`` of the
@@ -103,6 +105,7 @@ def _law_sigma(kind: str, t: np.ndarray, values: dict[str, float]) -> np.ndarray
     return law_sigma(kind, t, values["a0"], values["a1"], values.get("p", 0.5))
 
 
+@float64
 def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
     """max log L over the law's parameters within the config's uniform priors (L-BFGS-B from
     the profile's means and from a few spread starts)."""
@@ -128,6 +131,7 @@ def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof
     return -best
 
 
+@float64
 def p_value(cfg: NoiseModelConfig, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray) -> float:
     """The profile's posterior predictive p-value on points measured at t (n,) s with the sample
     sd ``shot_std`` (n,) of ``n_shots`` (n,) shots (points of fewer than 2 shots, or a NaN sd,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 from scipy import optimize
+from noisebo.precision import float64
 
 
 def reward(t: jnp.ndarray, noise: jnp.ndarray, alpha: float, beta: float) -> jnp.ndarray:
@@ -25,6 +26,7 @@ def optimal_index(t: jnp.ndarray, noise: jnp.ndarray, alpha: float, beta: float)
     return jnp.argmax(reward(t, noise, alpha, beta))
 
 
+@float64
 def true_optimal_t(noise_law, t_min: float, t_max: float, alpha: float, beta: float) -> float:
     """t* maximising R(t, noise_law(t)) on [t_min, t_max], found numerically (bounded Brent after
     a dense scan, so a multi-modal reward still gives the global optimum)."""

@@ -25,6 +25,7 @@ from noisebo.config import CampaignConfig
 from noisebo.storage.record import Points, Shots, Steps, Summary
 from noisebo.models.reward import normalise, reward
 from noisebo.state import format_position
+from noisebo.precision import float64
 
 POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured")
 
@@ -81,6 +82,7 @@ class Frame:
     latest_point: int | None
 
 
+@float64
 def normalised_reward(t: np.ndarray, noise: np.ndarray, alpha: float, beta: float) -> np.ndarray:
     """R = -alpha t^2 - beta Noise on the grid t, min-max normalised to [0, 1] (numpy)."""
     return np.asarray(normalise(reward(jnp.asarray(t), jnp.asarray(noise), alpha, beta)), dtype=np.float64)
