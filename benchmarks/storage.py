@@ -53,7 +53,7 @@ from noisebo.events import (  # noqa: E402
 from noisebo.reduction import Reading, ShotValue  # noqa: E402
 from noisebo.sho import SHOFit  # noqa: E402
 from noisebo.state import Point  # noqa: E402
-from noisebo.storage import live, records  # noqa: E402
+from noisebo.storage import event_codec, live  # noqa: E402
 from noisebo.storage.hdf5 import write_snapshot  # noqa: E402
 from noisebo.storage.journal import JournalWriter  # noqa: E402
 from noisebo.storage.recorder import Recorder, journal_path  # noqa: E402
@@ -306,7 +306,7 @@ def old_at(config: CampaignConfig, n: int, repeats: int, spectra: bool, folder: 
     """The old recorder from the in-memory ``state`` of n points: {"s", "hdf5_s": medians per
     point over ``repeats`` points after n, "bytes": its file's size at n}."""
     path = folder / f"old{n}.h5"
-    writer = JournalWriter.create(journal_path(path), records.encode(started(config)))
+    writer = JournalWriter.create(journal_path(path), event_codec.encode(started(config)))
     with RewritingRecorder(path, writer, state) as recorder:
         recorder.snapshot()
         size = path.stat().st_size

@@ -188,21 +188,11 @@ def _resume(args) -> int:
 def _journal_state(path: Path):
     """The campaign as its journal (its source of truth) has it; a torn last record (which the
     resume drops) is said on stderr."""
-    from noisebo.storage import journal, records
-    from noisebo.storage.recorder import DAMAGED_JOURNAL_ADVICE
+    from noisebo.storage.recorder import journal_path, journal_state
 
-    jpath = path.with_suffix(".journal")
-    try:
-        found, _, damage = journal.scan(jpath)
-        if damage is not None and not damage.torn:
-            raise journal.JournalDamaged(jpath, damage)
-        state = records.rebuild(found)
-    except journal.JournalDamaged as error:
-        raise CampaignFileError(f"{error}; {DAMAGED_JOURNAL_ADVICE.format(path=path)}") from None
-    except (records.CorruptJournal, OSError) as error:
-        raise CampaignFileError(f"cannot resume {path}: {error}") from None
+    state, _, damage = journal_state(path)
     if damage is not None:
-        _warn(f"noisebo: {damage.describe(jpath)}")
+        _warn(f"noisebo: {damage.describe(journal_path(path))}")
     return state
 
 

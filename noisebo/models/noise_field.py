@@ -124,12 +124,11 @@ from noisebo.models import inference
 from noisebo.models.inputs import Grouped, capacity_for, group_ids, merge
 from noisebo.models.kernels import JITTER, matern52
 from noisebo.models.noise_model import (
-    RESIDUAL_LENGTH_LOC,
     c4,
     group_log_factor,
+    law_and_residual_sites,
     mean_law,
     prior_rows,
-    profile_factor,
     sampling_rel_var,
 )
 from noisebo.models.noise_model import initial_guess as law_guess
@@ -358,14 +357,7 @@ def make_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
 
         if data.freq.shape[1] != dimensions or data.field_amplitude.shape[0] != len(prefixes):
             raise ValueError("noise-field data prepared for another dimension or field")
-        a0 = numpyro.sample("a0", dist.Uniform(data.bounds[0, 0], data.bounds[0, 1]))
-        a1 = numpyro.sample("a1", dist.Uniform(data.bounds[1, 0], data.bounds[1, 1]))
-        p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if law.infers_exponent else 0.5
-        amplitude = numpyro.sample(
-            "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
-        )
-        length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
-        profile_factor(data, a0, a1, p, law.infers_exponent)
+        a0, a1, p, amplitude, length = law_and_residual_sites(data, cfg, law)
         white = dist.Normal(0.0, 1.0).expand([data.freq.shape[0]]).to_event(1)
         params = {prefix + "_z": numpyro.sample(prefix + "_z", white) for prefix in prefixes}
         g0, g1 = log_fields(params, data, data.phi)

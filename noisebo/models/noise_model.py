@@ -87,14 +87,7 @@ def make_model(cfg: NoiseModelConfig):
         import numpyro
         import numpyro.distributions as dist
 
-        a0 = numpyro.sample("a0", dist.Uniform(data.bounds[0, 0], data.bounds[0, 1]))
-        a1 = numpyro.sample("a1", dist.Uniform(data.bounds[1, 0], data.bounds[1, 1]))
-        p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if law.infers_exponent else 0.5
-        amplitude = numpyro.sample(
-            "amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale)
-        )
-        length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
-        profile_factor(data, a0, a1, p, law.infers_exponent)
+        a0, a1, p, amplitude, length = law_and_residual_sites(data, cfg, law)
         m = law.mean(data.t, a0, a1, p)
         cov = masked_covariance(matern52(data.ts, data.ts, amplitude**2, length), m**2 * data.rel_var, data.mask)
         numpyro.sample("y", dist.MultivariateNormal(jnp.where(data.mask, m, 0.0), covariance_matrix=cov), obs=data.y)
@@ -140,6 +133,23 @@ class WithProfile(Protocol):
     def prior(self) -> jnp.ndarray | None: ...
     @property
     def prior_weight(self) -> jnp.ndarray | None: ...
+
+
+def law_and_residual_sites(data: WithProfile, cfg: NoiseModelConfig, law) -> tuple:
+    """Inside a numpyro model (the noise model's, the noise field's): the sites a0 and a1
+    (Uniform within ``data.bounds``), p (for a law that infers it; else 0.5), the residual GP's
+    amplitude and length, and the noise profile's factor (``profile_factor``). Returns
+    (a0, a1, p, amplitude, length)."""
+    import numpyro
+    import numpyro.distributions as dist
+
+    a0 = numpyro.sample("a0", dist.Uniform(data.bounds[0, 0], data.bounds[0, 1]))
+    a1 = numpyro.sample("a1", dist.Uniform(data.bounds[1, 0], data.bounds[1, 1]))
+    p = numpyro.sample("p", dist.Uniform(data.bounds[2, 0], data.bounds[2, 1])) if law.infers_exponent else 0.5
+    amplitude = numpyro.sample("amplitude", dist.LogNormal(cfg.residual_amplitude_loc, cfg.residual_amplitude_scale))
+    length = numpyro.sample("length", dist.LogNormal(RESIDUAL_LENGTH_LOC, 0.5))
+    profile_factor(data, a0, a1, p, law.infers_exponent)
+    return a0, a1, p, amplitude, length
 
 
 def profile_factor(data: WithProfile, a0, a1, p, infers_exponent: bool) -> None:

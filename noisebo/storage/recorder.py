@@ -29,7 +29,7 @@ from noisebo.events import (
     StatusChanged,
     Summarised,
 )
-from noisebo.storage import journal, records
+from noisebo.storage import event_codec, journal
 from noisebo.storage.hdf5 import CampaignFileError, stray_temporaries
 from noisebo.storage.journal import JournalError, JournalWriter
 from noisebo.storage.store import CampaignStore, Hdf5Store
@@ -66,14 +66,31 @@ def read_started(h5_path: Path) -> Started:
         raise CampaignFileError(f"cannot resume {h5_path}: {what} ({jpath} is missing)")
     try:
         found, _ = journal.read(jpath)
-        started = records.decode(found[0]) if found else None
+        started = event_codec.decode(found[0]) if found else None
     except journal.JournalDamaged as error:
         raise CampaignFileError(f"{error}; {DAMAGED_JOURNAL_ADVICE.format(path=h5_path)}") from None
-    except records.CorruptJournal as error:
+    except event_codec.CorruptJournal as error:
         raise CampaignFileError(f"cannot resume {h5_path}: {error}") from None
     if not isinstance(started, Started):
         raise CampaignFileError(f"cannot resume {h5_path}: the journal does not start with a campaign record")
     return started
+
+
+def journal_state(h5_path: Path) -> tuple[EngineState, int, journal.Damage | None]:
+    """The campaign of ``h5_path`` as its journal (its source of truth) has it, the length of the
+    journal's intact records, and the damage past them: None, or a torn last record (which a
+    resume drops). A journal damaged before its end, or records that do not form a campaign, are
+    a ``CampaignFileError`` that says what to do."""
+    jpath = journal_path(h5_path)
+    try:
+        found, valid_length, damage = journal.scan(jpath)
+        if damage is not None and not damage.torn:
+            raise journal.JournalDamaged(jpath, damage)
+        return event_codec.rebuild(found), valid_length, damage
+    except journal.JournalDamaged as error:
+        raise CampaignFileError(f"{error}; {DAMAGED_JOURNAL_ADVICE.format(path=h5_path)}") from None
+    except (event_codec.CorruptJournal, OSError) as error:
+        raise CampaignFileError(f"cannot resume {h5_path}: {error}") from None
 
 
 SNAPSHOT_AFTER = (Started, PointCommitted, Summarised, StatusChanged)
@@ -103,7 +120,7 @@ class Recorder:
             raise CampaignFileError(f"{h5_path} already exists; continue it with `noisebo resume {h5_path}`")
         h5_path.parent.mkdir(parents=True, exist_ok=True)
         try:
-            writer = JournalWriter.create(journal_path(h5_path), records.encode(started))
+            writer = JournalWriter.create(journal_path(h5_path), event_codec.encode(started))
         except JournalError as error:
             raise CampaignFileError(str(error)) from None
         recorder = cls(h5_path, writer, engine.start(started), store)
@@ -137,16 +154,10 @@ class Recorder:
         except JournalError as error:
             raise CampaignFileError(str(error)) from None
         try:
-            found, valid_length, damage = journal.scan(jpath)
-            if damage is not None and not damage.torn:
-                raise journal.JournalDamaged(jpath, damage)
-            state = records.rebuild(found)
-        except journal.JournalDamaged as error:
+            state, valid_length, damage = journal_state(h5_path)
+        except CampaignFileError:
             writer.close()
-            raise CampaignFileError(f"{error}; {DAMAGED_JOURNAL_ADVICE.format(path=h5_path)}") from None
-        except (records.CorruptJournal, OSError) as error:
-            writer.close()
-            raise CampaignFileError(f"cannot resume {h5_path}: {error}") from None
+            raise
         writer.truncate_to(valid_length)
         for tmp in stray_temporaries(h5_path):
             tmp.unlink()
@@ -158,7 +169,7 @@ class Recorder:
         """Journal and apply ``events`` to ``state`` in order; returns the new state."""
         snapshot = False
         for event in events:
-            self._writer.append(records.encode(event))
+            self._writer.append(event_codec.encode(event))
             state = engine.apply(state, event)
             snapshot = snapshot or isinstance(event, SNAPSHOT_AFTER)
         self.state = state

@@ -14,7 +14,7 @@ from noisebo.instruments import build
 from noisebo.instruments.registry import validated
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
-from noisebo.storage import journal, records
+from noisebo.storage import event_codec, journal
 
 OVERRIDES = {"space": {"n_x": 40, "n_t": 30}, "schedule": {"n_steps": 3, "shots_before": 6, "shots_after": 3}}
 SOURCE = "data/configs/forrester.yaml"
@@ -68,7 +68,7 @@ def wait_for_length(path: Path, n: int, alive, timeout: float = 240, what=lambda
 
 
 def assert_same_campaign(path: Path, expected) -> None:
-    state = records.rebuild(journal.read(path.with_suffix(".journal"))[0])
+    state = event_codec.rebuild(journal.read(path.with_suffix(".journal"))[0])
     assert state.status.value == "completed"
     assert [[(s.point, s.shot, s.reading) for s in p.shots] for p in state.points] == [
         [(s.point, s.shot, s.reading) for s in p.shots] for p in expected.points

@@ -14,7 +14,7 @@ import yaml
 
 from noisebo.instruments.registry import validated
 from noisebo.config import load_config
-from noisebo.storage import journal, records
+from noisebo.storage import event_codec, journal
 from tests.noisebo.bridge.conftest import call
 from tests.noisebo.bridge.kills import OVERRIDES, SOURCE
 
@@ -35,7 +35,7 @@ def journaled_status(path: Path) -> str | None:
     jpath = path.with_suffix(".journal")
     if not jpath.exists():
         return None
-    return records.rebuild(journal.read(jpath)[0]).status.value
+    return event_codec.rebuild(journal.read(jpath)[0]).status.value
 
 
 def test_sigterm_while_waiting_for_an_instrument_pc_that_never_connected_aborts_within_2_s(tmp_path):
@@ -76,7 +76,7 @@ def test_sigterm_while_waiting_for_an_instrument_pc_that_never_connected_aborts_
         campaign.kill()
     assert campaign.returncode == 0, err
     assert out.strip().splitlines()[-1] == "aborted SIGTERM received"
-    state = records.rebuild(journal.read(path.with_suffix(".journal"))[0])
+    state = event_codec.rebuild(journal.read(path.with_suffix(".journal"))[0])
     assert (state.status.value, state.reason, state.n_shots, len(state.failures)) == (
         "aborted",
         "SIGTERM received",

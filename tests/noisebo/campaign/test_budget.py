@@ -14,7 +14,7 @@ from noisebo.config import CampaignConfig, ConfigError, parse_config
 from noisebo.events import BudgetChanged, DriverInfo, Status
 from noisebo.models import noise_model
 from noisebo.models.grids import grids
-from noisebo.storage.records import decode, encode, rebuild
+from noisebo.storage.event_codec import decode, encode, rebuild
 
 
 def budgeted(tiny_config, budget_s, overhead_s=2.0, n_steps=100):

@@ -16,7 +16,7 @@ from noisebo.models.grids import grids
 from noisebo.models.reward import true_optimal_t
 from noisebo.storage.record import read_record
 from noisebo.storage.hdf5 import write_snapshot
-from noisebo.storage.records import decode, encode, rebuild
+from noisebo.storage.event_codec import decode, encode, rebuild
 
 # Quadrature law sqrt(A1^2/t + A0^2), A1 = 1, A0 = 0.1 off the patch and 4.1 on it (x = 0.5,
 # width 0.05): t* = 1.90 s off it, 1.06 s on it for alpha 0.1, beta 2.

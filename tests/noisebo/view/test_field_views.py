@@ -12,7 +12,7 @@ from noisebo.config import CampaignConfig
 from noisebo.events import DriverInfo
 from noisebo.storage.hdf5 import write_snapshot
 from noisebo.storage.record import read_record
-from noisebo.storage.records import encode, rebuild
+from noisebo.storage.event_codec import encode, rebuild
 from noisebo.view.recording import true_optimal_map
 from noisebo.view.report import _t_map, campaign_report
 

@@ -20,9 +20,9 @@ from noisebo.events import (
 )
 from noisebo.reduction import Reading, ShotValue, shot_value
 from noisebo.state import Point
-from noisebo.storage import journal, records
+from noisebo.storage import event_codec, journal
 from noisebo.storage.journal import Record
-from noisebo.storage.records import CorruptJournal, rebuild
+from noisebo.storage.event_codec import CorruptJournal, rebuild
 
 POINT = Point(x=0.1, t=1.0, value=2.0, shot_std=0.5, n_shots=2, noise=0.5, noise_measured=True)
 START = Started(
@@ -32,11 +32,11 @@ START = Started(
 
 def through_the_journal(event):
     """encode, frame, unframe, decode: what a resumed campaign reads back."""
-    frame = journal.encode(records.encode(event))
+    frame = journal.encode(event_codec.encode(event))
     head_len = int.from_bytes(frame[4:8], "little")
     payload_len = int.from_bytes(frame[8:16], "little")
     raw = journal._decode(frame[20 : 20 + head_len], frame[20 + head_len : 20 + head_len + payload_len])
-    return records.decode(raw)
+    return event_codec.decode(raw)
 
 
 def decision():
@@ -111,13 +111,13 @@ def test_every_event_comes_back_from_the_journal_as_it_went_in(event):
 def test_a_journal_rebuilds_its_campaign():
     state = rebuild(
         [
-            records.encode(START),
-            records.encode(ShotTaken(0, 0, (0.1,), 1.0, Reading(1.5))),
-            records.encode(ShotTaken(0, 1, (0.1,), 1.0, Reading(2.5))),
-            records.encode(
+            event_codec.encode(START),
+            event_codec.encode(ShotTaken(0, 0, (0.1,), 1.0, Reading(1.5))),
+            event_codec.encode(ShotTaken(0, 1, (0.1,), 1.0, Reading(2.5))),
+            event_codec.encode(
                 PointCommitted(0, -1, POINT, (ShotValue(1.5, True, "", None), ShotValue(2.5, True, "", None)))
             ),
-            records.encode(ShotTaken(1, 0, (0.4,), 2.0, Reading(9.0))),
+            event_codec.encode(ShotTaken(1, 0, (0.4,), 2.0, Reading(9.0))),
         ]
     )
     assert state.seed == 7 and state.data.points == (POINT,) and state.driver.name == "forrester"
@@ -127,7 +127,7 @@ def test_a_journal_rebuilds_its_campaign():
 
 
 def shot(point, k):
-    return records.encode(ShotTaken(point, k, (0.1,), 1.0, Reading(1.0)))
+    return event_codec.encode(ShotTaken(point, k, (0.1,), 1.0, Reading(1.0)))
 
 
 @pytest.mark.parametrize(
@@ -135,8 +135,8 @@ def shot(point, k):
     [
         ([shot(0, 1)], "shot 1 of point 0 out of order"),
         ([shot(3, 0)], "shot 0 of point 3 out of order"),
-        ([records.encode(PointCommitted(2, -1, POINT, ()))], "point 2 out of order"),
-        ([records.encode(START)], "a second campaign start"),
+        ([event_codec.encode(PointCommitted(2, -1, POINT, ()))], "point 2 out of order"),
+        ([event_codec.encode(START)], "a second campaign start"),
         ([Record("status", {"status": "done", "reason": ""})], "'done' is not a valid Status"),
         ([Record("weird", {})], "unknown record type 'weird'"),
         ([Record("shot", {"point": 0})], "a 'shot' record that is not one"),
@@ -144,7 +144,7 @@ def shot(point, k):
 )
 def test_records_that_do_not_form_a_campaign_are_named(tail, message):
     with pytest.raises(CorruptJournal, match=message):
-        rebuild([records.encode(START), *tail])
+        rebuild([event_codec.encode(START), *tail])
 
 
 def test_a_journal_must_start_with_its_campaign():
