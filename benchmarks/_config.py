@@ -29,7 +29,7 @@ from noisebo.instruments.registry import validated  # noqa: E402
 from noisebo.campaign.driver import simulates  # noqa: E402
 from noisebo.config import CampaignConfig, ConfigError, load_config  # noqa: E402
 
-EXIT_USAGE = 2  # as noisebo/cli/main.py
+EXIT_USAGE = 2  # as noisebo/cli/common.py
 
 
 class Parser(argparse.ArgumentParser):
@@ -48,7 +48,7 @@ def validated_config(
     path: str | Path, edit: Callable[[CampaignConfig], CampaignConfig] | None = None
 ) -> CampaignConfig:
     """The config at ``path`` with ``edit`` applied, validated as ``noisebo run`` validates a file
-    (``noisebo/cli/main.py: _validated``, ``flows/campaign.py: resolve_config``); ``ConfigError`` (its
+    (``noisebo/cli/common.py: validated_config``, ``flows/campaign.py: resolve_config``); ``ConfigError`` (its
     message the CLI's, the file named first) otherwise."""
     config = load_config(path)
     if edit is not None:

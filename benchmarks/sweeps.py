@@ -26,7 +26,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _ts
 
 from _config import Parser, benchmark_config  # noqa: E402
 
-from noisebo.cli.main import parse_seeds  # noqa: E402
+from noisebo.cli.common import parse_seeds  # noqa: E402
 from noisebo.flows.processes import BIN, local_server, start, stop, wait_for  # noqa: E402
 from noisebo.instruments import build  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402

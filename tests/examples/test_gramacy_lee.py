@@ -95,7 +95,7 @@ def test_a_campaign_on_the_example_driver_is_killed_resumed_and_reported(
     assert data.driver["version"] == "0.2.0" and data.driver["settings"]["a1"] == 0.5
 
     monkeypatch.syspath_prepend(str(target))  # the same campaign uninterrupted, in this process
-    from noisebo.cli.main import _validated
+    from noisebo.cli.common import validated_config as _validated
     from noisebo.instruments import build
 
     config = _validated(config_path)

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from noisebo.cli.main import inspect_summary
+from noisebo.cli.files import inspect_summary
 from noisebo.campaign.progress import decision_lines
 from noisebo.instruments import build
 from noisebo.instruments.registry import driver_info, validated

@@ -7,7 +7,8 @@ import h5py
 import pytest
 
 import noisebo
-from noisebo.cli.main import main, parse_seeds
+from noisebo.cli.common import parse_seeds
+from noisebo.cli.main import main
 from noisebo.flows.campaign import start_campaign
 from noisebo.campaign.engine import new_campaign
 from noisebo.config import CampaignConfig

@@ -1,5 +1,5 @@
 """The commands that need no model start without Prefect, JAX or numpyro: each imports what it
-uses when it runs (noisebo/cli/main.py). Checked in fresh interpreters; benchmarks/cli.py times them."""
+uses when it runs (noisebo/cli/, a module per command group). Checked in fresh interpreters; benchmarks/cli.py times them."""
 
 import importlib.metadata
 import json

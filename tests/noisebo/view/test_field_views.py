@@ -4,7 +4,7 @@ inspect summarises the map; an x-independent campaign has neither."""
 import numpy as np
 import pytest
 
-from noisebo.cli.main import inspect_summary
+from noisebo.cli.files import inspect_summary
 from noisebo.instruments.forrester import ForresterInstrument, ForresterSettings
 from noisebo.campaign import engine
 from noisebo.campaign.driver import run_campaign

@@ -1,0 +1,185 @@
+"""`noisebo inspect`, `report` and `replay`: a campaign file read back, summarised, drawn and replayed
+into Rerun."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from noisebo.cli import noise_profile
+from noisebo.cli.common import call_isolated, check_present, warn
+
+
+def _replay(args) -> int:
+    from noisebo.view.recording import replay
+
+    path = check_present(Path(args.file))
+    out = call_isolated(replay, path, args.out, warn, what=str(path))
+    print(f"{out}  (view it with: rerun {out})")
+    return 0
+
+
+def _report(args) -> int:
+    from noisebo.view.report import report
+
+    target = Path(args.target)
+    if not target.is_dir():
+        check_present(target)
+    for written in call_isolated(report, target, args.out, what=str(target)):
+        print(written)
+    return 0
+
+
+def _profile_summary(record) -> dict | None:
+    """The noise profile a campaign started from (None: none) and the first BO step (from 1)
+    whose check dropped it (None: in use throughout)."""
+    profile = (record.config.get("noise_model") or {}).get("profile")
+    if profile is None:
+        return None
+    steps = record.steps
+    dropped = next((int(s) for s, used in zip(steps.step, steps.profile_in_use) if not used), None)
+    return {
+        "law": profile["law"],
+        "parameters": noise_profile.law_text(profile),
+        "driver": profile["driver"]["name"],
+        "campaigns": len(profile.get("campaigns", ())),
+        "dropped_at_step": dropped,
+    }
+
+
+def inspect_summary(path: Path) -> dict:
+    """The JSON view of a campaign file (see ``noisebo inspect --json``)."""
+    import numpy as np
+
+    from noisebo.state import as_position
+    from noisebo.storage.record import read_record
+
+    record = read_record(path)
+    points, summary = record.points, record.summary
+    t_opt = {int(s): float(v) for s, v in zip(record.steps.step, record.steps.t_opt, strict=True)}
+    rows = []
+    for i in range(len(points)):
+        step = int(points.step[i])  # 0: a seed point; BO steps from 1 (storage.steps)
+        rows.append(
+            {
+                "point": i,
+                "step": step,
+                "x": list(as_position(points.x[i])) if np.ndim(points.x[i]) else float(points.x[i]),
+                "t": float(points.t[i]),
+                "n_shots": int(points.n_shots[i]),
+                "value": float(points.value[i]),
+                "noise": float(points.noise[i]),
+                "noise_measured": bool(points.noise_measured[i]),
+                "t_opt": t_opt.get(step),
+            }
+        )
+    field = None
+    if summary is not None and summary.t_opt_map.size:
+        t_map, noise_map = summary.t_opt_map, summary.noise_map
+        field = {
+            "t_opt_min": float(t_map.min()),
+            "t_opt_median": float(np.median(t_map)),
+            "t_opt_max": float(t_map.max()),
+            "noise_at_t_opt_min": float(noise_map.min()),
+            "noise_at_t_opt_max": float(noise_map.max()),
+            "x_at_shortest_t_opt": as_position(record.grid["x"][int(np.argmin(t_map))]),
+        }
+    return {
+        "file": str(path),
+        "noise_profile": _profile_summary(record),
+        "status": record.status,
+        "status_reason": record.status_reason,
+        "seed": record.seed,
+        "policy": record.policy,
+        "driver": record.driver,
+        "schema_version": record.schema_version,
+        "versions": record.versions,
+        "config": record.config,
+        "first_converged_step": record.converged_step,
+        "final_t_opt": None if summary is None else summary.t_opt,
+        "noise_field": field,
+        "n_shots": record.n_shots,
+        "measurement_time_s": record.measurement_time_s,
+        "budget_s": record.budget_s,
+        "spent_s": record.spent_s,
+        "points": rows,
+    }
+
+
+def _inspect(args) -> int:
+    from noisebo.state import format_position
+
+    path = check_present(Path(args.file))
+    summary = call_isolated(inspect_summary, path, what=str(path))
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    conv = summary["first_converged_step"]
+    driver = summary["driver"]
+    x_width = max([9] + [len(format_position(row["x"])) for row in summary["points"]])
+    print(
+        f"{summary['file']}: {summary['config']['name']} seed {summary['seed']}, policy {summary['policy']}, "
+        f"status {summary['status']}{' (' + summary['status_reason'] + ')' if summary['status_reason'] else ''}"
+    )
+    written_by = summary["versions"].get("noisebo")
+    print(
+        f"  instrument {driver['name']} {driver['version']}"
+        + (f"; written by noisebo {written_by}" if written_by else "")
+    )
+    print(
+        f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
+        f"noise model {'not converged' if conv is None else f'converged at step {conv}'}; "
+        f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s"
+    )
+    if summary["budget_s"] is not None:
+        print(
+            f"  instrument-time budget {summary['budget_s']:.4g} s, {summary['spent_s']:.4g} s spent "
+            f"(shots and {summary['config']['schedule']['point_overhead_s']:g} s per point)"
+        )
+    profile = summary["noise_profile"]
+    if profile is not None:
+        fate = (
+            "in use throughout"
+            if profile["dropped_at_step"] is None
+            else f"contradicted by the replicate scatter and dropped at step {profile['dropped_at_step']}"
+        )
+        print(
+            f"  noise profile ({profile['law']}: {profile['parameters']}; {profile['driver']}, "
+            f"{profile['campaigns']} campaigns): {fate}"
+        )
+    field = summary["noise_field"]
+    if field is not None:
+        print(
+            f"  noise field: optimal t per position from {field['t_opt_min']:.4g} s (at x = "
+            f"{format_position(field['x_at_shortest_t_opt'])}) to {field['t_opt_max']:.4g} s, median "
+            f"{field['t_opt_median']:.4g} s; single-shot noise there from {field['noise_at_t_opt_min']:.3g} to "
+            f"{field['noise_at_t_opt_max']:.3g}"
+        )
+    print(f"  {'step':>5} {'x':>{x_width}} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
+    for row in summary["points"]:
+        step = "seed" if row["step"] == 0 else str(row["step"])
+        t_opt = "" if row["t_opt"] is None else f"{row['t_opt']:.4f}"
+        print(
+            f"  {step:>5} {format_position(row['x']):>{x_width}} {row['t']:>8.4g} {row['n_shots']:>5} {row['value']:>10.4g} "
+            f"{row['noise']:>8.3g}{'' if row['noise_measured'] else '*'} {t_opt:>9}"
+        )
+    print("  * noise from the noise model")
+    return 0
+
+
+def add_parser(commands) -> None:
+    """The group's commands, on ``commands`` (the subparsers of ``noisebo``)."""
+    replay = commands.add_parser("replay", help="rebuild a campaign's Rerun recording from its .h5 file")
+    replay.add_argument("file", help="the campaign's .h5 file")
+    replay.add_argument("--out", type=Path, default=None, help="recording to write (default: FILE.rrd beside it)")
+    replay.set_defaults(handler=_replay)
+
+    report = commands.add_parser("report", help="figures (PNG) of a campaign file, or of a sweep directory")
+    report.add_argument("target", help="a campaign .h5 file, or a directory of them (a sweep)")
+    report.add_argument("--out", type=Path, default=None, help="where the PNGs go (default: beside the input)")
+    report.set_defaults(handler=_report)
+
+    inspect = commands.add_parser("inspect", help="summarise a campaign file")
+    inspect.add_argument("file", help="the campaign's .h5 file (finished or running)")
+    inspect.add_argument("--json", action="store_true", help="machine-readable output")
+    inspect.set_defaults(handler=_inspect)
