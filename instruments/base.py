@@ -13,6 +13,7 @@ group ``noisebo.instruments`` (``instruments.registry``) and built from its own 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
@@ -21,6 +22,29 @@ from noisebo.reduction import Reading
 
 if TYPE_CHECKING:
     from typing_extensions import TypeIs
+
+
+@dataclass(frozen=True)
+class Description:
+    """What a driver's readings are, for the labels of figures and views: the value's name and
+    units, the units of x where the config's axes give none, and whether a shot is a spectrum (a
+    sweep that a reduction such as the SHO fit turns into a value). A driver class says it as
+    ``description = Description(...)``; one that says nothing is described by the defaults."""
+
+    value: str = "f(x)"
+    value_units: str = ""
+    x_units: str = ""
+    spectra: bool = False
+
+    @property
+    def value_label(self) -> str:
+        """The value's name, with its units in brackets where it has some: "PFM response (pm)"."""
+        return f"{self.value} ({self.value_units})" if self.value_units else self.value
+
+    def axis_label(self, name: str, units: str | None) -> str:
+        """An axis of x named ``name`` with the config's ``units`` (or, without, the driver's)."""
+        units = units or self.x_units
+        return f"{name} ({units})" if units else name
 
 
 @runtime_checkable

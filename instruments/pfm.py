@@ -41,7 +41,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 import noisebo
-from noisebo.instruments.base import Reading
+from noisebo.instruments.base import Description, Reading
 from noisebo.instruments.pfm_area import ScanAreaConfig, SyntheticAreaConfig, scan_area, synthetic_area
 from noisebo.instruments.pfm_profile import ScanProfileConfig, SyntheticProfileConfig, build_profile
 from noisebo.config import Count, FrozenModel, NonNegativeFloat, Number, PositiveFloat
@@ -134,7 +134,7 @@ class PFMInstrument:
     name = "pfm"
     version = noisebo.__version__
     Settings = PFMSettings
-    spectra = True
+    description = Description(value="PFM response", value_units="pm", x_units="um", spectra=True)
 
     def __init__(self, settings: PFMSettings | None = None):
         self.config = settings or PFMSettings()

@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ValidationError
 
-from noisebo.instruments.base import Instrument
+from noisebo.instruments.base import Description, Instrument
 from noisebo.instruments.faults import FaultyInstrument
 from noisebo.instruments.guard import TimeoutGuard
 from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
@@ -115,7 +115,7 @@ def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
     if problem is not None:
         raise ConfigError(f"{source}: {problem}")
     faults = config.instrument.faults
-    if faults is not None and faults.corrupt_spectrum > 0 and not getattr(cls, "spectra", False):
+    if faults is not None and faults.corrupt_spectrum > 0 and not _describes(cls).spectra:
         raise ConfigError(f"{source}: instrument.faults.corrupt_spectrum needs an instrument that returns spectra")
     problem = profile_problem(config, settings.model_dump(mode="json"))
     if problem is not None:
@@ -177,6 +177,20 @@ def driver_info(config: InstrumentConfig) -> DriverInfo:
     """What a campaign file records of its driver: name, version and the complete settings."""
     cls = driver_class(config.kind)
     return DriverInfo(config.kind, str(cls.version), settings_of(config, cls).model_dump(mode="json"))
+
+
+def _describes(cls) -> Description:
+    described = getattr(cls, "description", None)
+    return described if isinstance(described, Description) else Description()
+
+
+def description(kind: str) -> Description:
+    """What the readings of the driver registered as ``kind`` are (its class's ``description``);
+    the defaults where it says nothing, or is not installed here (a file read on another machine)."""
+    try:
+        return _describes(driver_class(kind))
+    except ConfigError:
+        return Description()
 
 
 def build(config: InstrumentConfig):

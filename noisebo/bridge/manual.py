@@ -29,12 +29,12 @@ class ManualError(ValueError):
 def reading_shape(state: EngineState) -> ReadingShape:
     """What this campaign's readings look like: the "shape" of a remote or manual instrument's
     settings, else a spectrum for a driver that returns spectra, else one number."""
-    from noisebo.instruments.registry import driver_class
+    from noisebo.instruments.registry import description
 
     settings = state.config.instrument.settings
     if "shape" in settings:
         return ReadingShape.model_validate(settings["shape"])
-    spectra = bool(getattr(driver_class(state.config.instrument.kind), "spectra", False))
+    spectra = description(state.config.instrument.kind).spectra
     return ReadingShape(reading="spectrum" if spectra else "scalar")
 
 

@@ -38,7 +38,7 @@ def compile_first_decision(config: CampaignConfig, seed: int) -> None:
     """Compile (or load from the persistent cache) the programs of the campaign's first decision
     on stand-in seed points, so the real one need not: for a thread started while Prefect and
     the instrument start up. MAP mode only (NUTS samplers are per thread)."""
-    if config.inference.mode != "map":
+    if not config.inference.method.compiles_ahead:
         return
     state = stand_in_seeds(config, seed)
     compile_ahead(config, state, None, capacities_needed(config, state))
@@ -138,7 +138,7 @@ class CompileAhead:
         says a crossing is near, or, before the first decision, that decision's programs (on
         stand-in seed points) while the seed points are measured."""
         config = state.config
-        if config.inference.mode != "map" or self.busy:
+        if not config.inference.method.compiles_ahead or self.busy:
             return
         if not state.decisions:
             self._start(config, None, lambda: compile_first_decision(config, state.seed))

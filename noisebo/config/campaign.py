@@ -68,11 +68,9 @@ class CampaignConfig(FrozenModel):
     @model_validator(mode="after")
     def _posterior_rule_has_draws(self) -> CampaignConfig:
         inf = self.inference
-        if self.schedule.convergence == "posterior" and inf.mode == "map" and inf.laplace_samples < MIN_T_DRAWS:
-            raise ValueError(
-                f"schedule.convergence: the posterior rule needs the noise model's draws; set "
-                f"inference.laplace_samples to at least {MIN_T_DRAWS}"
-            )
+        few = inf.method.too_few_t_star_draws(inf.laplace_samples, MIN_T_DRAWS)
+        if self.schedule.convergence == "posterior" and few:
+            raise ValueError(f"schedule.convergence: the posterior rule needs the noise model's draws; {few}")
         return self
 
     @model_validator(mode="after")
@@ -130,7 +128,7 @@ class CampaignConfig(FrozenModel):
 
     @model_validator(mode="after")
     def _field_by_map(self) -> CampaignConfig:
-        if self.noise_model.field is not None and self.inference.mode != "map":
+        if self.noise_model.field is not None and not self.inference.method.fits_noise_field:
             raise ValueError(
                 "noise_model.field: the noise field is fitted by MAP with a Laplace approximation; "
                 "set inference.mode: map"

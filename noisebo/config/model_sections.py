@@ -10,6 +10,7 @@ from pydantic import (
     model_validator,
 )
 from noisebo import registry
+from noisebo.inference_methods import INFERENCE_METHODS, InferenceMethod
 from noisebo.config.numbers import Count, FiniteFloat, Flag, FrozenModel, NoiseLawName, Number, PositiveFloat
 from noisebo.config.profile_format import NoiseProfile
 from noisebo.config.sections import UniformPrior
@@ -270,6 +271,11 @@ class InferenceConfig(FrozenModel):
         description="after convergence every this-many-th step multi-starts, the "
         "others start from the previous fit (1: every step multi-starts)",
     )
+
+    @property
+    def method(self) -> InferenceMethod:
+        """The mode as the object that says what it does (``noisebo.inference_methods``)."""
+        return INFERENCE_METHODS[self.mode]
 
     def max_inputs_for(self, axes: int) -> int:
         """The distinct inputs a GP over ``axes`` input axes takes exactly (``max_inputs``, or

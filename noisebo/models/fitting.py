@@ -73,7 +73,7 @@ def _fit_one(
     """``named``: the model's program name and the plugins it calls; ``search_data``: the
     stand-in a multi-start searches on (``inference.fit_map``)."""
     inf = config.inference
-    if inf.mode == "nuts":
+    if inf.method.samples_posterior:
         return inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.predict_samples)
     name, depends_on = named
     return inference.fit_map(
@@ -232,7 +232,7 @@ def fit_gp(
     var = point_noise**2 / n_shots
     data, std, groups = primary.prepare(x, value, var, s.lows, s.highs, inf.max_inputs_for(s.dimensions), capacity)
     search = None
-    if inf.mode == "map" and not noise.warm and groups.count.size > inf.search_inputs:
+    if not inf.method.samples_posterior and not noise.warm and groups.count.size > inf.search_inputs:
         search = primary.prepare(x, value, var, s.lows, s.highs, inf.search_inputs)[0]
     p_warm = _previous_guesses(previous, "primary", 1.0)
     guesses = p_warm if noise.warm else [primary.prior_median(config.primary_model, s.dimensions)] + p_warm

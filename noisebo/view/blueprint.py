@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from noisebo.config import CampaignConfig
+from noisebo.instruments.registry import description
 
 
 def blueprint(config: CampaignConfig):
     """The ``rerun.blueprint.Blueprint``: acquisition map with the measured points, f with its
     band and the truth (for two axes: images of the GP mean and sd, the truth and the
     acquisition over the area; for more, the table of points), the noise model with its data, the normalised reward with t_opt (and the
-    latest sweep for PFM); below them the scalar traces and the decision log."""
+    latest sweep where the driver's shots are spectra); below them the scalar traces and the decision log."""
     import rerun.blueprint as rrb
 
     top: list[rrb.View] = [
@@ -29,7 +30,7 @@ def blueprint(config: CampaignConfig):
         rrb.Spatial2DView(origin="noise", name="Noise(t): model, +-2 sd band, law, measured"),
         rrb.Spatial2DView(origin="reward", name="normalised reward and predicted optimal t"),
     ]
-    if config.instrument.kind == "pfm":
+    if description(config.instrument.kind).spectra:
         middle.append(rrb.Spatial2DView(origin="spectrum", name="latest sweep and its SHO fit"))
     traces = rrb.Vertical(
         rrb.TimeSeriesView(origin="traces/t_opt_s", name="predicted optimal t (s)"),

@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from noisebo.config import CampaignConfig, parse_config
+from noisebo.instruments.registry import description
 from noisebo.metrics import campaign_figures, summarise_campaigns, summary_table
 from noisebo.models.reward import true_optimal_t
 from noisebo.state import format_position
@@ -46,11 +47,9 @@ def report(target: Path, out_dir: Path | None = None) -> list[Path]:
 
 
 def _units(config: CampaignConfig) -> tuple[str, str]:
-    axis = config.space.axes[0]
-    x_label = (
-        f"{axis.name} ({axis.units})" if axis.units else ("x (um)" if config.instrument.kind == "pfm" else axis.name)
-    )
-    return x_label, "PFM response (pm)" if config.instrument.kind == "pfm" else "f(x)"
+    """(x's label, the value's label), from the config's first axis and the driver's description."""
+    axis, described = config.space.axes[0], description(config.instrument.kind)
+    return described.axis_label(axis.name, axis.units), described.value_label
 
 
 def campaign_report(path: Path, out_dir: Path) -> list[Path]:

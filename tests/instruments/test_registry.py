@@ -234,3 +234,23 @@ def test_every_shipped_config_is_valid_for_its_driver(path):
     config = validated(load_config(path), str(path))
     if config.noise_model.field is not None:  # a field's configs pair their seeds: at least two pairs
         assert config.schedule.n_seed >= 4
+
+
+@pytest.mark.parametrize(
+    ("kind", "value_label", "x_label", "spectra"),
+    [
+        ("pfm", "PFM response (pm)", "x (um)", True),
+        ("forrester", "f(x)", "x", False),
+        ("not-installed-here", "f(x)", "x", False),  # a file read where its driver is not installed
+    ],
+)
+def test_a_drivers_description_labels_its_readings(kind, value_label, x_label, spectra):
+    from noisebo.instruments.registry import description
+
+    described = description(kind)
+    assert (described.value_label, described.axis_label("x", None), described.spectra) == (
+        value_label,
+        x_label,
+        spectra,
+    )
+    assert described.axis_label("x", "nm") == "x (nm)"  # the config's units win
