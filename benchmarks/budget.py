@@ -485,7 +485,8 @@ def figure(records: dict, budget: float, path: Path, title: str) -> None:
     fig.savefig(path, dpi=120)
 
 
-def main(argv=None) -> int:
+def build_parser() -> Parser:
+    """The benchmark's command line."""
     parser = Parser(prog=Path(__file__).name, description=__doc__.split("\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
     parser.add_argument("--budget", type=float, default=900.0)
@@ -520,8 +521,138 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--report", action="store_true", help="measure nothing: report every seed --json holds for each design"
     )
-    args = parser.parse_args(argv)
+    return parser
 
+
+def save(path: Path, base, stars: dict, fixed: dict, on_grid: dict, records: dict) -> None:
+    """Everything measured so far, written after every seed: a long run interrupted keeps it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(
+        json.dumps(
+            {
+                "config": base.model_dump(mode="json"),
+                "t_star": stars[LAW],
+                "t_star_definition": LAW,
+                "t_stars": stars,
+                "fixed_t": {n: {"nominal_s": t, "grid_s": on_grid[n]} for n, t in fixed.items()},
+                "records": records,
+            },
+            default=float,
+        )
+    )
+
+
+def measure(name: str, config, instrument, wanted: list[int], done: dict, args, score, stars: dict, save_all) -> list:
+    """``name``'s record of every seed in ``wanted``: those ``done`` holds, the others run here
+    (each saved through ``save_all`` as soon as it is measured)."""
+    kept = {r["seed"]: r for r in done.get("records", {}).get(name, []) if r["seed"] in wanted}
+    if kept:
+        print(f"{name}: {len(kept)} seeds kept from {args.json}", file=sys.stderr, flush=True)
+    for seed in wanted:
+        if seed in kept:
+            continue
+        if name == GPCAM:
+            from _gpcam import run_gpcam as run
+        else:
+            run = run_one
+        rec = run(config, instrument, seed, score, stars[LAW])
+        kept[seed] = rec
+        print(
+            f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
+            f"{rec['rmse'][-1]:.3f}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, "
+            f"wall {rec['wall_s']:.0f} s",
+            file=sys.stderr,
+            flush=True,
+        )
+        if args.json:
+            done.setdefault("records", {})[name] = sorted(
+                {**{r["seed"]: r for r in done.get("records", {}).get(name, [])}, **kept}.values(),
+                key=lambda r: r["seed"],
+            )
+            save_all(done["records"])
+    return [kept[seed] for seed in wanted]
+
+
+def design_row(name: str, recs: list, at: list[float], target: float, stars: dict, against: list[str]) -> str:
+    """The table's row of one design: the RMSE at each time, the time to ``target``, the points,
+    and how close its final t came to each t* of ``against``."""
+    cells = []
+    for b in at:
+        values = [rmse_at(r, b) for r in recs]
+        m, lo, hi = quartiles(values)
+        cells.append(
+            "-"
+            if not np.isfinite(m)
+            else f"{m:.3f} [{lo:.3f}, {'-' if not np.isfinite(hi) else f'{hi:.3f}'}]"
+            + ("" if all(np.isfinite(values)) else f" ({sum(np.isfinite(values))} with a model)")
+        )
+    reach = [time_to(r, target) for r in recs]
+    reached = [v for v in reach if np.isfinite(v)]
+    when = f"{np.median(reach):.0f}" if len(reached) == len(reach) else f"{len(reached)} of {len(reach)} reach it"
+    t_cells = []
+    for star in against:
+        errors = [relative_error(r["t_opt"], stars[star]) for r in recs]
+        t_cells.append(f"{sum(e <= 0.05 for e in errors)} of {len(recs)} | {100 * median_iqr(errors)[0]:.1f} %")
+    return (
+        f"| {name} ({len(recs)} seeds) | "
+        + " | ".join(cells)
+        + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
+        + " | ".join(t_cells)
+        + " |"
+    )
+
+
+def best_fixed_rows(records: dict, at: list[float], target: float, against: list[str]) -> list[str]:
+    """The best fixed t in hindsight's row and its note (none with fewer than two fixed designs)."""
+    fixed_shown = [n for n, recs in records.items() if is_fixed(n) and recs]
+    if len(fixed_shown) < 2:
+        return []
+    best = best_in_hindsight({n: records[n] for n in fixed_shown}, at)
+    cells = ["-" if b is None else f"{b[0]:.3f} ({b[1]})" for b in best]
+    reach = []
+    for n in fixed_shown:
+        times = [time_to(r, target) for r in records[n]]
+        if all(np.isfinite(times)):
+            reach.append((float(np.median(times)), n))
+    when = "-" if not reach else f"{min(reach)[0]:.0f} ({min(reach)[1]})"
+    return [
+        f"| {BEST_FIXED} | " + " | ".join(cells) + f" | {when} | - | " + " | ".join("- | -" for _ in against) + " |",
+        f"\n{BEST_FIXED}: at each time the lowest median over the {len(fixed_shown)} fixed designs above "
+        "(which one in brackets), chosen after the fact: no campaign could have known which t to fix.",
+    ]
+
+
+def print_table(records: dict, at: list[float], target: float, stars: dict, both: bool) -> None:
+    """The RMSE table of every design with records, the best fixed t in hindsight, each design
+    against it, and the verdict on each target."""
+    print("RMSE of f once this much instrument time is spent, median [IQR] over seeds:\n")
+    against = [LAW, X_AVG] if both else [LAW]
+    print(
+        "| design | "
+        + " | ".join(f"{v:g} s" for v in at)
+        + f" | time to RMSE {target:g} (s) | points | "
+        + " | ".join(f"final t within 5 % of {name} | final t error vs {name}" for name in against)
+        + " |"
+    )
+    print("|---" * (len(at) + 3 + 2 * len(against)) + "|")
+    for name, recs in records.items():
+        if recs:
+            print(design_row(name, recs, at, target, stars, against))
+    for line in best_fixed_rows(records, at, target, against):
+        print(line)
+    ratio_rows = against_best(records, at)
+    if ratio_rows:
+        print("\nEach design's median RMSE as a multiple of the best fixed t in hindsight's (below 1: lower):\n")
+        print("\n".join(ratio_rows))
+    verdicts = target_lines(records, at, target, LAW, stars[LAW])
+    if verdicts:
+        print("\nTargets, judged on the medians above:\n")
+        print("\n".join(verdicts))
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
     base, instrument = benchmark_config(
         parser,
         args.config,
@@ -560,7 +691,7 @@ def main(argv=None) -> int:
     wanted = list(range(args.first_seed, args.first_seed + args.seeds))
     notes = []
     if GPCAM in names and not args.report:
-        from _gpcam import available, run_gpcam
+        from _gpcam import available
 
         missing_peer = available()
         if missing_peer is not None:
@@ -571,47 +702,16 @@ def main(argv=None) -> int:
     if warm and (not args.report or args.profile is not None):  # a report names a given profile too
         profile, whence = warm_profile(args, base)
         notes.append(f"{', '.join(warm)}: {whence}")
+
+    def save_all(measured: dict) -> None:
+        save(args.json, base, stars, fixed, on_grid, measured)
+
     for name in names:
         if args.report:
             records[name] = done.get("records", {}).get(name, [])
             continue
-        kept = {r["seed"]: r for r in done.get("records", {}).get(name, []) if r["seed"] in wanted}
-        if kept:
-            print(f"{name}: {len(kept)} seeds kept from {args.json}", file=sys.stderr, flush=True)
         config = design_config(base, name, fixed, profile)
-        for seed in wanted:
-            if seed in kept:
-                continue
-            run = run_gpcam if name == GPCAM else run_one
-            rec = run(config, instrument, seed, score, t_star)
-            kept[seed] = rec
-            print(
-                f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
-                f"{rec['rmse'][-1]:.3f}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, "
-                f"wall {rec['wall_s']:.0f} s",
-                file=sys.stderr,
-                flush=True,
-            )
-            if args.json:  # after every seed: a long run interrupted keeps what it measured
-                done.setdefault("records", {})[name] = sorted(
-                    {**{r["seed"]: r for r in done.get("records", {}).get(name, [])}, **kept}.values(),
-                    key=lambda r: r["seed"],
-                )
-                args.json.parent.mkdir(parents=True, exist_ok=True)
-                args.json.write_text(
-                    json.dumps(
-                        {
-                            "config": base.model_dump(mode="json"),
-                            "t_star": t_star,
-                            "t_star_definition": LAW,
-                            "t_stars": stars,
-                            "fixed_t": {n: {"nominal_s": t, "grid_s": on_grid[n]} for n, t in fixed.items()},
-                            "records": done["records"],
-                        },
-                        default=float,
-                    )
-                )
-        records[name] = [kept[seed] for seed in wanted]
+        records[name] = measure(name, config, instrument, wanted, done, args, score, stars, save_all)
     counts = sorted({len(r) for r in records.values() if r}) or [0]
     print(
         f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, "
@@ -629,68 +729,7 @@ def main(argv=None) -> int:
             + "; ".join(snapped)
         )
     print()
-    print("RMSE of f once this much instrument time is spent, median [IQR] over seeds:\n")
-    against = [LAW, X_AVG] if both else [LAW]
-    print(
-        "| design | "
-        + " | ".join(f"{v:g} s" for v in at)
-        + f" | time to RMSE {args.target:g} (s) | points | "
-        + " | ".join(f"final t within 5 % of {name} | final t error vs {name}" for name in against)
-        + " |"
-    )
-    print("|---" * (len(at) + 3 + 2 * len(against)) + "|")
-    for name, recs in records.items():
-        if not recs:
-            continue
-        cells = []
-        for b in at:
-            values = [rmse_at(r, b) for r in recs]
-            m, lo, hi = quartiles(values)
-            cells.append(
-                "-"
-                if not np.isfinite(m)
-                else f"{m:.3f} [{lo:.3f}, {'-' if not np.isfinite(hi) else f'{hi:.3f}'}]"
-                + ("" if all(np.isfinite(values)) else f" ({sum(np.isfinite(values))} with a model)")
-            )
-        reach = [time_to(r, args.target) for r in recs]
-        reached = [v for v in reach if np.isfinite(v)]
-        when = f"{np.median(reach):.0f}" if len(reached) == len(reach) else f"{len(reached)} of {len(reach)} reach it"
-        t_cells = []
-        for star in against:
-            errors = [relative_error(r["t_opt"], stars[star]) for r in recs]
-            t_cells.append(f"{sum(e <= 0.05 for e in errors)} of {len(recs)} | {100 * median_iqr(errors)[0]:.1f} %")
-        print(
-            f"| {name} ({len(recs)} seeds) | "
-            + " | ".join(cells)
-            + f" | {when} | {np.median([r['points'] for r in recs]):.0f} | "
-            + " | ".join(t_cells)
-            + " |"
-        )
-    fixed_shown = [n for n, recs in records.items() if is_fixed(n) and recs]
-    if len(fixed_shown) > 1:
-        best = best_in_hindsight({n: records[n] for n in fixed_shown}, at)
-        cells = ["-" if b is None else f"{b[0]:.3f} ({b[1]})" for b in best]
-        reach = []
-        for n in fixed_shown:
-            times = [time_to(r, args.target) for r in records[n]]
-            if all(np.isfinite(times)):
-                reach.append((float(np.median(times)), n))
-        when = "-" if not reach else f"{min(reach)[0]:.0f} ({min(reach)[1]})"
-        print(
-            f"| {BEST_FIXED} | " + " | ".join(cells) + f" | {when} | - | " + " | ".join("- | -" for _ in against) + " |"
-        )
-        print(
-            f"\n{BEST_FIXED}: at each time the lowest median over the {len(fixed_shown)} fixed designs above "
-            "(which one in brackets), chosen after the fact: no campaign could have known which t to fix."
-        )
-    ratio_rows = against_best(records, at)
-    if ratio_rows:
-        print("\nEach design's median RMSE as a multiple of the best fixed t in hindsight's (below 1: lower):\n")
-        print("\n".join(ratio_rows))
-    verdicts = target_lines(records, at, args.target, LAW, t_star)
-    if verdicts:
-        print("\nTargets, judged on the medians above:\n")
-        print("\n".join(verdicts))
+    print_table(records, at, args.target, stars, both)
     if args.figure:
         figure(
             {n: r for n, r in records.items() if r},
