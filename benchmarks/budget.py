@@ -548,13 +548,13 @@ def measure(name: str, config, instrument, wanted: list[int], done: dict, args, 
     kept = {r["seed"]: r for r in done.get("records", {}).get(name, []) if r["seed"] in wanted}
     if kept:
         print(f"{name}: {len(kept)} seeds kept from {args.json}", file=sys.stderr, flush=True)
+    if name == GPCAM:
+        from _gpcam import run_gpcam as run
+    else:
+        run = run_one
     for seed in wanted:
         if seed in kept:
             continue
-        if name == GPCAM:
-            from _gpcam import run_gpcam as run
-        else:
-            run = run_one
         rec = run(config, instrument, seed, score, stars[LAW])
         kept[seed] = rec
         print(

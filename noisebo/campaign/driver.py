@@ -174,7 +174,6 @@ def now_utc() -> str:
     return dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
 
 
-@float64
 def run_campaign(
     config: CampaignConfig,
     instrument,
