@@ -129,6 +129,12 @@ class Persisted:
         return hashlib.sha256(json.dumps(described).encode()).hexdigest()[:32]
 
 
+def label(plugin: object) -> str:
+    """A plug-in object's class as a program name says it: ``module.QualifiedName``."""
+    kind = plugin if isinstance(plugin, type) else type(plugin)
+    return f"{kind.__module__}.{kind.__qualname__}"
+
+
 def persisted(
     name: str, fn: Callable, static_argnums: Sequence[int] = (), depends_on: Sequence[object] = ()
 ) -> Persisted:

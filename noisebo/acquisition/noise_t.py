@@ -2,7 +2,7 @@
 behind one small protocol, so the acquire stage asks the rule and compares no names.
 
 A rule moves the policy's proposal in t only, never in x: ``applies`` says whether this
-decision's point is one the rule places, ``choose`` gives its index on the t grid. What a rule
+decision's point (proposed by ``policy``) is one the rule places, ``choose`` gives its index on the t grid. What a rule
 needs of the config (the posterior rule, the budget mode, a policy whose t is the reward's) is
 checked once where the config is validated (``CampaignConfig._noise_t_settings``).
 """
@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from noisebo.acquisition import information
-from noisebo.acquisition.policies import policy_of
+from noisebo.acquisition.policies import Policy
 from noisebo.config import CampaignConfig, ScheduleConfig
 from noisebo.models import noise_model
 from noisebo.models.convergence import Convergence
@@ -29,8 +29,9 @@ class NoiseT(Protocol):
 
     name: ClassVar[str]
 
-    def applies(self, config: CampaignConfig, convergence: Convergence, shots: int) -> bool:
-        """Whether this decision's point of ``shots`` shots is one the rule places in t."""
+    def applies(self, policy: Policy, schedule: ScheduleConfig, convergence: Convergence, shots: int) -> bool:
+        """Whether this decision's point of ``shots`` shots, proposed by ``policy``, is one the
+        rule places in t."""
         ...
 
     def choose(
@@ -54,7 +55,7 @@ class PolicyT:
 
     name: ClassVar[str] = "policy"
 
-    def applies(self, config: CampaignConfig, convergence: Convergence, shots: int) -> bool:
+    def applies(self, policy: Policy, schedule: ScheduleConfig, convergence: Convergence, shots: int) -> bool:
         return False
 
     def choose(self, prediction, j: int, shots: int, allowed, config, budget_left, step: int) -> int:
@@ -69,8 +70,8 @@ class InformativeT:
 
     name: ClassVar[str] = "informative"
 
-    def applies(self, config: CampaignConfig, convergence: Convergence, shots: int) -> bool:
-        return convergence.narrowing(config.schedule) and shots >= 2
+    def applies(self, policy: Policy, schedule: ScheduleConfig, convergence: Convergence, shots: int) -> bool:
+        return convergence.narrowing(schedule) and shots >= 2
 
     def choose(
         self, prediction: Prediction, j: int, shots: int, allowed, config: CampaignConfig, budget_left, step: int
@@ -105,8 +106,8 @@ class ValuedT:
 
     name: ClassVar[str] = "valued"
 
-    def applies(self, config: CampaignConfig, convergence: Convergence, shots: int) -> bool:
-        return bool(policy_of(config.acquisition).reward_chooses_t)
+    def applies(self, policy: Policy, schedule: ScheduleConfig, convergence: Convergence, shots: int) -> bool:
+        return bool(policy.reward_chooses_t)
 
     def choose(
         self, prediction: Prediction, j: int, shots: int, allowed, config: CampaignConfig, budget_left, step: int

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from noisebo import registry
 from noisebo.acquisition import information
 from noisebo.acquisition.functions import expected_improvement, f_acquisition
 from noisebo.config import AcquisitionConfig, RewardConfig
@@ -229,17 +228,12 @@ class InformationRate(Policy):
         return spread / (var + sd**2 / shots) / (overhead_s + shots * post.t[j])
 
 
-def policy_of(acq: AcquisitionConfig) -> Policy:
-    """The installed policy ``acq.policy`` names (``noisebo.registry``)."""
-    return registry.policy(acq.policy)
-
-
 def acquisition_map(
-    post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig, overhead_s: float = 0.0
+    policy: Policy, post: Posterior, shots: int, acq: AcquisitionConfig, rew: RewardConfig, overhead_s: float = 0.0
 ) -> jnp.ndarray:
-    """The configured policy's acquisition over the (x, t) grid, (n_x, n_t); for info_rate, the
-    rate at ``shots`` shots with ``overhead_s`` per point (f units^2 per s)."""
-    return policy_of(acq).acquisition_map(post, shots, acq, rew, overhead_s)
+    """``policy``'s acquisition over the (x, t) grid, (n_x, n_t); for info_rate, the rate at
+    ``shots`` shots with ``overhead_s`` per point (f units^2 per s)."""
+    return policy.acquisition_map(post, shots, acq, rew, overhead_s)
 
 
 def _at(rows: jnp.ndarray, j: jnp.ndarray) -> jnp.ndarray:
@@ -248,6 +242,7 @@ def _at(rows: jnp.ndarray, j: jnp.ndarray) -> jnp.ndarray:
 
 
 def point_scores(
+    policy: Policy,
     post: Posterior,
     mean: jnp.ndarray,
     var: jnp.ndarray,
@@ -259,14 +254,14 @@ def point_scores(
     spread: jnp.ndarray | None = None,
     overhead_s: float = 0.0,
 ) -> jnp.ndarray:
-    """The configured policy's score at points off the x grid: latent f ``mean`` and ``var``
+    """``policy``'s score at points off the x grid: latent f ``mean`` and ``var``
     (any shape) at each point, paired with the t-grid index ``j`` (same shape); for a noise
     field, ``noise`` at the points; for a policy that ``uses_spread``, ``spread`` (q, same
     shape) there. Shifts and normalisers are the ones ``acquisition_map`` takes from the grid in
     ``post``, so at a grid point the score equals its map entry."""
     if _field(post) and noise is None:
         raise ValueError("a noise field's scores need the noise at the points")
-    return policy_of(acq).point_scores(post, mean, var, j, shots, acq, rew, noise, spread, overhead_s)
+    return policy.point_scores(post, mean, var, j, shots, acq, rew, noise, spread, overhead_s)
 
 
 def argmax_2d(values: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:

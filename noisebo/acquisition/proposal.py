@@ -9,12 +9,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from noisebo.acquisition import information, noise_t
+from noisebo.acquisition import information
+from noisebo.acquisition.method import Method
 from noisebo.acquisition.policies import (
+    Policy,
     acquisition_map,
     argmax_2d,
     point_scores,
-    policy_of,
 )
 from noisebo.acquisition.records import Decision
 from noisebo.acquisition.search import STARTS, refine
@@ -25,11 +26,11 @@ from noisebo.config import (
     ScheduleConfig,
     SpaceConfig,
 )
-from noisebo import registry
 from noisebo.keys import PROPOSE, jax_key
 from noisebo.models import inference, primary
 from noisebo.models.convergence import Convergence
 from noisebo.models.fitting import Fitted, hyperparameters
+from noisebo.models.noise_laws import NoiseLaw
 from noisebo.models.grids import (
     Grids,
     grids,
@@ -45,7 +46,7 @@ from noisebo.models.prediction import (
     field_rows,
     spread,
 )
-from noisebo.programs import persisted
+from noisebo.programs import label, persisted
 from noisebo.precision import float64
 
 
@@ -55,33 +56,39 @@ def shots_for(is_converged: bool, schedule: ScheduleConfig) -> int:
     return schedule.rule.shots(is_converged, schedule.shots_before, schedule.shots_after)
 
 
-def _propose_program(config: CampaignConfig):
-    return _propose_compiled(config.acquisition, config.reward, config.space, config.schedule.point_overhead_s)
+def _propose_program(config: CampaignConfig, policy: Policy):
+    return _propose_compiled(policy, config.acquisition, config.reward, config.space, config.schedule.point_overhead_s)
 
 
 @lru_cache(maxsize=None)
-def _propose_compiled(acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, overhead_s: float = 0.0):
+def _propose_compiled(
+    policy: Policy, acq: AcquisitionConfig, rew: RewardConfig, space: SpaceConfig, overhead_s: float = 0.0
+):
     def propose(post: Posterior, shots, allowed):
-        values = acquisition_map(post, shots, acq, rew, overhead_s)
+        values = acquisition_map(policy, post, shots, acq, rew, overhead_s)
         i, j = argmax_2d(jnp.where(allowed[None, :], values, -jnp.inf))
         return values, i, j
 
-    name = f"propose/{acq.model_dump_json()}/{rew.model_dump_json()}/{space.model_dump_json()}/{overhead_s!r}"
-    return persisted(name, propose, depends_on=(policy_of(acq),))
+    name = (
+        f"propose/{label(policy)}/{acq.model_dump_json()}/{rew.model_dump_json()}/{space.model_dump_json()}/"
+        f"{overhead_s!r}"
+    )
+    return persisted(name, propose, depends_on=(policy,))
 
 
 @lru_cache(maxsize=None)
 def _propose_nd_compiled(
+    policy: Policy,
     acq: AcquisitionConfig,
     rew: RewardConfig,
     space: SpaceConfig,
     primary_first: bool,
-    field_kind: str | None = None,
+    field_law: NoiseLaw | None = None,
     overhead_s: float = 0.0,
 ):
     """For d > 1: the policy's map on the reference points for each shot count, then
     ``search.refine`` from the best ``STARTS`` entries over all counts (each keeps its t), a
-    candidate scored at its best count; with a noise field (its law ``field_kind``) each
+    candidate scored at its best count; with a noise field (its law ``field_law``) each
     candidate is scored with the noise predicted where it lies. Takes the counts ``shots``
     (n_s,) and the t each may use ``allowed`` (n_s, n_t) bool. Returns the maps' maximum over t
     and counts at each reference point (m,), the proposal's scaled x (d,), its t index, score,
@@ -92,7 +99,7 @@ def _propose_nd_compiled(
     xi = jnp.asarray(integration_points(space))
     spacing = reference_spacing(space)
     n_t = g.t.size
-    uses_spread = policy_of(acq).uses_spread
+    uses_spread = policy.uses_spread
 
     def each_count(fn, shots, allowed):  # fn(count, its allowed t) for every count, stacked
         if shots.shape[0] == 1:
@@ -101,7 +108,7 @@ def _propose_nd_compiled(
 
     def propose(post: Posterior, shots, fitted: Fitted, key, allowed):
         def masked_map(n, ok):
-            return jnp.where(ok[None, :], acquisition_map(post, n, acq, rew, overhead_s), -jnp.inf)
+            return jnp.where(ok[None, :], acquisition_map(policy, post, n, acq, rew, overhead_s), -jnp.inf)
 
         values = jnp.max(each_count(masked_map, shots, allowed), axis=0)
         _, flat = jax.lax.top_k(values.ravel(), STARTS)
@@ -109,7 +116,7 @@ def _propose_nd_compiled(
         std = fitted.standardisation
 
         def noise_rows(flat):  # (n, d) scaled -> NoiseRows (n, n_t)
-            rows = field_rows(field_kind, space, rew, fitted, flat)
+            rows = field_rows(field_law, space, rew, fitted, flat)
             return NoiseRows(rows.mean, rows.var)
 
         def scores(candidates):  # (K, P, d) scaled -> (n_s, K, P), each count's
@@ -122,7 +129,7 @@ def _propose_nd_compiled(
             )
             raw_mean, raw_var = std.mean + std.scale * mean, std.scale**2 * var
             noise = None
-            if field_kind is not None:
+            if field_law is not None:
                 rows = noise_rows(flat)
                 noise = NoiseRows(rows.mean.reshape(k, p, n_t), rows.var.reshape(k, p, n_t))
             q = spread(fitted, flat, xi, primary_first).reshape(k, p) if uses_spread else None
@@ -130,7 +137,7 @@ def _propose_nd_compiled(
 
             def of_count(n, ok):
                 found = point_scores(
-                    post, raw_mean.reshape(k, p), raw_var.reshape(k, p), at, n, acq, rew, noise, q, overhead_s
+                    policy, post, raw_mean.reshape(k, p), raw_var.reshape(k, p), at, n, acq, rew, noise, q, overhead_s
                 )
                 return jnp.where(ok[at], found, -jnp.inf)
 
@@ -139,18 +146,18 @@ def _propose_nd_compiled(
         best_x, best_s = refine(lambda c: jnp.max(scores(c), axis=0), xs[i], key, spacing)
         best = jnp.argmax(best_s)
         count = jnp.argmax(scores(best_x[:, None, :])[:, best, 0])
-        if field_kind is None:
+        if field_law is None:
             noise_at = post.noise_mean[j[best]]
         else:
             noise_at = noise_rows(best_x[best][None, :]).mean[0, j[best]]
         return jnp.max(values, axis=1), best_x[best], j[best], best_s[best], noise_at, count
 
+    laws = () if field_law is None else (field_law,)
     name = (
-        f"propose_nd/{acq.model_dump_json()}/{rew.model_dump_json()}/{space.model_dump_json()}/"
-        f"{primary_first}/{field_kind}/{overhead_s!r}"
+        f"propose_nd/{label(policy)}/{acq.model_dump_json()}/{rew.model_dump_json()}/{space.model_dump_json()}/"
+        f"{primary_first}/{'/'.join(map(label, laws))}/{overhead_s!r}"
     )
-    laws = () if field_kind is None else (registry.noise_law(field_kind),)
-    return persisted(name, propose, depends_on=(policy_of(acq), *laws))
+    return persisted(name, propose, depends_on=(policy, *laws))
 
 
 def _allowed_t(acq: AcquisitionConfig, t_grid: np.ndarray) -> np.ndarray:
@@ -188,6 +195,7 @@ def affordable(config: CampaignConfig, shots: int, left: float | None) -> tuple[
 @float64
 def acquire(
     config: CampaignConfig,
+    method: Method,
     fitted: Fitted,
     prediction: Prediction,
     convergence: Convergence,
@@ -195,7 +203,7 @@ def acquire(
     key: jax.Array | None = None,
     budget_left: float | None = None,
 ) -> Decision:
-    """The acquire stage: the policy's proposal of BO step ``step`` from the posterior
+    """The acquire stage: ``method``'s policy's proposal of BO step ``step`` from the posterior
     (``prediction``) and where the noise model stands (``convergence``), among the times (and
     shot counts) that fit ``budget_left`` seconds (``affordable``; None: no budget); with d > 1
     axes the local refinement draws from ``key`` (default ``propose_key(0, step)``)."""
@@ -203,22 +211,22 @@ def acquire(
     sched = config.schedule
     t_opt, t_map, spread_t, now_converged = convergence
     key = propose_key(0, step) if key is None else key
-    choices = shot_choices(config, now_converged, budget_left)
+    choices = shot_choices(config, method.policy, now_converged, budget_left)
     if config.space.dimensions == 1:  # each count's map maximised exactly; the best count kept
         best = None
         for shots, allowed in choices:
             if allowed.any():
-                found = _propose(config, fitted, post, key, shots, jnp.asarray(allowed))
+                found = _propose(config, method.policy, post, shots, jnp.asarray(allowed))
                 if best is None or found[2] > best[2]:
                     best = found + (shots,)
         assert best is not None  # some count fits: the engine checked the cheapest point does
         x, j, acq_value, acq_map, noise_at_t, shots = best
     else:  # one search over x, t and the counts together
-        x, j, acq_value, acq_map, noise_at_t, k = _propose_nd(config, fitted, post, key, choices)
+        x, j, acq_value, acq_map, noise_at_t, k = _propose_nd(config, method, fitted, post, key, choices)
         shots = choices[k][0]
     g = grids(config)
-    rule = noise_t.rule_of(sched)
-    if rule.applies(config, convergence, shots):
+    rule = method.noise_t
+    if rule.applies(method.policy, sched, convergence, shots):
         j = rule.choose(prediction, j, shots, affordable(config, shots, budget_left)[0], config, budget_left, step)
         noise_at_t = float(np.asarray(post.noise_mean)[j])
     if sched.adaptive_shots and not now_converged:
@@ -229,7 +237,7 @@ def acquire(
         t=float(g.t[j]),
         acq_value=acq_value,
         shots=shots,
-        measure_noise=sched.rule.measures_noise(now_converged, shots),
+        measure_noise=method.schedule.measures_noise(now_converged, shots),
         noise_at_t=noise_at_t,
         t_opt=t_opt,
         converged=now_converged,
@@ -251,9 +259,9 @@ def acquire(
 
 
 def shot_choices(
-    config: CampaignConfig, now_converged: bool, budget_left: float | None
+    config: CampaignConfig, policy: Policy, now_converged: bool, budget_left: float | None
 ) -> list[tuple[int, np.ndarray]]:
-    """The shot counts a proposal chooses among, each with the t-grid entries (n_t,) bool it may
+    """The shot counts ``policy``'s proposal chooses among, each with the t-grid entries (n_t,) bool it may
     use within ``budget_left`` (``affordable``): the schedule's count, or, for a policy that
     chooses shots once the noise model has converged, each of ``information.shot_options`` (from
     2 in the budget mode, where every point's replicate scatter informs the noise law). A
@@ -261,7 +269,7 @@ def shot_choices(
     so the list keeps its length as the budget runs out."""
     sched = config.schedule
     options = [shots_for(now_converged, sched)]
-    if policy_of(config.acquisition).chooses_shots and now_converged:
+    if policy.chooses_shots and now_converged:
         least = sched.intact_noise_shots or 1  # the budget mode: every point informs the noise law
         options = list(information.shot_options(sched.shots_before, sched.shots_after, least))
     choices = []
@@ -273,18 +281,18 @@ def shot_choices(
     return choices
 
 
-def _propose(config: CampaignConfig, fitted: Fitted, post: Posterior, key, shots: int, allowed) -> tuple:
+def _propose(config: CampaignConfig, policy: Policy, post: Posterior, shots: int, allowed) -> tuple:
     """One axis: the policy's proposal for points of ``shots`` shots at the allowed t: x (a
     tuple), its t index, acquisition value, the acquisition map, and the noise model's sd there."""
     g = grids(config)
     noise_grid = np.asarray(post.noise_mean)
-    values, i, j = _propose_program(config)(post, float(shots), allowed)
+    values, i, j = _propose_program(config, policy)(post, float(shots), allowed)
     i, j, acq_map = int(i), int(j), np.asarray(values)  # index on the host: no program per index
     noise_at_t = float(noise_grid[j] if noise_grid.ndim == 1 else noise_grid[i, j])
     return (float(g.x[i]),), j, float(acq_map[i, j]), acq_map, noise_at_t
 
 
-def _propose_nd(config: CampaignConfig, fitted: Fitted, post: Posterior, key, choices) -> tuple:
+def _propose_nd(config: CampaignConfig, method: Method, fitted: Fitted, post: Posterior, key, choices) -> tuple:
     """d > 1 axes: the policy's proposal over x, t and the shot counts of ``choices``
     (``shot_choices``) in one search: x (a tuple), its t index, acquisition value, the map (the
     best over t and counts at each reference point), the noise model's sd there, and the index
@@ -293,7 +301,7 @@ def _propose_nd(config: CampaignConfig, fitted: Fitted, post: Posterior, key, ch
     s = config.space
     shots = jnp.asarray([float(n) for n, _ in choices])
     allowed = jnp.asarray(np.stack([a for _, a in choices]))
-    acq_map, x_scaled, j, acq_value, noise_at, k = _propose_nd_program(config, fitted)(
+    acq_map, x_scaled, j, acq_value, noise_at, k = _propose_nd_program(config, method, fitted)(
         post, shots, fitted, key, allowed
     )
     lows, highs = np.asarray(s.lows), np.asarray(s.highs)
@@ -322,14 +330,14 @@ def _over_x(curves) -> np.ndarray:
     return curves if curves.ndim == 1 else curves.mean(axis=0)
 
 
-def _propose_nd_program(config: CampaignConfig, fitted: Fitted):
-    nm = config.noise_model
+def _propose_nd_program(config: CampaignConfig, method: Method, fitted: Fitted):
     return _propose_nd_compiled(
+        method.policy,
         config.acquisition,
         config.reward,
         config.space,
         fitted.primary.map_first,
-        None if nm.field is None else nm.mean,
+        None if config.noise_model.field is None else method.noise_law,
         config.schedule.point_overhead_s,
     )
 

@@ -10,7 +10,7 @@ import threading
 
 import jax
 
-from noisebo.acquisition.policies import policy_of
+from noisebo.acquisition.method import Method
 from noisebo.acquisition.proposal import _propose_nd, propose_key, shot_choices
 from noisebo.acquisition.records import Decision
 from noisebo.campaign.steps import seed_points
@@ -96,15 +96,17 @@ def compile_ahead(
     with _COMPILING_LOCK:
         _COMPILING.setdefault(key, done)
     try:
-        fitted = fit_models(config, state, fit_key(0, 0), previous, False, capacities)
-        posterior = predict(config, fitted, state, policy_of(config.acquisition).uses_spread).posterior
+        method = Method.of(config)
+        fitted = fit_models(config, method.noise_law, state, fit_key(0, 0), previous, False, capacities)
+        posterior = predict(config, method.noise_law, fitted, state, method.policy.uses_spread).posterior
         jax.block_until_ready(posterior)
         if config.space.dimensions > 1:  # the refinement's program depends on the capacity too
             # one program per number of shot counts: a policy that chooses them has two, before
             # and after the noise model converges
-            chooses = policy_of(config.acquisition).chooses_shots
+            chooses = method.policy.chooses_shots
             for converged in (False, True) if chooses else (False,):
-                _propose_nd(config, fitted, posterior, propose_key(0, 0), shot_choices(config, converged, None))
+                choices = shot_choices(config, method.policy, converged, None)
+                _propose_nd(config, method, fitted, posterior, propose_key(0, 0), choices)
     finally:
         done.set()
         with _COMPILING_LOCK:

@@ -20,7 +20,7 @@ from functools import cached_property
 
 import jax
 
-from noisebo.acquisition.policies import policy_of
+from noisebo.acquisition.method import Method
 from noisebo.acquisition.proposal import acquire, propose_key
 from noisebo.acquisition.records import Decision
 from noisebo.campaign.compile_ahead import wait_for_compilation
@@ -44,11 +44,12 @@ from noisebo.precision import float64
 
 @dataclass(frozen=True)
 class StepInputs:
-    """What BO step ``step`` (0-based index) decides from: the config, the points so far, the
-    campaign's seed (the keys are (seed, step)), the previous step's hyperparameters (None at
+    """What BO step ``step`` (0-based index) decides from: the config and its ``method`` (the
+    objects it names, ``Method.of(config)``), the points so far, the campaign's seed (the keys are (seed, step)), the previous step's hyperparameters (None at
     the first) and the instrument time the budget has left (s; None: no budget)."""
 
     config: CampaignConfig
+    method: Method
     points: CampaignState
     seed: int
     step: int
@@ -77,7 +78,7 @@ class StepInputs:
 def noise_stage(step: StepInputs) -> NoiseFit:
     """The fit noise model stage of ``step``, timed."""
     started = time.perf_counter()
-    noise = fit_noise_model(step.config, step.points, step.fit_keys[1], step.previous, step.warm)
+    noise = fit_noise_model(step.config, step.method.noise_law, step.points, step.fit_keys[1], step.previous, step.warm)
     return noise._replace(seconds=time.perf_counter() - started)
 
 
@@ -95,7 +96,7 @@ def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision
     stages' own time."""
     started = time.perf_counter()
     decision, _ = decide_on(
-        step.config, combined(gp, noise), step.points, step.step, step.propose_key, step.budget_left
+        step.config, step.method, combined(gp, noise), step.points, step.step, step.propose_key, step.budget_left
     )
     return replace(decision, latency_s=noise.seconds + gp.seconds + time.perf_counter() - started)
 
@@ -103,6 +104,7 @@ def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision
 @float64
 def decide_on(
     config: CampaignConfig,
+    method: Method,
     fitted: Fitted,
     state: CampaignState,
     step: int,
@@ -111,9 +113,9 @@ def decide_on(
 ) -> tuple[Decision, CampaignState]:
     """From fitted models: predict, assess convergence and acquire. Returns the decision and
     ``state`` with this step's predicted optimal t recorded."""
-    prediction = predict(config, fitted, state, policy_of(config.acquisition).uses_spread)
+    prediction = predict(config, method.noise_law, fitted, state, method.policy.uses_spread)
     convergence = assess(config.schedule, prediction, state)
-    decision = acquire(config, fitted, prediction, convergence, step, key, budget_left)
+    decision = acquire(config, method, fitted, prediction, convergence, step, key, budget_left)
     return decision, convergence.recorded(state)
 
 
@@ -130,7 +132,8 @@ def decide(
     step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then predict, assess
     convergence and acquire within ``budget_left`` seconds of instrument time (None: no budget).
     Returns the decision and ``state`` with its predicted optimal t recorded."""
-    inputs = StepInputs(config, state, seed, step, previous, budget_left)
+    inputs = StepInputs(config, Method.of(config), state, seed, step, previous, budget_left)
     wait_for_compilation(config, state)
     noise = noise_stage(inputs)
-    return decide_on(config, combined(gp_stage(inputs, noise), noise), state, step, inputs.propose_key, budget_left)
+    gp = gp_stage(inputs, noise)
+    return decide_on(config, inputs.method, combined(gp, noise), state, step, inputs.propose_key, budget_left)

@@ -353,10 +353,12 @@ def advance(state: EngineState, stages: Stages | None = None) -> tuple[Event, ..
 def step_inputs(state: EngineState) -> StepInputs:
     """What the due BO step decides from: the points, the keys' seed and step, the previous
     step's hyperparameters and the budget left."""
+    from noisebo.acquisition.method import Method
     from noisebo.campaign.decision import StepInputs
 
     previous = state.decisions[-1].hyperparameters if state.decisions else None
-    return StepInputs(state.config, state.data, state.seed, len(state.decisions), previous, budget_left(state))
+    method = Method.of(state.config)
+    return StepInputs(state.config, method, state.data, state.seed, len(state.decisions), previous, budget_left(state))
 
 
 def stop(state: EngineState, status: Status, reason: str) -> tuple[Event, ...]:

@@ -99,12 +99,13 @@ def make_point(
 def summarize(config: CampaignConfig, state: CampaignState, seed: int) -> Summary:
     """Fit both models on every point (key for the step after the last decision: ``n_steps``
     unless the instrument-time budget ended the campaign sooner) and summarise them."""
-    from noisebo.acquisition.policies import policy_of  # the models load with the first fit, not to ask
+    from noisebo.acquisition.method import Method  # the models load with the first fit, not to ask
     from noisebo.models.fitting import fit_key, fit_models, hyperparameters
     from noisebo.models.prediction import predict
 
-    fitted = fit_models(config, state, fit_key(seed, len(state.t_opt_history)))
-    pred = predict(config, fitted, state, policy_of(config.acquisition).uses_spread)
+    method = Method.of(config)
+    fitted = fit_models(config, method.noise_law, state, fit_key(seed, len(state.t_opt_history)))
+    pred = predict(config, method.noise_law, fitted, state, method.policy.uses_spread)
     return Summary(
         f_mean=np.asarray(pred.posterior.f_mean, dtype=np.float64),
         f_var=np.asarray(pred.posterior.f_var, dtype=np.float64),

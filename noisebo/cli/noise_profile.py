@@ -57,6 +57,7 @@ def _field_kind(field, config) -> str:
 def make_profile(files: list[Path]) -> NoiseProfile:
     import numpy as np
 
+    from noisebo import registry
     from noisebo.config import parse_config
     from noisebo.keys import PROFILE, jax_key
     from noisebo.models.profile import (
@@ -85,14 +86,15 @@ def make_profile(files: list[Path]) -> NoiseProfile:
     )
     pooled = {k: np.concatenate([c[k] for c in campaigns]) for k in ("t", "shot_std", "n_shots")}
     names = ", ".join(str(f) for f in files)
+    law = registry.noise_law(configs[0].noise_model.mean)
     try:
         if fields[0] is None:
-            posterior = distil(configs[0], pooled["t"], pooled["shot_std"], pooled["n_shots"], jax_key(0, PROFILE))
+            posterior = distil(configs[0], law, pooled["t"], pooled["shot_std"], pooled["n_shots"], jax_key(0, PROFILE))
         else:
             parts = [
                 FieldCampaign(cfg, c["x"], c["t"], c["shot_std"], c["n_shots"]) for c, cfg in zip(campaigns, configs)
             ]
-            posterior = distil_field(parts, jax_key(0, PROFILE))
+            posterior = distil_field(parts, law, jax_key(0, PROFILE))
     except NotDistillable as why:
         raise CampaignFileError(f"no noise profile can be made of {names}: {why}") from None
     driver = campaigns[0]["driver"]

@@ -19,6 +19,7 @@ from noisebo.config import CampaignConfig
 from noisebo.models import field_profile_check, inference, noise_field, noise_model
 from noisebo.models.profile_check import ProfileCheck
 from noisebo.models.inputs import capacity_for
+from noisebo.models.noise_laws import NoiseLaw
 from noisebo.models.reward import reward
 from noisebo.state import CampaignState
 
@@ -111,6 +112,7 @@ def previous_law(previous: dict | None, data: noise_field.FieldData, scale: floa
 
 def fit_field(
     config: CampaignConfig,
+    law: NoiseLaw,
     state: CampaignState,
     scaled_positions: np.ndarray,
     key: jax.Array,
@@ -135,7 +137,7 @@ def fit_field(
     field = nm.field
     assert field is not None  # fit_field runs for a noise field only
     spans = np.asarray(s.highs) - np.asarray(s.lows)
-    check = field_profile_check.verdict(nm, state.profile_dropped_step is not None, x, spans, t, std, shots)
+    check = field_profile_check.verdict(nm, law, state.profile_dropped_step is not None, x, spans, t, std, shots)
     data, scale, groups = noise_field.prepare(
         x,
         t,
@@ -153,11 +155,12 @@ def fit_field(
     hyper = previous_field(previous, data)
     if hyper is not None:
         data = noise_field.set_field(data, hyper)
-    law = previous_law(previous, data, scale)
-    starts = ([law] if law else []) + ([] if warm else noise_model.profile_guess(data, nm))
+    before = previous_law(previous, data, scale)
+    starts = ([before] if before else []) + ([] if warm else noise_model.profile_guess(data, nm, law))
     samples, data = noise_field.fit(
         data,
         nm,
+        law,
         field,
         key,
         FIELD_RESTARTS,
@@ -170,7 +173,7 @@ def fit_field(
 
 
 def rows(
-    kind: str,
+    law: NoiseLaw,
     samples: inference.Samples,
     data: noise_field.FieldData,
     scale,
@@ -186,17 +189,17 @@ def rows(
     t*(x) on the fine grid t_fine / ts_fine (k,): value units. The mean is the MAP point's, the
     variance adds the Laplace draws' spread (``inference.combine``); t*(x) maximises R on the
     MAP curve, which is linear in Noise, so the posterior mean gives the expected reward's best."""
-    means, variances = noise_field.predict_samples(kind, samples.params, data, xs, t, ts)
+    means, variances = noise_field.predict_samples(law, samples.params, data, xs, t, ts)
     mean, var = inference.combine(means, variances, True)
     first = {name: value[:1] for name, value in samples.params.items()}
-    fine = noise_field.predict_samples(kind, first, data, xs, t_fine, ts_fine)[0][0] * scale
+    fine = noise_field.predict_samples(law, first, data, xs, t_fine, ts_fine)[0][0] * scale
     best = jnp.argmax(reward(t_fine[None, :], fine, alpha, beta), axis=-1)
     at = jnp.take_along_axis(fine, best[:, None], axis=-1)[:, 0]
     return FieldRows(mean * scale, var * scale**2, t_fine[best], at, fine, jnp.mean(means, axis=1) * scale)
 
 
 def best_training_reward(
-    kind: str,
+    law: NoiseLaw,
     samples: inference.Samples,
     data: noise_field.FieldData,
     scale,
@@ -213,7 +216,7 @@ def best_training_reward(
     t_nodes = t_min + data.t_nodes * (t_max - t_min)
     t_all = jnp.concatenate([t, t_nodes])
     ts_all = (t_all - t_min) / (t_max - t_min)
-    mean, _ = noise_field.predict_one(kind, first, data, data.x, t_all, ts_all)
+    mean, _ = noise_field.predict_one(law, first, data, data.x, t_all, ts_all)
     r = reward(t_all[None, :], mean * scale, alpha, beta)
     n_t = t.shape[0]
     lo, hi = jnp.min(r[:, :n_t], axis=1), jnp.max(r[:, :n_t], axis=1)

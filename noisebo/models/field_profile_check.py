@@ -42,6 +42,8 @@ growing there; once the profile is dropped the check is not run again (``verdict
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy.special import chdtr, gammaln, logsumexp, ndtri
 
@@ -49,6 +51,9 @@ from noisebo import keys
 from noisebo.config import NoiseModelConfig, NoiseProfile, field_length_names
 from noisebo.models.profile_check import NO_PROFILE, TINY_NOISE, ProfileCheck, law_sigma, law_values
 from noisebo.precision import float64
+
+if TYPE_CHECKING:  # the laws import jax; the checks run on numpy until a law is called
+    from noisebo.models.noise_laws import NoiseLaw
 
 GRID = 41  # nodes of each position's field, one field
 GRID_2D = 15  # nodes per field, two fields
@@ -117,7 +122,9 @@ def _logsumexp(a: np.ndarray) -> np.ndarray:
     return top[..., 0] + np.log(np.sum(np.exp(a - top), axis=-1))
 
 
-def _on_nodes(cfg: NoiseModelConfig, t: np.ndarray, smooth: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _on_nodes(
+    cfg: NoiseModelConfig, law: NoiseLaw, t: np.ndarray, smooth: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """The noise sd (n, K) at t (n,) under the profile's means with the fields at the nodes
     (``_nodes``), and the nodes' log weights (K,)."""
     profile = _profile(cfg)
@@ -125,14 +132,16 @@ def _on_nodes(cfg: NoiseModelConfig, t: np.ndarray, smooth: bool = False) -> tup
     grid, log_w = _nodes(len(_fields(profile)), smooth)
     a0 = mean["a0"] * np.exp(mean["g0_amplitude"] * grid[:, 0])
     a1 = mean["a1"] * (np.exp(mean["g1_amplitude"] * grid[:, 1]) if grid.shape[1] > 1 else np.ones(len(grid)))
-    return law_sigma(cfg.mean, t[:, None], a0[None, :], a1[None, :], mean.get("p", 0.5)), log_w
+    return law_sigma(law, t[:, None], a0[None, :], a1[None, :], mean.get("p", 0.5)), log_w
 
 
 @float64
-def discrepancy(cfg: NoiseModelConfig, ids: np.ndarray, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
+def discrepancy(
+    cfg: NoiseModelConfig, law: NoiseLaw, ids: np.ndarray, t: np.ndarray, s: np.ndarray, dof: np.ndarray
+) -> np.ndarray:
     """D for data sets s (R, n) (sample sds at t (n,) with dof (n,) = shots - 1 at positions
     ``ids`` (n,), sorted), under the profile's means: (R,)."""
-    sigma, log_w = _on_nodes(cfg, t)
+    sigma, log_w = _on_nodes(cfg, law, t)
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     floor = 1e-3 * np.maximum(np.median(s, axis=1, keepdims=True), TINY_NOISE)
     s = np.maximum(s, floor)  # a reading without scatter (a quantised sensor) is not infinitely unlikely
@@ -147,12 +156,12 @@ def discrepancy(cfg: NoiseModelConfig, ids: np.ndarray, t: np.ndarray, s: np.nda
 
 
 @float64
-def normal_scores(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
+def normal_scores(cfg: NoiseModelConfig, law: NoiseLaw, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
     """Each point's sample sd as a standard-normal score (R, n) of its predictive distribution
     under the profile's means, the field integrated out on the nodes (as ``discrepancy``, but
     point by point): Phi^-1 of P(S <= s), clipped to 1e-9 from 0 and 1. Bounded, so one
     position far out in the field's tail weighs like any other."""
-    sigma, log_w = _on_nodes(cfg, t, smooth=True)
+    sigma, log_w = _on_nodes(cfg, law, t, smooth=True)
     w = np.exp(log_w)
     out = np.empty(s.shape)
     step = max(1, CHUNK // max(1, s.shape[1] * sigma.shape[1]))
@@ -164,11 +173,11 @@ def normal_scores(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.n
 
 
 @float64
-def shift_statistics(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
+def shift_statistics(cfg: NoiseModelConfig, law: NoiseLaw, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> np.ndarray:
     """Two statistics per data set (R, 2) from the points' ``normal_scores`` z: |mean z|, the
     whole level off (noise higher or lower than the profile's everywhere), and |the slope of z
     over log t|, the split between the time-independent and the shot-noise part off."""
-    z = normal_scores(cfg, t, s, dof)
+    z = normal_scores(cfg, law, t, s, dof)
     log_t = np.log(t) - np.log(t).mean()
     spread = float(np.sum(log_t**2))
     slope = z @ log_t / spread if spread > 0 else np.zeros(z.shape[0])
@@ -182,6 +191,7 @@ def _drawn(posterior, size: int, rng: np.random.Generator, low: float = 0.0) -> 
 @float64
 def replicates(
     cfg: NoiseModelConfig,
+    law: NoiseLaw,
     positions: np.ndarray,
     ids: np.ndarray,
     t: np.ndarray,
@@ -205,13 +215,14 @@ def replicates(
         g = rng.standard_normal((count, positions.shape[0])) @ np.linalg.cholesky(k).T
         levels.append(np.exp(amplitude[:, None] * g)[:, ids])
     a1 = draws["a1"][:, None] * (levels[1] if len(levels) > 1 else 1.0)
-    sigma = law_sigma(cfg.mean, t[None, :], draws["a0"][:, None] * levels[0], a1, p[:, None])
+    sigma = law_sigma(law, t[None, :], draws["a0"][:, None] * levels[0], a1, p[:, None])
     return sigma * np.sqrt(rng.chisquare(np.broadcast_to(dof, sigma.shape)) / dof)
 
 
 @float64
 def p_value(
     cfg: NoiseModelConfig,
+    law: NoiseLaw,
     x: np.ndarray,
     spans: np.ndarray,
     t: np.ndarray,
@@ -236,11 +247,11 @@ def p_value(
     order = np.argsort(ids, kind="stable")
     ids, t, s, dof = ids[order], t[keep][order], s[keep][order], n[keep][order] - 1.0
     rng = keys.numpy_rng(0, keys.PROFILE_CHECK) if rng is None else rng
-    sets = np.vstack([s[None, :], replicates(cfg, positions, ids, t, dof, spans, rng)])  # the data first
-    shifts = shift_statistics(cfg, t, sets, dof)
+    sets = np.vstack([s[None, :], replicates(cfg, law, positions, ids, t, dof, spans, rng)])  # the data first
+    shifts = shift_statistics(cfg, law, t, sets, dof)
     smaller = np.minimum.reduce(
         [
-            _exceeding(discrepancy(cfg, ids, t, sets, dof)),
+            _exceeding(discrepancy(cfg, law, ids, t, sets, dof)),
             _exceeding(shifts[:, 0]),
             _exceeding(shifts[:, 1]),
         ]
@@ -256,6 +267,7 @@ def _exceeding(statistic: np.ndarray) -> np.ndarray:
 
 def verdict(
     cfg: NoiseModelConfig,
+    law: NoiseLaw,
     dropped: bool,
     x: np.ndarray,
     spans: np.ndarray,
@@ -269,5 +281,5 @@ def verdict(
         return NO_PROFILE
     if dropped:
         return ProfileCheck(float("nan"), False)
-    p = p_value(cfg, x, spans, t, shot_std, n_shots)
+    p = p_value(cfg, law, x, spans, t, shot_std, n_shots)
     return ProfileCheck(p, not p < cfg.profile_alpha)

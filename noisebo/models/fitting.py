@@ -26,6 +26,7 @@ from noisebo.keys import FIT, jax_key, split_key
 from noisebo.models import field_fit, inference, noise_field, noise_model, primary, profile_check
 from noisebo.models.grids import scaled
 from noisebo.models.inputs import capacity_for, group_ids
+from noisebo.models.noise_laws import NoiseLaw
 from noisebo.state import CampaignState
 from noisebo.precision import float64
 
@@ -49,13 +50,14 @@ class Fitted(NamedTuple):
     profile: profile_check.ProfileCheck = profile_check.NO_PROFILE
 
 
-def _models(config: CampaignConfig):
-    return _models_for(config.primary_model, config.noise_model, config.space.dimensions)
+@lru_cache(maxsize=None)
+def _primary_model(primary_config: PrimaryModelConfig, dimensions: int):
+    return primary.make_model(primary_config, dimensions)
 
 
 @lru_cache(maxsize=None)
-def _models_for(primary_config: PrimaryModelConfig, noise_config: NoiseModelConfig, dimensions: int):
-    return primary.make_model(primary_config, dimensions), noise_model.make_model(noise_config)
+def _noise_model(noise_config: NoiseModelConfig, law: NoiseLaw):
+    return noise_model.make_model(noise_config, law)
 
 
 def _fit_one(
@@ -177,14 +179,15 @@ def _columns(config: CampaignConfig, state: CampaignState):
 @float64
 def fit_noise_model(
     config: CampaignConfig,
+    law: NoiseLaw,
     state: CampaignState,
     key: jax.Array,
     previous: dict | None = None,
     warm: bool = False,
     capacity: int | None = None,
 ) -> NoiseFit:
-    """Fit the noise model (or the noise field, when ``noise_model.field`` is set) on its
-    training points, drawing from ``key`` (the noise model's half of the step's fit key:
+    """Fit the noise model (or the noise field, when ``noise_model.field`` is set) of mean
+    ``law`` (the one ``noise_model.mean`` names) on its training points, drawing from ``key`` (the noise model's half of the step's fit key:
     ``fit_keys``). ``previous``: the previous step's ``hyperparameters``, an extra start; ``warm``: start
     from them alone, when both models' are all there (the record says whether it did).
     ``capacity``: the padded size of the training set (default the smallest that fits; padding
@@ -195,21 +198,25 @@ def fit_noise_model(
     warm = warm and bool(_previous_guesses(previous, "primary", 1.0))
     if config.noise_model.field is not None:
         samples, field_data, scale, inputs, binned, check = field_fit.fit_field(
-            config, state, scaled(s, x), k_noise, previous, warm, capacity
+            config, law, state, scaled(s, x), k_noise, previous, warm, capacity
         )
         return NoiseFit(samples, field_data, scale, inputs, binned, warm, profile=check)
     cfg = config.noise_model
     train = field_fit.training_mask(config, state)
     t_train, std_train, n_train = t[train], state.column("shot_std")[train], n_shots[train]
-    check = profile_check.verdict(cfg, state.profile_dropped_step is not None, t_train, std_train, n_train)
+    check = profile_check.verdict(cfg, law, state.profile_dropped_step is not None, t_train, std_train, n_train)
     data, scale, groups = noise_model.prepare(
         t_train, std_train, n_train, cfg, s.t_min, s.t_max, inf.max_inputs_for(1), capacity, check.in_use
     )
     n_warm = _previous_guesses(previous, "noise", scale, np.asarray(data.bounds))
     warm = warm and bool(n_warm)
-    guesses = n_warm if warm else [noise_model.initial_guess(data, cfg)] + noise_model.profile_guess(data, cfg) + n_warm
-    named = noise_model.program_name(cfg)
-    samples = _fit_one(config, _models(config)[1], named, data, k_noise, guesses, inf.laplace_samples, 0, warm)
+    guesses = (
+        n_warm
+        if warm
+        else [noise_model.initial_guess(data, cfg, law)] + noise_model.profile_guess(data, cfg, law) + n_warm
+    )
+    named = noise_model.program_name(cfg, law)
+    samples = _fit_one(config, _noise_model(cfg, law), named, data, k_noise, guesses, inf.laplace_samples, 0, warm)
     return NoiseFit(samples, data, scale, groups.count.size, groups.binned, warm, profile=check)
 
 
@@ -238,13 +245,23 @@ def fit_gp(
     guesses = p_warm if noise.warm else [primary.prior_median(config.primary_model, s.dimensions)] + p_warm
     named = (primary.program_name(config.primary_model, s.dimensions), ())
     samples = _fit_one(
-        config, _models(config)[0], named, data, key, guesses, 0, inf.primary_quadrature, noise.warm, search
+        config,
+        _primary_model(config.primary_model, s.dimensions),
+        named,
+        data,
+        key,
+        guesses,
+        0,
+        inf.primary_quadrature,
+        noise.warm,
+        search,
     )
     return PrimaryFit(samples, data, std, groups.count.size, groups.binned)
 
 
 def fit_models(
     config: CampaignConfig,
+    law: NoiseLaw,
     state: CampaignState,
     key: jax.Array,
     previous: dict | None = None,
@@ -255,7 +272,7 @@ def fit_models(
     prediction takes them. ``capacities``: the padded (primary, noise) training-set sizes."""
     cap_primary, cap_noise = capacities or (None, None)
     k_primary, k_noise = fit_keys(key)
-    noise = fit_noise_model(config, state, k_noise, previous, warm, cap_noise)
+    noise = fit_noise_model(config, law, state, k_noise, previous, warm, cap_noise)
     return combined(fit_gp(config, state, noise, k_primary, previous, cap_primary), noise)
 
 

@@ -118,16 +118,15 @@ import jax.scipy.linalg as jsl
 import numpy as np
 from scipy import optimize
 
-from noisebo import registry
 from noisebo.config import NoiseFieldConfig, NoiseModelConfig, field_length_names
 from noisebo.models import inference
 from noisebo.models.inputs import Grouped, capacity_for, group_ids, merge
 from noisebo.models.kernels import JITTER, matern52
+from noisebo.models.noise_laws import NoiseLaw
 from noisebo.models.noise_model import (
     c4,
     group_log_factor,
     law_and_residual_sites,
-    mean_law,
     prior_rows,
     sampling_rel_var,
 )
@@ -339,7 +338,7 @@ def _log_likelihood(r: _Residual) -> jnp.ndarray:
 # Model and data
 
 
-def make_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
+def make_model(cfg: NoiseModelConfig, law: NoiseLaw, field: NoiseFieldConfig, dimensions: int):
     """The numpyro model ``model(data: FieldData)`` for this law, field and number of x axes.
 
     Sites: a0, a1 (Uniform within ``data.bounds``), p (a law that infers it only, e.g. "power"),
@@ -348,7 +347,6 @@ def make_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
     they are read from ``data`` (``estimate_field``, ``set_field``). ``dimensions`` only checks
     the data's."""
     prefixes = field_names(field)
-    law = registry.noise_law(cfg.mean)
 
     def noise_field_model(data: FieldData) -> None:
         # numpyro loads where a model is traced: a process that loads kept programs never pays for it.
@@ -519,12 +517,11 @@ class _Evidence(NamedTuple):
     other: jnp.ndarray  # (Gc,) the other source's value at the group (A1 t^-p, or A0)
 
 
-def _evidence_terms(kind: str, f: int, g, ev: _Evidence, data: FieldData, p):
+def _evidence_terms(law: NoiseLaw, f: int, g, ev: _Evidence, data: FieldData, p):
     """Per group: log likelihood (Gc,), and d/dg and Fisher information in the field value g at
     its position (Gc,) each, with the law's other parameters fixed and the residual left out."""
     value = ev.base * _exp(g[ev.pos])
     shot, a0 = (ev.other, value) if f == 0 else (value * data.t ** (-p), ev.other)
-    law = registry.noise_law(kind)
     m = law.combine(shot, a0)
     share = law.share(a0 if f == 0 else shot, m)
     m = jnp.where(ev.gmask, m, 1.0)
@@ -536,7 +533,7 @@ def _evidence_terms(kind: str, f: int, g, ev: _Evidence, data: FieldData, p):
     return jnp.where(keep, loglik, 0.0), jnp.where(keep, dldm * m * share, 0.0), jnp.where(keep, info, 0.0)
 
 
-def _neg_evidence(theta, kind: str, f: int, steps: int, ev: _Evidence, data: FieldData, p, prior):
+def _neg_evidence(theta, law: NoiseLaw, f: int, steps: int, ev: _Evidence, data: FieldData, p, prior):
     """-log of the Laplace approximation to the marginal likelihood of the field's amplitude and
     lengths (theta = their logs), plus their LogNormal priors: the field at the chosen positions
     is a GP (the basis's covariance plus a constant of variance LEVEL_VAR) under the groups'
@@ -550,7 +547,7 @@ def _neg_evidence(theta, kind: str, f: int, steps: int, ev: _Evidence, data: Fie
     k = jnp.where(pair, k, 0.0) + jnp.diag(jnp.where(ev.pmask, 1e-8, 1.0))
 
     def terms(g):
-        loglik, score, info = _evidence_terms(kind, f, g, ev, data, p)
+        loglik, score, info = _evidence_terms(law, f, g, ev, data, p)
         return (loglik, jax.ops.segment_sum(score, ev.pos, n), jax.ops.segment_sum(info, ev.pos, n))
 
     def step(g):
@@ -586,7 +583,12 @@ def amplitude_loc(data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfi
 
 
 def estimate_field(
-    data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfig, point: dict, from_medians: bool = True
+    data: FieldData,
+    cfg: NoiseModelConfig,
+    law: NoiseLaw,
+    field: NoiseFieldConfig,
+    point: dict,
+    from_medians: bool = True,
 ) -> dict:
     """The fields' hyperparameters, {prefix}_amplitude and {prefix}_length[_k] (floats), given a
     fit ``point`` (one parameter set in ``data``'s scaled units: the law's a0, a1, p and each
@@ -648,9 +650,7 @@ def estimate_field(
 
         def fun(theta, f=f, ev=ev, prior=prior):
             # Always from the point's field, so the objective is a fixed function of theta.
-            (value, _), grad = _evidence_value_and_grad(
-                jnp.asarray(theta), cfg.mean, f, SCORING_STEPS, ev, data, p, prior
-            )
+            (value, _), grad = _evidence_value_and_grad(jnp.asarray(theta), law, f, SCORING_STEPS, ev, data, p, prior)
             value = float(value)
             if not np.isfinite(value) or not np.all(np.isfinite(np.asarray(grad))):
                 return 1e10, np.zeros_like(theta)
@@ -698,14 +698,14 @@ def estimate_field(
 # Starting point and the whole fit
 
 
-def _pseudo_observations(data: FieldData, cfg: NoiseModelConfig, base: dict):
+def _pseudo_observations(data: FieldData, law: NoiseLaw, base: dict):
     """Per field: each real group's log A0 (log A1) given the x-independent law ``base``'s A1
     (A0), and its precision (g,) by the delta method; and y (floored), p. See ``initial_guess``."""
     gr = _real(data)
     n_fields = data.field_amplitude.shape[0]
     y = np.maximum(gr.y, max(1e-3 * float(gr.y.max(initial=0.0)), 1e-12))
     p = base.get("p", 0.5)
-    power = registry.noise_law(cfg.mean).sources_power
+    power = law.sources_power
     shot = base["a1"] * gr.t ** (-p)
     out = []
     for f, other in enumerate((shot, np.full_like(y, base["a0"]))[:n_fields]):
@@ -725,7 +725,9 @@ def _precision_weighted(data: FieldData) -> FieldData:
     return data._replace(count=precision)
 
 
-def initial_guess(data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfig, base: dict | None = None) -> dict:
+def initial_guess(
+    data: FieldData, cfg: NoiseModelConfig, law: NoiseLaw, field: NoiseFieldConfig, base: dict | None = None
+) -> dict:
     """A data-driven starting point for the MAP fit (scaled units; each z an (M,) array), for the
     field hyperparameters held by ``data``.
 
@@ -743,11 +745,11 @@ def initial_guess(data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfi
     4. a0 and a1 refitted on a grid of factors with the fields fixed.
     """
     given = base is not None
-    base = dict(base) if base is not None else law_guess(_precision_weighted(data), cfg)
+    base = dict(base) if base is not None else law_guess(_precision_weighted(data), cfg, law)
     n_fields = data.field_amplitude.shape[0]
     m_basis = data.freq.shape[0]
     guess = dict(base) | {f"{prefix}_z": np.zeros(m_basis) for prefix in ("g0", "g1")[:n_fields]}
-    gr, y, p, per_field = _pseudo_observations(data, cfg, base)
+    gr, y, p, per_field = _pseudo_observations(data, law, base)
     if gr.t.shape[0] < 2:
         return guess
     bounds = np.asarray(data.bounds)
@@ -768,9 +770,7 @@ def initial_guess(data: FieldData, cfg: NoiseModelConfig, field: NoiseFieldConfi
     a0s = np.clip(np.exp(levels[0]) * factors, bounds[0, 0] + eps, bounds[0, 1] - eps)
     a1s = np.clip((np.exp(levels[1]) if n_fields > 1 else base["a1"]) * factors, bounds[1, 0] + eps, bounds[1, 1] - eps)
     m = np.asarray(
-        mean_law(
-            cfg.mean, gr.t[None, None, :], a0s[:, None, None] * np.exp(fields[0]), a1s[None, :, None] * np.exp(g1), p
-        )
+        law.mean(gr.t[None, None, :], a0s[:, None, None] * np.exp(fields[0]), a1s[None, :, None] * np.exp(g1), p)
     )
     m = np.maximum(m, 1e-12)
     nll = np.sum((y - m) ** 2 / (m**2 * gr.rel) + 2.0 * np.log(m), axis=-1)
@@ -793,22 +793,23 @@ def laplace_basis(data: FieldData) -> dict:
     return out
 
 
-def program_name(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int) -> tuple[str, tuple]:
+def program_name(cfg: NoiseModelConfig, law: NoiseLaw, field: NoiseFieldConfig, dimensions: int) -> tuple[str, tuple]:
     """What identifies ``make_model(cfg, field, dimensions)``'s programs across processes
     (``noisebo.programs``): a name and the noise law it calls."""
     name = f"noise_field/{dimensions}/{cfg.model_dump_json()}/{field.model_dump_json()}"
-    return name, (registry.noise_law(cfg.mean),)
+    return name, (law,)
 
 
 @lru_cache(maxsize=None)
-def cached_model(cfg: NoiseModelConfig, field: NoiseFieldConfig, dimensions: int):
+def cached_model(cfg: NoiseModelConfig, law: NoiseLaw, field: NoiseFieldConfig, dimensions: int):
     """One model per configuration, so ``inference.fit_map`` (and a profile's NUTS) compiles its programs once."""
-    return make_model(cfg, field, dimensions)
+    return make_model(cfg, law, field, dimensions)
 
 
 def fit(
     data: FieldData,
     cfg: NoiseModelConfig,
+    law: NoiseLaw,
     field: NoiseFieldConfig,
     key: jax.Array,
     restarts: int,
@@ -837,20 +838,27 @@ def fit(
 
     Returns the samples (sample 0 the MAP point) and the data holding the hyperparameters used
     (predict with these data, not the ones passed in)."""
-    model = cached_model(cfg, field, data.freq.shape[1])
-    name, depends_on = program_name(cfg, field, data.freq.shape[1])
+    model = cached_model(cfg, law, field, data.freq.shape[1])
+    name, depends_on = program_name(cfg, law, field, data.freq.shape[1])
 
     def completed(guess: dict) -> dict:  # a law without its fields' weights gets them by ridge
-        return guess if all(f"{p}_z" in guess for p in field_names(field)) else initial_guess(data, cfg, field, guess)
+        return (
+            guess if all(f"{p}_z" in guess for p in field_names(field)) else initial_guess(data, cfg, law, field, guess)
+        )
 
     if estimate:
         data = set_field(
             data,
             estimate_field(
-                data, cfg, field, initial_guess(data, cfg, field), from_medians=not guesses if scan is None else scan
+                data,
+                cfg,
+                law,
+                field,
+                initial_guess(data, cfg, law, field),
+                from_medians=not guesses if scan is None else scan,
             ),
         )
-    starts = [*(completed(g) for g in guesses), initial_guess(data, cfg, field)]
+    starts = [*(completed(g) for g in guesses), initial_guess(data, cfg, law, field)]
     samples = inference.fit_map(
         model,
         data,
@@ -883,7 +891,7 @@ def field_samples(params: dict, data: FieldData, xs: jnp.ndarray):
 
 
 def predict_one(
-    kind: str, params: dict, data: FieldData, xs: jnp.ndarray, t: jnp.ndarray, ts: jnp.ndarray
+    law: NoiseLaw, params: dict, data: FieldData, xs: jnp.ndarray, t: jnp.ndarray, ts: jnp.ndarray
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Mean and variance (m, k) of Noise (scaled units) at scaled positions xs (m, d) and times t
     (k,) seconds / ts (k,) scaled, for one parameter set: the law at the fields' A0(x), A1(x)
@@ -891,7 +899,7 @@ def predict_one(
     x). The fields' own uncertainty is in the spread over samples (``inference.combine``)."""
     p = params.get("p", 0.5)
     g0, g1 = log_fields(params, data, data.phi)
-    m_train = mean_law(kind, data.t, params["a0"] * _exp(g0), params["a1"] * _exp(g1), p)
+    m_train = law.mean(data.t, params["a0"] * _exp(g0), params["a1"] * _exp(g1), p)
     r = _residual(m_train, params["amplitude"], params["length"], data)
     amplitude2 = params["amplitude"] ** 2
     a = r.sl * jsl.cho_solve((r.chol, True), r.c)  # (K + 1/lam)^-1 rbar
@@ -899,15 +907,15 @@ def predict_one(
     v = jsl.solve_triangular(r.chol, r.sl[:, None] * k_star.T, lower=True)
     r_var = jnp.maximum(amplitude2 - jnp.sum(v**2, axis=0), 1e-12)
     a0x, a1x = field_one(params, data, xs)
-    mean = mean_law(kind, t[None, :], a0x[:, None], a1x[:, None], p) + (k_star @ a)[None, :]
+    mean = law.mean(t[None, :], a0x[:, None], a1x[:, None], p) + (k_star @ a)[None, :]
     return mean, jnp.broadcast_to(r_var, mean.shape)
 
 
-def predict_samples(kind: str, params: dict, data: FieldData, xs, t, ts):
+def predict_samples(law: NoiseLaw, params: dict, data: FieldData, xs, t, ts):
     """``predict_one`` over a leading sample axis of every parameter: (S, m, k) means and
     variances. Memory: 2 S m k floats out (4096 x 100 at S = 33: 216 MB); predict the MAP point
     alone on a large grid if the draws are not needed there."""
-    return jax.vmap(lambda p: predict_one(kind, p, data, xs, t, ts))(params)
+    return jax.vmap(lambda p: predict_one(law, p, data, xs, t, ts))(params)
 
 
 def optimal_t(t_fine: jnp.ndarray, mean: jnp.ndarray, alpha: float, beta: float) -> jnp.ndarray:

@@ -20,10 +20,10 @@ import numpy as np
 from scipy import optimize
 from scipy.special import gammaln
 
-from noisebo import registry
 from noisebo.config import LAW_PARAMETERS, NoiseModelConfig
 from noisebo.models.inputs import Grouped, capacity_for, merge
 from noisebo.models.kernels import masked_covariance, matern52
+from noisebo.models.noise_laws import NoiseLaw
 
 RESIDUAL_LENGTH_LOC = float(np.log(0.3))
 
@@ -65,22 +65,15 @@ def sampling_rel_var(n: np.ndarray | int) -> np.ndarray:
     return (1.0 - k**2) / k**2
 
 
-def mean_law(kind: str, t: jnp.ndarray, a0, a1, p=0.5) -> jnp.ndarray:
-    """Noise(t) under the noise law named ``kind`` (``noisebo.models.noise_laws``; e.g. "inv_sqrt"
-    A1/sqrt(t) + A0, "power" A1/t^p + A0, "quadrature" sqrt(A1^2/t + A0^2))."""
-    return registry.noise_law(kind).mean(t, a0, a1, p)
-
-
-def program_name(cfg: NoiseModelConfig) -> tuple[str, tuple]:
-    """What identifies ``make_model(cfg)``'s programs across processes (``noisebo.programs``):
+def program_name(cfg: NoiseModelConfig, law: NoiseLaw) -> tuple[str, tuple]:
+    """What identifies ``make_model(cfg, law)``'s programs across processes (``noisebo.programs``):
     a name and the noise law it calls."""
-    return f"noise_model/{cfg.model_dump_json()}", (registry.noise_law(cfg.mean),)
+    return f"noise_model/{cfg.model_dump_json()}", (law,)
 
 
-def make_model(cfg: NoiseModelConfig):
-    """The numpyro noise model for this configuration: ``model(data: NoiseData)``."""
-
-    law = registry.noise_law(cfg.mean)
+def make_model(cfg: NoiseModelConfig, law: NoiseLaw):
+    """The numpyro noise model with the mean ``law`` (the one ``cfg.mean`` names) and the
+    priors of ``cfg``: ``model(data: NoiseData)``."""
 
     def noise_model(data: NoiseData) -> None:
         # numpyro loads where a model is traced: a process that loads kept programs never pays for it.
@@ -238,11 +231,10 @@ def prepare(
     return data, scale, groups
 
 
-def initial_guess(data: Replicates, cfg: NoiseModelConfig) -> dict[str, float]:
+def initial_guess(data: Replicates, cfg: NoiseModelConfig, law: NoiseLaw) -> dict[str, float]:
     """A data-driven starting point for the MAP fit: the law fitted by non-negative least squares
     (over a grid of exponents for a law that infers p; on the law's ``sources_power``, e.g. squared
     for "quadrature"), residual GP at its prior median. Scaled units."""
-    law = registry.noise_law(cfg.mean)
     mask = np.asarray(data.mask)
     t, y = np.asarray(data.t)[mask], np.asarray(data.y)[mask]
     weight = np.sqrt(np.asarray(data.count)[mask])  # a group stands for its points
@@ -272,12 +264,11 @@ def initial_guess(data: Replicates, cfg: NoiseModelConfig) -> dict[str, float]:
     return guess
 
 
-def profile_guess(data: WithProfile, cfg: NoiseModelConfig) -> list[dict[str, float]]:
+def profile_guess(data: WithProfile, cfg: NoiseModelConfig, law: NoiseLaw) -> list[dict[str, float]]:
     """The profile's means as a starting point of the MAP fit (scaled units), while it is in use;
     none otherwise."""
     if data.prior is None or data.prior_weight is None or float(data.prior_weight) == 0.0:
         return []
-    law = registry.noise_law(cfg.mean)
     bounds, prior = np.asarray(data.bounds), np.asarray(data.prior)
     eps = 1e-6
     guess = {
@@ -291,25 +282,25 @@ def profile_guess(data: WithProfile, cfg: NoiseModelConfig) -> list[dict[str, fl
 
 
 def predict_one(
-    kind: str, params: dict, data: NoiseData, t: jnp.ndarray, ts: jnp.ndarray, n_var: int | None = None
+    law: NoiseLaw, params: dict, data: NoiseData, t: jnp.ndarray, ts: jnp.ndarray, n_var: int | None = None
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Mean (m,) of Noise (scaled units) at t (m,) seconds / ts scaled, one parameter set, and its
     variance at the first ``n_var`` of them (all when None): (n_var,). The variance costs a
     triangular solve per point, (n_var x capacity^2), so a caller asks only for those it uses."""
     p = params.get("p", 0.5)
     amplitude, length = params["amplitude"] ** 2, params["length"]
-    m_train = mean_law(kind, data.t, params["a0"], params["a1"], p)
+    m_train = law.mean(data.t, params["a0"], params["a1"], p)
     cov = masked_covariance(matern52(data.ts, data.ts, amplitude, length), m_train**2 * data.rel_var, data.mask)
     chol = jnp.linalg.cholesky(cov)
     k_star = jnp.where(data.mask[None, :], matern52(ts, data.ts, amplitude, length), 0.0)
     resid = jnp.where(data.mask, data.y - m_train, 0.0)
-    mean = mean_law(kind, t, params["a0"], params["a1"], p) + k_star @ jsl.cho_solve((chol, True), resid)
+    mean = law.mean(t, params["a0"], params["a1"], p) + k_star @ jsl.cho_solve((chol, True), resid)
     v = jsl.solve_triangular(chol, k_star[:n_var].T, lower=True)
     var = jnp.maximum(amplitude - jnp.sum(v**2, axis=0), 1e-12)
     return mean, var
 
 
-def predict_samples(kind: str, params: dict, data: NoiseData, t, ts, n_var: int | None = None):
+def predict_samples(law: NoiseLaw, params: dict, data: NoiseData, t, ts, n_var: int | None = None):
     """``predict_one`` over a leading sample axis of every parameter: returns (S, m) means and
     (S, n_var) variances."""
-    return jax.vmap(lambda p: predict_one(kind, p, data, t, ts, n_var))(params)
+    return jax.vmap(lambda p: predict_one(law, p, data, t, ts, n_var))(params)

@@ -11,13 +11,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from noisebo import registry
 from noisebo.config import CampaignConfig, RewardConfig, SpaceConfig
 from noisebo.models import field_fit, inference, noise_field, noise_model, primary
 from noisebo.models.fitting import Fitted
+from noisebo.models.noise_laws import NoiseLaw
 from noisebo.models.grids import N_FINE, integration_points, scaled, space_grids
 from noisebo.models.reward import optimal_index, reward
-from noisebo.programs import persisted
+from noisebo.programs import label, persisted
 from noisebo.state import CampaignState
 from noisebo.precision import float64
 
@@ -84,7 +84,7 @@ class Prediction(NamedTuple):
     noise_draws: jnp.ndarray | None = None
 
 
-def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first: bool):
+def _noise_curves(law: NoiseLaw, fitted: Fitted, t_all, ts_all, n_t: int, map_first: bool):
     """The noise model's mean at every t of t_all (m,) and its variance at the first n_t (the
     t grid). The variance and, for a MAP fit, the Laplace draws are needed on the t grid only
     (their spread widens the grid variance; the mean is the MAP point's), so the draws predict
@@ -92,18 +92,18 @@ def _noise_curves(kind: str, fitted: Fitted, t_all, ts_all, n_t: int, map_first:
     params, data, weights = fitted.noise.params, fitted.noise_data, fitted.noise.weights
     assert isinstance(data, noise_model.NoiseData)  # a noise field predicts through field_rows
     if not map_first:
-        means, grid_vars = noise_model.predict_samples(kind, params, data, t_all, ts_all, n_t)
+        means, grid_vars = noise_model.predict_samples(law, params, data, t_all, ts_all, n_t)
         mean, _ = inference.combine(means, jnp.zeros_like(means), False, weights)
         _, var = inference.combine(means[:, :n_t], grid_vars, False, weights)
         return mean, var
     first = {name: value[:1] for name, value in params.items()}
-    mean = noise_model.predict_samples(kind, first, data, t_all, ts_all, 0)[0][0]
-    grid_means, grid_vars = noise_model.predict_samples(kind, params, data, t_all[:n_t], ts_all[:n_t], n_t)
+    mean = noise_model.predict_samples(law, first, data, t_all, ts_all, 0)[0][0]
+    grid_means, grid_vars = noise_model.predict_samples(law, params, data, t_all[:n_t], ts_all[:n_t], n_t)
     _, var = inference.combine(grid_means, grid_vars, True)
     return mean, var
 
 
-def _t_draws(kind: str, fitted: Fitted, s: SpaceConfig, rew: RewardConfig) -> tuple[jnp.ndarray, jnp.ndarray]:
+def _t_draws(law: NoiseLaw, fitted: Fitted, s: SpaceConfig, rew: RewardConfig) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Each of the noise model's S draws' optimal t (S,), on the fine t grid (the decision
     grid's step, 1 % of the range, can exceed a tolerance), and its noise curve on the t grid
     (S, n_t), raw units."""
@@ -111,7 +111,7 @@ def _t_draws(kind: str, fitted: Fitted, s: SpaceConfig, rew: RewardConfig) -> tu
     t_all = jnp.asarray(np.concatenate([g.t, g.t_fine]))
     assert isinstance(fitted.noise_data, noise_model.NoiseData)  # a noise field's draws: field_fit
     means, _ = noise_model.predict_samples(
-        kind, fitted.noise.params, fitted.noise_data, t_all, (t_all - s.t_min) / (s.t_max - s.t_min), 0
+        law, fitted.noise.params, fitted.noise_data, t_all, (t_all - s.t_min) / (s.t_max - s.t_min), 0
     )
     means = means * fitted.noise_scale
     n_t, t_fine = g.t.shape[0], t_all[g.t.shape[0] :]
@@ -119,25 +119,27 @@ def _t_draws(kind: str, fitted: Fitted, s: SpaceConfig, rew: RewardConfig) -> tu
     return t_fine[best], means[:, :n_t]
 
 
-def _predict_program(config: CampaignConfig, uses_spread: bool):
+def _predict_program(config: CampaignConfig, law: NoiseLaw, uses_spread: bool):
     return _predict_compiled(
         config.space,
         config.reward,
-        config.noise_model.mean,
+        law,
         config.noise_model.field is not None,
         uses_spread,
         config.schedule.draws_t_star,
     )
 
 
-def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray) -> field_fit.FieldRows:
+def field_rows(
+    law: NoiseLaw, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray
+) -> field_fit.FieldRows:
     """The fitted noise field at scaled positions xs (m, d) on the space's t grids."""
     g = space_grids(s)
     t, t_fine = jnp.asarray(g.t), jnp.asarray(g.t_fine)
     span = s.t_max - s.t_min
     assert isinstance(fitted.noise_data, noise_field.FieldData)
     return field_fit.rows(
-        kind,
+        law,
         fitted.noise,
         fitted.noise_data,
         fitted.noise_scale,
@@ -152,18 +154,18 @@ def field_rows(kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs:
 
 
 def _field_prediction(
-    kind: str, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray, f_mean, f_var, f_best
+    law: NoiseLaw, s: SpaceConfig, rew: RewardConfig, fitted: Fitted, xs: jnp.ndarray, f_mean, f_var, f_best
 ) -> Prediction:
     """The policies' posterior with a noise field: a noise curve per reference point, t*(x), and
     for the whole sample the t that maximises the x-averaged reward (on the x-averaged curve,
     which the prediction's ``noise_fine`` holds)."""
-    rows = field_rows(kind, s, rew, fitted, xs.reshape(xs.shape[0], -1))
+    rows = field_rows(law, s, rew, fitted, xs.reshape(xs.shape[0], -1))
     t, t_fine = jnp.asarray(space_grids(s).t), jnp.asarray(space_grids(s).t_fine)
     noise_fine = jnp.mean(rows.fine, axis=0)
     best_i = optimal_index(t_fine, noise_fine, rew.alpha, rew.beta)
     assert isinstance(fitted.noise_data, noise_field.FieldData)
     best_reward = field_fit.best_training_reward(
-        kind, fitted.noise, fitted.noise_data, fitted.noise_scale, t, s.t_min, s.t_max, rew.alpha, rew.beta
+        law, fitted.noise, fitted.noise_data, fitted.noise_scale, t, s.t_min, s.t_max, rew.alpha, rew.beta
     )
     post = Posterior(
         f_mean=f_mean,
@@ -196,7 +198,7 @@ def peak_t(t: jnp.ndarray, values: jnp.ndarray) -> jnp.ndarray:
 
 @lru_cache(maxsize=None)
 def _predict_compiled(
-    s: SpaceConfig, rew: RewardConfig, kind: str, has_field: bool = False, info: bool = False, draws: bool = False
+    s: SpaceConfig, rew: RewardConfig, law: NoiseLaw, has_field: bool = False, info: bool = False, draws: bool = False
 ):
     g = space_grids(s)
     xs = jnp.asarray(scaled(s, g.x))
@@ -209,7 +211,7 @@ def _predict_compiled(
             post = prediction.posterior._replace(f_spread=spread(fitted, xs, xi, primary_first))
             prediction = prediction._replace(posterior=post)
         if draws and not has_field:
-            t_draws, noise_draws = _t_draws(kind, fitted, s, rew)
+            t_draws, noise_draws = _t_draws(law, fitted, s, rew)
             prediction = prediction._replace(t_draws=t_draws, noise_draws=noise_draws)
         return prediction
 
@@ -222,12 +224,12 @@ def _predict_compiled(
         )
         if has_field:
             return _field_prediction(
-                kind, s, rew, fitted, xs, std.mean + std.scale * f_mean, std.scale**2 * f_var, f_best
+                law, s, rew, fitted, xs, std.mean + std.scale * f_mean, std.scale**2 * f_var, f_best
             )
         t_train = fitted.noise_data.t
         t_all = jnp.concatenate([jnp.asarray(g.t), jnp.asarray(g.t_fine), t_train])
         ts_all = (t_all - s.t_min) / (s.t_max - s.t_min)
-        n_mean, n_var = _noise_curves(kind, fitted, t_all, ts_all, n_t, noise_first)
+        n_mean, n_var = _noise_curves(law, fitted, t_all, ts_all, n_t, noise_first)
         n_mean, n_var = n_mean * fitted.noise_scale, n_var * fitted.noise_scale**2
         grid_mean, fine_mean, train_mean = n_mean[:n_t], n_mean[n_t : n_t + N_FINE], n_mean[n_t + N_FINE :]
         r_grid = reward(jnp.asarray(g.t), grid_mean, rew.alpha, rew.beta)
@@ -247,14 +249,17 @@ def _predict_compiled(
         )
         return Prediction(post, fine_mean)
 
-    name = f"predict/{s.model_dump_json()}/{rew.model_dump_json()}/{kind}/{has_field}/{info}/{draws}"
-    return persisted(name, predict, static_argnums=(1, 2), depends_on=(registry.noise_law(kind),))
+    name = f"predict/{s.model_dump_json()}/{rew.model_dump_json()}/{label(law)}/{has_field}/{info}/{draws}"
+    return persisted(name, predict, static_argnums=(1, 2), depends_on=(law,))
 
 
 @float64
-def predict(config: CampaignConfig, fitted: Fitted, state: CampaignState, uses_spread: bool = False) -> Prediction:
-    """Predictions of f on the x grid and of Noise on the t grids, from fitted models; with
+def predict(
+    config: CampaignConfig, law: NoiseLaw, fitted: Fitted, state: CampaignState, uses_spread: bool = False
+) -> Prediction:
+    """Predictions of f on the x grid and of Noise (the noise model's mean ``law``) on the t
+    grids, from fitted models; with
     ``uses_spread`` (a policy that integrates the variance of f) also the spread weights q(x)."""
     values = state.column("value")
     f_best = float(values.max() if config.acquisition.maximize else values.min())
-    return _predict_program(config, uses_spread)(fitted, fitted.primary.map_first, fitted.noise.map_first, f_best)
+    return _predict_program(config, law, uses_spread)(fitted, fitted.primary.map_first, fitted.noise.map_first, f_best)

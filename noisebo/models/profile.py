@@ -28,6 +28,7 @@ from noisebo.config import (  # noqa: F401 - the profile's records, re-exported
     field_length_names,
 )
 from noisebo.models import field_fit, inference, noise_field, noise_model
+from noisebo.models.noise_laws import NoiseLaw
 from noisebo.precision import float64
 
 LAPLACE_DRAWS = 256  # posterior draws the parameters' mean and sd are taken over
@@ -49,9 +50,9 @@ class Distilled(NamedTuple):
 
 @float64
 def distil(
-    config: CampaignConfig, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray, key: jax.Array
+    config: CampaignConfig, law: NoiseLaw, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray, key: jax.Array
 ) -> Distilled:
-    """The posterior of the noise law of ``config.noise_model`` fitted to pooled noise
+    """The posterior of the noise law ``law`` (the one ``config.noise_model.mean`` names) fitted to pooled noise
     measurements: t (n,) s, the sample sd of each point's shots (n,) in value units, and their
     number (n,). Returns "a0", "a1" (value units) and, for a law with an exponent, "p", each as
     mean and sd over the MAP fit's Laplace draws (``LAPLACE_DRAWS``, the MAP point first), and
@@ -68,9 +69,9 @@ def distil(
     t_min, t_max = min(s.t_min, float(t.min())), max(s.t_max, float(t.max()))
     own = config.noise_model.model_copy(update={"profile": None})  # the campaigns' data alone, not their prior
     data, scale, _ = noise_model.prepare(t, shot_std, n_shots, own, t_min, t_max, inf.max_inputs_for(1))
-    model = noise_model.make_model(own)
-    guess = noise_model.initial_guess(data, own)
-    name, depends_on = noise_model.program_name(own)
+    model = noise_model.make_model(own, law)
+    guess = noise_model.initial_guess(data, own, law)
+    name, depends_on = noise_model.program_name(own, law)
     fitted = inference.fit_map(model, data, key, inf.restarts, LAPLACE_DRAWS, [guess], name=name, depends_on=depends_on)
     if at_a_bound(fitted.params, np.asarray(data.bounds)):
         fitted = inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.nuts_samples)
@@ -132,7 +133,9 @@ class FieldCampaign(NamedTuple):
     n_shots: np.ndarray
 
 
-def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+def _field_fit(
+    campaign: FieldCampaign, law: NoiseLaw, key: jax.Array
+) -> tuple[dict[str, np.ndarray], dict[str, float]]:
     """One campaign's noise field fitted on its own: the law's Laplace draws (a0, a1 in value
     units; p), or NUTS draws given the fields' fitted hyperparameters where the fit sits at a
     bound (``at_a_bound``, as ``distil``; 10-20 s), and the fields' spreads and lengths (lengths
@@ -148,22 +151,22 @@ def _field_fit(campaign: FieldCampaign, key: jax.Array) -> tuple[dict[str, np.nd
     t_min, t_max = min(s.t_min, float(t.min())), max(s.t_max, float(t.max()))
     own = nm.model_copy(update={"profile": None})  # the campaign's data alone, not its prior
     data, scale, _ = noise_field.prepare(x, t, shot_std, n_shots, own, field, t_min, t_max, inf.max_inputs_for(1))
-    samples, data = noise_field.fit(data, own, field, key, field_fit.FIELD_RESTARTS, LAPLACE_DRAWS)
+    samples, data = noise_field.fit(data, own, law, field, key, field_fit.FIELD_RESTARTS, LAPLACE_DRAWS)
     if at_a_bound(samples.params, np.asarray(data.bounds)):  # the fields' hyperparameters as fitted
-        model = noise_field.cached_model(own, field, data.freq.shape[1])  # one sampler for every campaign
+        model = noise_field.cached_model(own, law, field, data.freq.shape[1])  # one sampler for every campaign
         keep = LAPLACE_DRAWS + 1  # as many draws as a Laplace fit's (nuts_samples allowing), so campaigns weigh alike
         samples = inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, keep)
-    law = _law_draws(samples.params, scale)
+    draws = _law_draws(samples.params, scale)
     hyper = noise_field.field_hyperparameters(data)
     for prefix in noise_field.field_names(field):
         for k, name in enumerate(field_length_names(prefix, spans.size)):
             hyper[name] *= float(spans[k])
-    return law, hyper
+    return draws, hyper
 
 
 @float64
-def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> Distilled:
-    """The posterior of a noise field's law from noise-field campaigns on one instrument, each
+def distil_field(campaigns: Sequence[FieldCampaign], law: NoiseLaw, key: jax.Array) -> Distilled:
+    """The posterior of a noise field's law ``law`` from noise-field campaigns on one instrument, each
     fitted on its own (their positions are different places, perhaps on different samples):
     a0, a1 (and p) pooled over the campaigns' Laplace draws (the MAP point and ``LAPLACE_DRAWS``
     more each; the level a0 of A0(x) = a0 exp(g0(x))), so their sd holds both each fit's
@@ -175,8 +178,8 @@ def distil_field(campaigns: Sequence[FieldCampaign], key: jax.Array) -> Distille
     ``distil``."""
     if not campaigns:
         raise NotDistillable("no campaign was given")
-    laws, hypers = zip(*(_field_fit(c, jax.random.fold_in(key, i)) for i, c in enumerate(campaigns)))
-    draws = {name: np.concatenate([law[name] for law in laws]) for name in laws[0]}
+    each, hypers = zip(*(_field_fit(c, law, jax.random.fold_in(key, i)) for i, c in enumerate(campaigns)))
+    draws = {name: np.concatenate([fitted[name] for fitted in each]) for name in each[0]}
     pooled = {name: _summary(values) for name, values in draws.items()}
     spreads = {name: _summary(np.asarray([hyper[name] for hyper in hypers])) for name in hypers[0]}
     return Distilled(pooled | spreads, correlation(draws))

@@ -23,15 +23,17 @@ from __future__ import annotations
 
 from functools import lru_cache
 from itertools import product
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from scipy import optimize
 
-from noisebo import registry
 from noisebo.config import NoiseModelConfig, NoiseProfile
 from noisebo.models.inputs import capacity_for
 from noisebo.precision import float64
+
+if TYPE_CHECKING:  # the laws import jax; the checks run on numpy until a law is called
+    from noisebo.models.noise_laws import NoiseLaw
 
 NODES = 5  # Gauss-Hermite nodes per profile parameter
 TINY_NOISE = 1e-12  # a law's noise is kept above this (a profile with A0 = A1 = 0 predicts none)
@@ -81,41 +83,39 @@ def _log_likelihood(sigma: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
 
 
 @lru_cache(maxsize=None)
-def _law_program(kind: str):
+def _law_program(law: NoiseLaw):
     import jax
 
-    law = registry.noise_law(kind)
     return jax.jit(law.mean)
 
 
 @float64
-def law_sigma(kind: str, t, a0, a1, p=0.5) -> np.ndarray:
-    """The noise sd of the law ``kind`` (numpy in and out, broadcasting), kept above
+def law_sigma(law: NoiseLaw, t, a0, a1, p=0.5) -> np.ndarray:
+    """The noise sd of the noise law ``law`` (numpy in and out, broadcasting), kept above
     ``TINY_NOISE``. Run as one compiled program per padded size (``capacity_for`` of the
     broadcast size): the law's operations run eagerly would compile for every new shape, i.e.
     at every step of a campaign (0.3-0.5 s each)."""
     arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (t, a0, a1, p)))
     shape, n = arrays[0].shape, arrays[0].size
     padded = [np.pad(a.reshape(-1), (0, capacity_for(n) - n), constant_values=1.0) for a in arrays]
-    sigma = np.asarray(_law_program(kind)(*padded), dtype=np.float64)[:n].reshape(shape)
+    sigma = np.asarray(_law_program(law)(*padded), dtype=np.float64)[:n].reshape(shape)
     return np.maximum(sigma, TINY_NOISE)
 
 
-def _law_sigma(kind: str, t: np.ndarray, values: dict[str, float]) -> np.ndarray:
-    return law_sigma(kind, t, values["a0"], values["a1"], values.get("p", 0.5))
+def _law_sigma(law: NoiseLaw, t: np.ndarray, values: dict[str, float]) -> np.ndarray:
+    return law_sigma(law, t, values["a0"], values["a1"], values.get("p", 0.5))
 
 
 @float64
-def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
+def best_log_likelihood(cfg: NoiseModelConfig, law: NoiseLaw, t: np.ndarray, s: np.ndarray, dof: np.ndarray) -> float:
     """max log L over the law's parameters within the config's uniform priors (L-BFGS-B from
     the profile's means and from a few spread starts)."""
-    law = registry.noise_law(cfg.mean)
     names = ["a0", "a1"] + (["p"] if law.infers_exponent else [])
     priors = {"a0": cfg.a0_prior, "a1": cfg.a1_prior, "p": cfg.p_prior}
     bounds = [(priors[n].low, priors[n].high) for n in names]
 
     def loss(theta: np.ndarray) -> float:
-        return -_log_likelihood(_law_sigma(cfg.mean, t, dict(zip(names, theta))), s, dof)
+        return -_log_likelihood(_law_sigma(law, t, dict(zip(names, theta))), s, dof)
 
     starts = [[_profile(cfg).parameters[n].mean for n in names]]
     scale = float(np.median(s)) if np.median(s) > 0 else 1.0
@@ -132,7 +132,7 @@ def best_log_likelihood(cfg: NoiseModelConfig, t: np.ndarray, s: np.ndarray, dof
 
 
 @float64
-def p_value(cfg: NoiseModelConfig, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray) -> float:
+def p_value(cfg: NoiseModelConfig, law: NoiseLaw, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray) -> float:
     """The profile's posterior predictive p-value on points measured at t (n,) s with the sample
     sd ``shot_std`` (n,) of ``n_shots`` (n,) shots (points of fewer than 2 shots, or a NaN sd,
     are left out); NaN when none is left."""
@@ -143,20 +143,20 @@ def p_value(cfg: NoiseModelConfig, t: np.ndarray, shot_std: np.ndarray, n_shots:
         return float("nan")
     from scipy import stats  # 0.2 s to import: only a campaign with a profile needs it
 
-    best = best_log_likelihood(cfg, t, s, dof)
+    best = best_log_likelihood(cfg, law, t, s, dof)
     free = min(len(_profile(cfg).parameters), np.unique(t).size)
     sets, weights = _nodes(cfg)
-    ratios = np.asarray([2.0 * (best - _log_likelihood(_law_sigma(cfg.mean, t, values), s, dof)) for values in sets])
+    ratios = np.asarray([2.0 * (best - _log_likelihood(_law_sigma(law, t, values), s, dof)) for values in sets])
     return float(np.sum(weights * stats.chi2.sf(np.maximum(ratios, 0.0), free)))
 
 
 def verdict(
-    cfg: NoiseModelConfig, dropped: bool, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray
+    cfg: NoiseModelConfig, law: NoiseLaw, dropped: bool, t: np.ndarray, shot_std: np.ndarray, n_shots: np.ndarray
 ) -> ProfileCheck:
     """This step's ``ProfileCheck`` of ``cfg.profile`` on its noise model's training points
     (``p_value``), given whether an earlier step ``dropped`` it: in use while every step's
     p-value has been at least ``cfg.profile_alpha`` (or NaN)."""
     if cfg.profile is None:
         return NO_PROFILE
-    p = p_value(cfg, t, shot_std, n_shots)
+    p = p_value(cfg, law, t, shot_std, n_shots)
     return ProfileCheck(p, not dropped and not p < cfg.profile_alpha)

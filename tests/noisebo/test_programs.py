@@ -136,11 +136,12 @@ FIT = textwrap.dedent(
     import json, sys
     from noisebo.flows import runtime
     runtime.configure()
+    from noisebo.acquisition.method import Method
     from noisebo.campaign.compile_ahead import stand_in_seeds
     from noisebo.config import load_config
     from noisebo.models.fitting import fit_key, fit_models, hyperparameters
     config = load_config(sys.argv[1])
-    fitted = fit_models(config, stand_in_seeds(config, 0), fit_key(0, 0))
+    fitted = fit_models(config, Method.of(config).noise_law, stand_in_seeds(config, 0), fit_key(0, 0))
     print(json.dumps({"hyperparameters": {k: repr(v) for k, v in hyperparameters(fitted).items()}}))
     """
 )

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from noisebo.instruments.forrester import ForresterInstrument
+from noisebo import registry
 from noisebo.acquisition import information
 from noisebo.acquisition.policies import acquisition_map, point_scores
 from noisebo.campaign.driver import run_campaign
@@ -72,17 +73,18 @@ def test_pure_shot_noise_prefers_no_time_over_another_but_overhead_prefers_long_
     # a longer point spreads it.
     acq = AcquisitionConfig(policy="info_rate")
     post = post_of(1.0 / jnp.sqrt(jnp.array([0.5, 1.0, 2.0])))
-    free = np.asarray(acquisition_map(post, 1, acq, RewardConfig(), 0.0))
-    costly = np.asarray(acquisition_map(post, 1, acq, RewardConfig(), 10.0))
+    free = np.asarray(acquisition_map(registry.policy(acq.policy), post, 1, acq, RewardConfig(), 0.0))
+    costly = np.asarray(acquisition_map(registry.policy(acq.policy), post, 1, acq, RewardConfig(), 10.0))
     assert np.argmax(free[0]) == 0 and np.argmax(costly[0]) == 2
 
 
 def test_info_rate_point_scores_at_grid_points_equal_the_map():
     acq = AcquisitionConfig(policy="info_rate")
     post = post_of(jnp.array([2.0, 1.5, 1.2]))
-    values = np.asarray(acquisition_map(post, 3, acq, RewardConfig(), 0.5))
+    values = np.asarray(acquisition_map(registry.policy(acq.policy), post, 3, acq, RewardConfig(), 0.5))
     i, j = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
     scores = point_scores(
+        registry.policy(acq.policy),
         post,
         post.f_mean[i],
         post.f_var[i],

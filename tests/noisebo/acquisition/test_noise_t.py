@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from noisebo import registry
 from noisebo.acquisition.noise_t import RULES, InformativeT, PolicyT, ValuedT, points_left, rule_of
 from noisebo.acquisition.proposal import affordable
 from noisebo.config import CampaignConfig, ScheduleConfig
@@ -43,18 +44,19 @@ def test_informative_applies_while_the_interval_of_t_star_is_to_be_narrowed(
     schedule, interval, converged, shots, expected
 ):
     config = CampaignConfig().with_overrides(schedule={"t_interval_rel": 0.05, **schedule})
-    assert InformativeT().applies(config, _convergence(interval, converged), shots) is expected
+    policy = registry.policy(config.acquisition.policy)
+    assert InformativeT().applies(policy, config.schedule, _convergence(interval, converged), shots) is expected
 
 
 @pytest.mark.parametrize("policy, expected", [("reward", True), ("double", True), ("info_rate", False)])
 def test_valued_applies_where_the_policy_chooses_t_by_the_reward(policy, expected):
     config = CampaignConfig().with_overrides(acquisition={"policy": policy})
-    assert ValuedT().applies(config, _convergence(0.2, False), 3) is expected
+    assert ValuedT().applies(registry.policy(policy), config.schedule, _convergence(0.2, False), 3) is expected
 
 
 def test_the_policys_rule_never_moves_a_point():
     config = CampaignConfig()
-    assert not PolicyT().applies(config, _convergence(0.5, False), 30)
+    assert not PolicyT().applies(registry.policy("reward"), config.schedule, _convergence(0.5, False), 30)
     assert PolicyT().choose(None, 7, 3, np.ones(100, bool), config, None, 0) == 7
 
 

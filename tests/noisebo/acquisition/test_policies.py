@@ -2,6 +2,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from noisebo import registry
 from noisebo.acquisition.policies import (
     acquisition_map,
     argmax_2d,
@@ -61,7 +62,7 @@ def test_double_acquisition_by_hand():
 @pytest.mark.parametrize("f_acq", ["ue", "ei", "ucb"])
 def test_every_combination_gives_a_finite_map(policy, f_acq):
     acq = AcquisitionConfig(policy=policy, f_acquisition=f_acq)
-    values = np.asarray(acquisition_map(POST, 3, acq, REWARD))
+    values = np.asarray(acquisition_map(registry.policy(acq.policy), POST, 3, acq, REWARD))
     assert values.shape == (2, 3) and np.all(np.isfinite(values)) and np.all(values >= 0)
 
 
@@ -77,14 +78,20 @@ def test_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
 
     acq = AcquisitionConfig(policy=policy, f_acquisition=f_acquisition)
     post = POST._replace(f_mean=jnp.array([-1.0, 0.5]))
-    values = np.asarray(acquisition_map(post, 3, acq, REWARD))
+    values = np.asarray(acquisition_map(registry.policy(acq.policy), post, 3, acq, REWARD))
     i, j = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
-    scores = point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD)
+    scores = point_scores(
+        registry.policy(acq.policy), post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD
+    )
     np.testing.assert_allclose(np.asarray(scores), values, rtol=1e-12, atol=1e-15)
     # off the grid: a larger f variance scores higher under UE at every t
     if f_acquisition == "ue":
         assert np.all(
-            np.asarray(point_scores(post, jnp.zeros(3), jnp.full(3, 5.0), jnp.arange(3), 3, acq, REWARD))
+            np.asarray(
+                point_scores(
+                    registry.policy(acq.policy), post, jnp.zeros(3), jnp.full(3, 5.0), jnp.arange(3), 3, acq, REWARD
+                )
+            )
             >= values[1] - 1e-12
         )
 
@@ -110,7 +117,9 @@ def test_the_same_curve_at_every_position_gives_the_papers_map(policy, f_acq):
         t_opt_map=jnp.full(2, 1.0),
     )
     np.testing.assert_allclose(
-        np.asarray(acquisition_map(rows, 3, acq, REWARD)), np.asarray(acquisition_map(POST, 3, acq, REWARD)), rtol=1e-12
+        np.asarray(acquisition_map(registry.policy(acq.policy), rows, 3, acq, REWARD)),
+        np.asarray(acquisition_map(registry.policy(acq.policy), POST, 3, acq, REWARD)),
+        rtol=1e-12,
     )
 
 
@@ -149,13 +158,15 @@ def test_field_point_scores_at_grid_points_equal_the_map(policy, f_acquisition):
 
     acq = AcquisitionConfig(policy=policy, f_acquisition=f_acquisition)
     post = FIELD_POST._replace(f_mean=jnp.array([-1.0, 0.5]))
-    values = np.asarray(acquisition_map(post, 3, acq, REWARD))
+    values = np.asarray(acquisition_map(registry.policy(acq.policy), post, 3, acq, REWARD))
     i, j = np.meshgrid(np.arange(2), np.arange(3), indexing="ij")
     rows = NoiseRows(post.noise_mean[i], post.noise_var[i])
-    scores = point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD, rows)
+    scores = point_scores(
+        registry.policy(acq.policy), post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD, rows
+    )
     np.testing.assert_allclose(np.asarray(scores), values, rtol=1e-12, atol=1e-15)
     with pytest.raises(ValueError, match="need the noise at the points"):
-        point_scores(post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD)
+        point_scores(registry.policy(acq.policy), post, post.f_mean[i], post.f_var[i], jnp.asarray(j), 3, acq, REWARD)
 
 
 @pytest.mark.parametrize("policy", ["reward", "double"])
@@ -168,5 +179,5 @@ def test_a_noisy_position_is_not_chosen_for_its_noise_alone(policy):
         noise_var=jnp.zeros((2, 3)),
         noise_at_t_opt=jnp.array([10.0, 1.0]),
     )
-    values = acquisition_map(post, 3, AcquisitionConfig(policy=policy), REWARD)
+    values = acquisition_map(registry.policy(policy), post, 3, AcquisitionConfig(policy=policy), REWARD)
     assert int(argmax_2d(values)[0]) == 1

@@ -4,6 +4,7 @@ over x, t and those counts together."""
 import numpy as np
 import pytest
 
+from noisebo.acquisition.method import Method
 from noisebo.acquisition.proposal import _propose_nd, propose_key, shot_choices
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import CampaignConfig
@@ -33,7 +34,7 @@ ALL = [1, 1, 1, 1]
     ids=["no budget", "the longest cut", "cut to another count"],
 )
 def test_a_converged_info_rate_campaign_chooses_among_the_counts_the_budget_affords(left, expected):
-    choices = shot_choices(RATE, True, left)
+    choices = shot_choices(RATE, Method.of(RATE).policy, True, left)
     assert [(n, allowed.astype(int).tolist()) for n, allowed in choices] == expected
 
 
@@ -43,7 +44,7 @@ def test_a_converged_info_rate_campaign_chooses_among_the_counts_the_budget_affo
 )
 def test_otherwise_the_schedule_s_one_count(policy, converged, shots):
     config = RATE.with_overrides(acquisition={"policy": policy}, schedule={"budget_s": None})
-    [(n, allowed)] = shot_choices(config, converged, None)
+    [(n, allowed)] = shot_choices(config, Method.of(config).policy, converged, None)
     assert n == shots and allowed.all()
 
 
@@ -60,29 +61,30 @@ def area():
         acquisition={"policy": "info_rate"},
     )
     state = run_campaign(config, build(config.instrument), seed=0).state
-    fitted = fit_models(config, state, fit_key(0, 9))
-    return config, fitted, predict(config, fitted, state, uses_spread=True).posterior
+    law = Method.of(config).noise_law
+    fitted = fit_models(config, law, state, fit_key(0, 9))
+    return config, fitted, predict(config, law, fitted, state, uses_spread=True).posterior
 
 
 def test_one_search_over_the_counts_is_as_good_as_each_count_s_map(area):
     config, fitted, post = area
-    choices = shot_choices(config, True, None)
+    choices = shot_choices(config, Method.of(config).policy, True, None)
     key = propose_key(0, 9)
-    joint = _propose_nd(config, fitted, post, key, choices)
-    alone = [_propose_nd(config, fitted, post, key, [choice]) for choice in choices]
+    joint = _propose_nd(config, Method.of(config), fitted, post, key, choices)
+    alone = [_propose_nd(config, Method.of(config), fitted, post, key, [choice]) for choice in choices]
     # the map is the best over the counts at each reference point, and the proposal scores at
     # least its best entry
     np.testing.assert_array_equal(np.asarray(joint[3]), np.max([np.asarray(a[3]) for a in alone], axis=0))
     assert joint[2] >= float(np.max(joint[3])) * (1 - 1e-12)
     # the count is chosen by its score, not by its place in the list
-    backwards = _propose_nd(config, fitted, post, key, choices[::-1])
+    backwards = _propose_nd(config, Method.of(config), fitted, post, key, choices[::-1])
     assert choices[joint[5]][0] == choices[::-1][backwards[5]][0]
     assert backwards[:3] == joint[:3]
 
 
 def test_a_count_that_allows_no_t_is_never_chosen(area):
     config, fitted, post = area
-    choices = shot_choices(config, True, None)
-    best = _propose_nd(config, fitted, post, propose_key(0, 9), choices)[5]
+    choices = shot_choices(config, Method.of(config).policy, True, None)
+    best = _propose_nd(config, Method.of(config), fitted, post, propose_key(0, 9), choices)[5]
     shut = [(n, allowed & (k != best)) for k, (n, allowed) in enumerate(choices)]
-    assert _propose_nd(config, fitted, post, propose_key(0, 9), shut)[5] != best
+    assert _propose_nd(config, Method.of(config), fitted, post, propose_key(0, 9), shut)[5] != best

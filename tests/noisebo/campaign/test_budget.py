@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from noisebo.acquisition.method import Method
 from noisebo.instruments.forrester import ForresterInstrument
 from noisebo.acquisition.proposal import affordable, cheapest_point_s
 from noisebo.campaign import engine
@@ -217,9 +218,9 @@ def test_an_informative_noise_point_measures_where_the_rate_on_t_star_peaks(tiny
         }
     )
     seeds = run_campaign(config.with_overrides(schedule={"n_steps": 0}), ForresterInstrument(), 1).state
-    fitted = fit_models(config, seeds, fit_key(1, 0))
-    chosen, _ = decide_on(config, fitted, seeds, 0)
-    prediction = predict(config, fitted, seeds)
+    fitted = fit_models(config, Method.of(config).noise_law, seeds, fit_key(1, 0))
+    chosen, _ = decide_on(config, Method.of(config), fitted, seeds, 0)
+    prediction = predict(config, Method.of(config).noise_law, fitted, seeds)
     shots = config.schedule.shots_before if mode == "paper" else config.schedule.shots_after
     c4 = noise_model.c4(shots)
     rate = np.asarray(
@@ -229,7 +230,7 @@ def test_an_informative_noise_point_measures_where_the_rate_on_t_star_peaks(tiny
     )
     assert not chosen.converged and chosen.measure_noise == (mode == "paper") and chosen.shots == shots
     assert chosen.t == grids(config).t[int(np.argmax(rate))] and rate.max() > 0
-    policy, _ = decide_on(config.with_overrides(schedule={"noise_t": "policy"}), fitted, seeds, 0)
+    policy, _ = decide_on(*_policy_t(config), fitted, seeds, 0)
     assert policy.x == chosen.x  # the point keeps the policy's x
 
 
@@ -248,10 +249,10 @@ def test_a_wide_interval_after_convergence_narrows_again_only_in_the_budget_mode
     )
     seeds = run_campaign(config.with_overrides(schedule={"n_steps": 0}), ForresterInstrument(), 1).state
     converged = seeds.with_t_opt(2.0, True)
-    fitted = fit_models(config, converged, fit_key(1, 0))
-    chosen, _ = decide_on(config, fitted, converged, 0)
-    policy, _ = decide_on(config.with_overrides(schedule={"noise_t": "policy"}), fitted, converged, 0)
-    prediction = predict(config, fitted, converged)
+    fitted = fit_models(config, Method.of(config).noise_law, converged, fit_key(1, 0))
+    chosen, _ = decide_on(config, Method.of(config), fitted, converged, 0)
+    policy, _ = decide_on(*_policy_t(config), fitted, converged, 0)
+    prediction = predict(config, Method.of(config).noise_law, fitted, converged)
     rate = information.t_opt_rate(
         prediction.t_draws,
         prediction.noise_draws,
@@ -280,14 +281,20 @@ def test_a_valued_budget_decision_keeps_the_policys_x_and_leaves_its_t_only_whil
     config = tiny_config.with_overrides(schedule={"mode": "budget", "noise_t": "valued", "n_steps": 5000})
     ran = run_campaign(config.with_overrides(schedule={"n_steps": 6}), ForresterInstrument(), 1).final
     state = dataclasses.replace(ran.data, points=ran.data.points[:9])
-    fitted = fit_models(config, state, fit_key(1, 6))
-    chosen, _ = decide_on(config, fitted, state, 6)
-    policy, _ = decide_on(config.with_overrides(schedule={"noise_t": "policy"}), fitted, state, 6)
+    fitted = fit_models(config, Method.of(config).noise_law, state, fit_key(1, 6))
+    chosen, _ = decide_on(config, Method.of(config), fitted, state, 6)
+    policy, _ = decide_on(*_policy_t(config), fitted, state, 6)
     t = list(grids(config).t)
-    prediction = predict(config, fitted, state)
+    prediction = predict(config, Method.of(config).noise_law, fitted, state)
     assert chosen.x == policy.x and chosen.shots == policy.shots == 3 and not chosen.measure_noise
     j = ValuedT().choose(prediction, t.index(policy.t), 3, affordable(config, 3, None)[0], config, None, 6)
     assert chosen.t == t[j] != policy.t
     assert chosen.noise_at_t == pytest.approx(float(np.asarray(prediction.posterior.noise_mean)[t.index(chosen.t)]))
-    last, _ = decide_on(config, fitted, state, 4999)
+    last, _ = decide_on(config, Method.of(config), fitted, state, 4999)
     assert last.t == policy.t
+
+
+def _policy_t(config):
+    """``config`` with the rule ``noise_t: policy``, and its method."""
+    plain = config.with_overrides(schedule={"noise_t": "policy"})
+    return plain, Method.of(plain)

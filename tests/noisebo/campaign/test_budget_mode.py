@@ -5,6 +5,7 @@ every point's replicate scatter."""
 import numpy as np
 import pytest
 
+from noisebo.acquisition.method import Method
 from noisebo.instruments.forrester import ForresterInstrument
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import ConfigError, parse_config
@@ -32,7 +33,7 @@ def test_every_point_takes_the_few_shots_and_only_seeds_measure_their_noise(fina
 
 def test_the_noise_model_trains_on_every_point_s_replicate_scatter(final):
     config, state = final
-    noise = fit_noise_model(config, state.data, fit_key(1, 0))
+    noise = fit_noise_model(config, Method.of(config).noise_law, state.data, fit_key(1, 0))
     assert int(np.sum(np.asarray(noise.data.count))) == len(state.data.points)
 
 
@@ -52,7 +53,7 @@ def test_a_policy_that_chooses_shots_takes_two_or_more_and_each_point_informs_th
     assert state.decisions and all(d.shots >= 2 for d in state.decisions)
     points = state.data.points
     assert all(p.n_shots >= 2 for p in points) and state.data.intact().all()
-    noise = fit_noise_model(config, state.data, fit_key(1, 0))
+    noise = fit_noise_model(config, Method.of(config).noise_law, state.data, fit_key(1, 0))
     assert int(np.sum(np.asarray(noise.data.count))) == len(points)
 
 
@@ -75,7 +76,7 @@ def test_few_shot_points_enter_the_noise_model_with_their_sampling_error(tiny_co
     points = tuple(
         Point((0.1 * i,), float(t), 0.0, float(s), 3, float(s), False) for i, (t, s) in enumerate(zip(ts, sd))
     )
-    noise = fit_noise_model(config, CampaignState(points=points), fit_key(0, 0))
+    noise = fit_noise_model(config, Method.of(config).noise_law, CampaignState(points=points), fit_key(0, 0))
     data = noise.data
     real = np.asarray(data.mask)
     assert sorted(np.asarray(data.count)[real].tolist()) == [2, 2, 4, 4]

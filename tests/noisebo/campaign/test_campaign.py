@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from noisebo.acquisition.method import Method
 from noisebo.instruments import build
 from noisebo.campaign.driver import run_campaign
 from noisebo.campaign.steps import make_point, seed_points
@@ -131,7 +132,7 @@ def test_no_model_is_ever_trained_on_a_non_finite_value(tiny_config):
     for i, value in enumerate([1.0, float("inf"), 2.0]):
         state = state.with_point(Point(0.1 * i, 1.0, value, 0.5, 10, 0.5, True))
     with pytest.raises(NonFiniteData, match=r"point\(s\) \[1\] have a non-finite value"):
-        fit_models(tiny_config, state, fit_key(0, 0))
+        fit_models(tiny_config, Method.of(tiny_config).noise_law, state, fit_key(0, 0))
 
 
 def test_few_shot_points_that_lost_shots_do_not_train_the_noise_model():

@@ -4,6 +4,7 @@ capacity's programs compiled ahead of the crossing."""
 import numpy as np
 import pytest
 
+from noisebo.acquisition.method import Method
 from noisebo.acquisition.records import Decision
 from noisebo.campaign.compile_ahead import capacities_ahead, compile_ahead
 from noisebo.campaign.decision import decide, decide_on
@@ -56,15 +57,15 @@ def area_state(config: CampaignConfig, n: int = 5) -> CampaignState:
 def crossing():
     """A state whose x inputs just crossed 32 distinct values: the primary GP pads to 64."""
     state = grid_state(45)
-    fitted = fit_models(CONFIG, state, fit_key(0, 0))
+    fitted = fit_models(CONFIG, Method.of(CONFIG).noise_law, state, fit_key(0, 0))
     assert fitted.primary_inputs > 32 and fitted.primary_data.x.shape[0] == 64
     return state
 
 
 def test_padding_changes_no_decision(crossing):
     plain, _ = decide(CONFIG, crossing, 0, 0)
-    fitted = fit_models(CONFIG, crossing, fit_key(0, 0), capacities=(128, 128))
-    padded, _ = decide_on(CONFIG, fitted, crossing, 0)
+    fitted = fit_models(CONFIG, Method.of(CONFIG).noise_law, crossing, fit_key(0, 0), capacities=(128, 128))
+    padded, _ = decide_on(CONFIG, Method.of(CONFIG), fitted, crossing, 0)
     assert (padded.x, padded.t, padded.shots) == (plain.x, plain.t, plain.shots)
     assert padded.t_opt == pytest.approx(plain.t_opt, abs=1e-12)
     for name, value in plain.hyperparameters.items():
@@ -97,10 +98,12 @@ def test_a_multi_start_beyond_search_inputs_searches_on_bins_and_fits_what_a_ful
         return best_of(value_and_grad, starts, data)
 
     monkeypatch.setattr(inference, "_best_of", spy)
-    full = fit_models(AREA, state, fit_key(0, 0))
+    full = fit_models(AREA, Method.of(AREA).noise_law, state, fit_key(0, 0))
     assert searched_on == [(7, 60)]  # the prior median and 6 prior draws, each on all 60 inputs
     searched_on.clear()
-    searched = fit_models(AREA.with_overrides(inference={"search_inputs": 16}), state, fit_key(0, 0))
+    searched = fit_models(
+        AREA.with_overrides(inference={"search_inputs": 16}), Method.of(AREA).noise_law, state, fit_key(0, 0)
+    )
     assert searched_on[0][0] == 7 and searched_on[0][1] <= 16  # every start on at most 16 bins
     assert searched_on[1:] == [(1, 60)]  # then the best of them on all 60 inputs
     assert (searched.primary_inputs, searched.binned) == (60, False)

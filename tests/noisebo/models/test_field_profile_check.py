@@ -9,6 +9,7 @@ from scipy import integrate, stats
 
 from simulated_fields import field_measurements
 
+from noisebo import registry
 from noisebo.config import CampaignConfig, NoiseProfile
 from noisebo.models import field_profile_check as check
 
@@ -37,7 +38,7 @@ def field_points(seed, a0, a1, positions, shots):
 
 def checked(points, dropped=False):
     x, t, s, n = points
-    return check.verdict(NOISE, dropped, x, SPAN, t, s, n)
+    return check.verdict(NOISE, registry.noise_law(NOISE.mean), dropped, x, SPAN, t, s, n)
 
 
 def p_values(a0, a1, positions, shots, sets):
@@ -103,7 +104,7 @@ def test_a_profile_whose_a1_varies_too_checks_both_fields():
 
     def p(a0, a1, seed):
         x, t, s, n = field_points(seed, a0, a1, 10, 30)
-        return check.p_value(noise.noise_model, x, SPAN, t, s, n)
+        return check.p_value(noise.noise_model, registry.noise_law(noise.noise_model.mean), x, SPAN, t, s, n)
 
     assert sum(p(0.1, 2.0, seed) < 0.01 for seed in range(10)) <= 1
     assert all(p(0.1, 1.0, seed) < 0.01 for seed in range(10))

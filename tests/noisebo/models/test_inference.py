@@ -5,6 +5,7 @@ import numpyro
 import numpyro.distributions as dist
 import pytest
 
+from noisebo import registry
 from noisebo.config import NoiseModelConfig
 from noisebo.models import inference, noise_model
 from noisebo.models.inference import combine
@@ -35,8 +36,10 @@ def _data():
 def test_map_is_a_local_optimum_and_laplace_draws_spread_around_it():
     cfg = NoiseModelConfig()
     data, _ = _data()
-    model = noise_model.make_model(cfg)
-    samples = inference.fit_map(model, data, jax.random.PRNGKey(0), 4, 16, noise_model.initial_guess(data, cfg))
+    model = noise_model.make_model(cfg, registry.noise_law(cfg.mean))
+    samples = inference.fit_map(
+        model, data, jax.random.PRNGKey(0), 4, 16, noise_model.initial_guess(data, cfg, registry.noise_law(cfg.mean))
+    )
     a1 = np.asarray(samples.params["a1"])
     assert a1.shape == (17,) and samples.map_first
     assert 0 < np.std(a1[1:]) < 0.5 * a1[0]
@@ -53,7 +56,9 @@ def test_map_is_a_local_optimum_and_laplace_draws_spread_around_it():
 def test_nuts_posterior_covers_the_truth():
     cfg = NoiseModelConfig()
     data, scale = _data()
-    samples = inference.fit_nuts(noise_model.make_model(cfg), data, jax.random.PRNGKey(1), 300, 300, 100)
+    samples = inference.fit_nuts(
+        noise_model.make_model(cfg, registry.noise_law(cfg.mean)), data, jax.random.PRNGKey(1), 300, 300, 100
+    )
     a1 = np.asarray(samples.params["a1"]) * scale
     assert a1.shape == (100,) and not samples.map_first
     lo, hi = np.percentile(a1, [1, 99])

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from numpyro.infer.util import log_density
 
+from noisebo import registry
 from noisebo.config import NoiseModelConfig, PrimaryModelConfig
 from noisebo.models import noise_model, primary
 from noisebo.models.inputs import capacity_for, group_ids, merge
@@ -106,7 +107,7 @@ def test_merged_noise_likelihood_differs_by_a_constant_and_predicts_the_same():
         mask=jnp.ones(6, dtype=bool),
         bounds=merged.bounds,
     )
-    density = jitted_density(noise_model.make_model(cfg))
+    density = jitted_density(noise_model.make_model(cfg, registry.noise_law(cfg.mean)))
     predict = jax.jit(noise_model.predict_samples, static_argnums=0)
     gaps, tq = [], jnp.array([0.3, 2.0, 9.0])
     for a0, a1, amplitude, length in ((0.05, 1.1, 0.05, 0.3), (0.2, 0.6, 0.2, 0.1), (0.01, 2.0, 0.02, 0.8)):
@@ -115,8 +116,8 @@ def test_merged_noise_likelihood_differs_by_a_constant_and_predicts_the_same():
         gaps.append(float(density(merged, params) - density(raw, params)))
         batch = {k_: v[None] for k_, v in params.items()}
         for a, b in zip(
-            predict("inv_sqrt", batch, merged, tq, (tq - 0.2) / 9.8),
-            predict("inv_sqrt", batch, raw, tq, (tq - 0.2) / 9.8),
+            predict(registry.noise_law("inv_sqrt"), batch, merged, tq, (tq - 0.2) / 9.8),
+            predict(registry.noise_law("inv_sqrt"), batch, raw, tq, (tq - 0.2) / 9.8),
         ):
             np.testing.assert_allclose(
                 np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from jax.flatten_util import ravel_pytree
 
+from noisebo import registry
 from noisebo.config import NoiseModelConfig
 from noisebo.models import inference, noise_field, noise_model
 from noisebo.models.kernels import JITTER, ard_matern52, matern52
@@ -22,6 +23,11 @@ ALPHA, BETA = 0.1, 2.0
 SHOTS = 30
 T_FINE = np.linspace(T_MIN, T_MAX, 2049)
 QUADRATURE = NoiseModelConfig(mean="quadrature")
+INV_SQRT = registry.noise_law("inv_sqrt")
+
+
+def law_of(cfg: NoiseModelConfig):
+    return registry.noise_law(cfg.mean)
 
 
 def scaled_t(t):
@@ -42,14 +48,14 @@ field_samples = jax.jit(noise_field.predict_samples, static_argnums=0)
 
 def fit(x, t, s, cfg=QUADRATURE, field=DEFAULT_FIELD, laplace=32, capacity=None, **kwargs):
     data, scale, _ = noise_field.prepare(x, t, s, np.full(len(t), SHOTS), cfg, field, T_MIN, T_MAX, 256, capacity)
-    samples, data = noise_field.fit(data, cfg, field, jax.random.PRNGKey(0), 2, laplace, **kwargs)
+    samples, data = noise_field.fit(data, cfg, law_of(cfg), field, jax.random.PRNGKey(0), 2, laplace, **kwargs)
     return samples, data, scale
 
 
 @functools.partial(jax.jit, static_argnums=(3, 4))
 def _predicted(params, weights, data, kind, map_first, xq):
     means, variances = noise_field.predict_samples(
-        kind, params, data, xq, jnp.asarray(T_FINE), jnp.asarray(scaled_t(T_FINE))
+        registry.noise_law(kind), params, data, xq, jnp.asarray(T_FINE), jnp.asarray(scaled_t(T_FINE))
     )
     mean, _ = inference.combine(means, variances, map_first, weights)
     return mean, noise_field.field_one({k: v[0] for k, v in params.items()}, data, xq)
@@ -136,8 +142,8 @@ def test_zero_field_amplitude_predicts_exactly_as_the_x_independent_model():
     law = {"a0": 0.05, "a1": 1.1, "amplitude": 0.08, "length": 0.3}
     z = np.random.default_rng(1).standard_normal(data.freq.shape[0])  # any z: the field is 0
     xq, tq = jnp.asarray([[0.0], [0.37], [1.0]]), jnp.asarray([0.25, 1.0, 4.0, 9.5])
-    mean, var = field_one_law("inv_sqrt", law | {"g0_z": jnp.asarray(z)}, data, xq, tq, scaled_t(tq))
-    n_mean, n_var = x_independent_law("inv_sqrt", law, ndata, tq, scaled_t(tq))
+    mean, var = field_one_law(INV_SQRT, law | {"g0_z": jnp.asarray(z)}, data, xq, tq, scaled_t(tq))
+    n_mean, n_var = x_independent_law(INV_SQRT, law, ndata, tq, scaled_t(tq))
     # Equal up to the 1e-8 jitter, added per (x, t) group here and per t there (variances ~1e-3).
     np.testing.assert_allclose(np.asarray(mean), np.broadcast_to(n_mean, mean.shape), rtol=1e-6)
     np.testing.assert_allclose(np.asarray(var), np.broadcast_to(n_var, var.shape), rtol=1e-5)
@@ -149,16 +155,21 @@ def test_fitted_with_the_field_amplitude_pinned_near_zero_matches_the_fitted_x_i
     field = noise_field.NoiseFieldConfig()
     data, scale, _ = noise_field.prepare(x, t, s, np.full(t.size, SHOTS), cfg, field, T_MIN, T_MAX, 256)
     data = noise_field.set_field(data, {"g0_amplitude": 1e-6, "g0_length": 0.2})
-    samples, data = noise_field.fit(data, cfg, field, jax.random.PRNGKey(0), 2, 0, estimate=False)
+    samples, data = noise_field.fit(data, cfg, law_of(cfg), field, jax.random.PRNGKey(0), 2, 0, estimate=False)
     ndata, _, _ = noise_model.prepare(t, s, np.full(t.size, SHOTS), cfg, T_MIN, T_MAX, 256)
     nsamples = inference.fit_map(
-        noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 2, 0, noise_model.initial_guess(ndata, cfg)
+        noise_model.make_model(cfg, INV_SQRT),
+        ndata,
+        jax.random.PRNGKey(0),
+        2,
+        0,
+        noise_model.initial_guess(ndata, cfg, INV_SQRT),
     )
     point = {k: v[0] for k, v in samples.params.items()}
     npoint = {k: v[0] for k, v in nsamples.params.items()}
     tq = jnp.asarray(T_FINE[::64])
-    mean, _ = field_one_law("inv_sqrt", point, data, jnp.asarray([[0.5]]), tq, scaled_t(tq))
-    n_mean, _ = x_independent_law("inv_sqrt", npoint, ndata, tq, scaled_t(tq))
+    mean, _ = field_one_law(INV_SQRT, point, data, jnp.asarray([[0.5]]), tq, scaled_t(tq))
+    n_mean, _ = x_independent_law(INV_SQRT, npoint, ndata, tq, scaled_t(tq))
     # The same posterior mode up to the field's 1e-6 (and L-BFGS's tolerance): A0, A1 and the
     # curve to 0.1 %, where the sampling error of the curve is ~3 %.
     assert float(point["a1"]) == pytest.approx(float(npoint["a1"]), rel=1e-3)
@@ -176,12 +187,17 @@ def test_an_x_independent_noise_gives_a_flat_field():
     npoint = {
         k: v[0]
         for k, v in inference.fit_map(
-            noise_model.make_model(cfg), ndata, jax.random.PRNGKey(0), 2, 0, noise_model.initial_guess(ndata, cfg)
+            noise_model.make_model(cfg, INV_SQRT),
+            ndata,
+            jax.random.PRNGKey(0),
+            2,
+            0,
+            noise_model.initial_guess(ndata, cfg, INV_SQRT),
         ).params.items()
     }
     xq = np.linspace(0.0, 1.0, 11)[:, None]
     mean, _, a0, _ = predicted(samples, data, scale, "inv_sqrt", xq)
-    n_mean, _ = x_independent_law("inv_sqrt", npoint, ndata, jnp.asarray(T_FINE), scaled_t(T_FINE))
+    n_mean, _ = x_independent_law(INV_SQRT, npoint, ndata, jnp.asarray(T_FINE), scaled_t(T_FINE))
     assert float(np.max(np.abs(np.log(a0 / np.median(a0))))) < 0.25  # A0 within 25 % of its median
     np.testing.assert_allclose(mean, np.broadcast_to(np.asarray(n_mean) * scale, mean.shape), rtol=0.05)
 
@@ -196,7 +212,7 @@ def test_residual_likelihood_is_the_dense_gaussian(amplitude, length, rel):
     data, _, _ = noise_field.prepare(
         x, t, s, np.full(t.size, SHOTS), QUADRATURE, noise_field.NoiseFieldConfig(), T_MIN, T_MAX, 256
     )
-    m = jnp.asarray(noise_model.mean_law("inv_sqrt", data.t, 0.05, 0.9))
+    m = jnp.asarray(INV_SQRT.mean(data.t, 0.05, 0.9))
     woodbury = noise_field._log_likelihood(noise_field._residual(m, amplitude, length, data))
     mask = np.asarray(data.mask)
     mm, ts, y = np.asarray(m)[mask], np.asarray(data.ts)[mask], np.asarray(data.y)[mask]
@@ -234,7 +250,7 @@ def check_wall(samples, data, scale, kind, xq, a0_true, a1_true, noise_tol, t_to
     inside = (T_FINE >= WALL_T[0]) & (T_FINE <= WALL_T[-1])
     for i in range(len(xq)):
         law = (
-            (lambda t, i=i: noise_model.mean_law(kind, t, a0_true[i], a1_true[i]))
+            (lambda t, i=i: registry.noise_law(kind).mean(t, a0_true[i], a1_true[i]))
             if kind != "quadrature"
             else quadrature_truth(a0_true[i], a1_true[i])
         )
@@ -357,7 +373,7 @@ def test_padding_changes_no_prediction(wall_1d):
             [
                 np.asarray(a)
                 for a in field_samples(
-                    "quadrature",
+                    registry.noise_law("quadrature"),
                     samples.params,
                     data,
                     jnp.asarray([[0.1], [0.5]]),
@@ -368,7 +384,11 @@ def test_padding_changes_no_prediction(wall_1d):
         )
         out[-1].append(
             noise_field.estimate_field(
-                data, QUADRATURE, noise_field.NoiseFieldConfig(), {k: v[0] for k, v in samples.params.items()}
+                data,
+                QUADRATURE,
+                law_of(QUADRATURE),
+                noise_field.NoiseFieldConfig(),
+                {k: v[0] for k, v in samples.params.items()},
             )
         )
     assert out[0][0].shape == (33, 2, 65)
@@ -429,9 +449,11 @@ def test_fit_and_predict_time(positions):
     for rep in range(3):
         start = time.perf_counter()
         data, scale, _ = noise_field.prepare(x, t, s, np.full(positions, SHOTS), QUADRATURE, field, T_MIN, T_MAX, 256)
-        samples, data = noise_field.fit(data, QUADRATURE, field, jax.random.PRNGKey(rep), 2, 32)
+        samples, data = noise_field.fit(data, QUADRATURE, law_of(QUADRATURE), field, jax.random.PRNGKey(rep), 2, 32)
         fitted = time.perf_counter()
-        mean, var = inference.combine(*predict("quadrature", samples.params, data, ref, tq, scaled_t(tq)), True)
+        mean, var = inference.combine(
+            *predict(registry.noise_law("quadrature"), samples.params, data, ref, tq, scaled_t(tq)), True
+        )
         t_opt = noise_field.optimal_t(tq, mean * scale, ALPHA, BETA).block_until_ready()
         times.append((fitted - start, time.perf_counter() - fitted))
     # The next step, warm: one more point, the previous hyperparameters and MAP point as the start.
@@ -445,7 +467,9 @@ def test_fit_and_predict_time(positions):
         )
         data2 = noise_field.set_field(data2, noise_field.field_hyperparameters(data))
         point = {k: v[0] * (scale / scale2 if k in ("a0", "a1") else 1.0) for k, v in samples.params.items()}
-        noise_field.fit(data2, QUADRATURE, field, jax.random.PRNGKey(rep), 2, 32, guesses=[point], draws=False)
+        noise_field.fit(
+            data2, QUADRATURE, law_of(QUADRATURE), field, jax.random.PRNGKey(rep), 2, 32, guesses=[point], draws=False
+        )
         warm.append(time.perf_counter() - start)
     print(
         f"\n{positions} positions (capacity {data.mask.shape[0]}): fit {times[1][0]:.3f} / {times[2][0]:.3f} s, "
@@ -468,7 +492,7 @@ def test_the_hessian_outside_the_laplace_basis_is_the_priors():
     samples, data, _ = fit(
         x[:, None], t, measure(x, t, np.sqrt(1 / t + np.where(x > 0.6, 1.0, 0.01)), rng), laplace=0, estimate=False
     )
-    model = noise_field.cached_model(QUADRATURE, noise_field.NoiseFieldConfig(), 1)
+    model = noise_field.cached_model(QUADRATURE, law_of(QUADRATURE), noise_field.NoiseFieldConfig(), 1)
     point = {k: v[0] for k, v in samples.params.items()}
     template = inference._unconstrained(model, data, point)
     flat = ravel_pytree(template)[0]

@@ -3,6 +3,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from noisebo import registry
 from noisebo.config import NoiseModelConfig
 from noisebo.models import inference, noise_model
 
@@ -17,15 +18,16 @@ def test_c4_known_values():
 def synthetic(a0, a1, n_points=16, shots=30, seed=0, law="inv_sqrt"):
     rng = np.random.default_rng(seed)
     t = np.geomspace(0.2, 10.0, n_points)
-    sd = np.asarray(noise_model.mean_law(law, t, a0, a1))
+    sd = np.asarray(registry.noise_law(law).mean(t, a0, a1))
     shot_std = (sd[:, None] * rng.standard_normal((n_points, shots))).std(axis=1, ddof=1)
     return t, shot_std, np.full(n_points, shots)
 
 
 def fit(cfg, t, shot_std, n_shots, key=0):
     data, scale, _ = noise_model.prepare(t, shot_std, n_shots, cfg, 0.2, 10.0, 256)
-    guess = noise_model.initial_guess(data, cfg)
-    samples = inference.fit_map(noise_model.make_model(cfg), data, jax.random.PRNGKey(key), 6, 0, guess)
+    law = registry.noise_law(cfg.mean)
+    guess = noise_model.initial_guess(data, cfg, law)
+    samples = inference.fit_map(noise_model.make_model(cfg, law), data, jax.random.PRNGKey(key), 6, 0, guess)
     return {k: float(v[0]) * (scale if k in ("a0", "a1") else 1.0) for k, v in samples.params.items()}
 
 
@@ -45,7 +47,7 @@ def test_power_law_recovers_the_exponent():
 
 def test_quadrature_law_by_hand():
     # sqrt(A1^2/t + A0^2): t = 4, A1 = 2, A0 = 1.5 -> sqrt(1 + 2.25) = 1.802776
-    np.testing.assert_allclose(noise_model.mean_law("quadrature", np.array([4.0]), 1.5, 2.0), [np.sqrt(3.25)])
+    np.testing.assert_allclose(registry.noise_law("quadrature").mean(np.array([4.0]), 1.5, 2.0), [np.sqrt(3.25)])
 
 
 def test_quadrature_law_recovers_a0_and_a1():
@@ -59,7 +61,7 @@ def test_quadrature_initial_guess_is_exact_on_exact_data():
     sd = np.sqrt(4.0 / t + 0.25)
     cfg = NoiseModelConfig(mean="quadrature")
     data, scale, _ = noise_model.prepare(t, sd * noise_model.c4(np.full(8, 30)), np.full(8, 30), cfg, 0.2, 10.0, 256)
-    guess = noise_model.initial_guess(data, cfg)
+    guess = noise_model.initial_guess(data, cfg, registry.noise_law("quadrature"))
     assert guess["a1"] * scale == pytest.approx(2.0, rel=1e-6) and guess["a0"] * scale == pytest.approx(0.5, rel=1e-6)
 
 
@@ -71,13 +73,13 @@ def test_padding_does_not_change_predictions():
     out, predict = [], jax.jit(noise_model.predict_samples, static_argnums=0)  # op by op: 99 compilations
     for capacity in (8, 32):
         data, _, _ = noise_model.prepare(t, s, n, cfg, 0.2, 10.0, 256, capacity)
-        out.append(np.asarray(predict("inv_sqrt", params, data, tq, (tq - 0.2) / 9.8)))
+        out.append(np.asarray(predict(registry.noise_law("inv_sqrt"), params, data, tq, (tq - 0.2) / 9.8)))
     np.testing.assert_allclose(out[0], out[1], rtol=1e-10)
 
 
 def test_unknown_law_is_an_error():
     with pytest.raises(ValueError, match="no installed noise law 'exp'; installed: inv_sqrt, power, quadrature"):
-        noise_model.mean_law("exp", np.ones(2), 0.1, 2.0)
+        registry.noise_law("exp")
 
 
 @pytest.mark.parametrize("shot_std", [[0.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.5, 0.0]])

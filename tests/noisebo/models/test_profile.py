@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from noisebo import registry
 from noisebo.config import CampaignConfig
 from noisebo.keys import PROFILE, jax_key
 from noisebo.models.noise_model import c4
@@ -11,6 +12,7 @@ from simulated_fields import field_measurements
 from noisebo.models.profile import FieldCampaign, NotDistillable, at_a_bound, correlation, distil, distil_field
 
 CONFIG = CampaignConfig()
+INV_SQRT = registry.noise_law(CONFIG.noise_model.mean)
 
 
 TIMES = np.geomspace(0.3, 8.0, 16)
@@ -24,7 +26,7 @@ def law_measurements(a0=0.1, a1=2.0, n=30, ts=TIMES):
 
 def test_the_law_s_own_values_give_its_parameters():
     t, sd, shots = law_measurements()
-    distilled = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE))
+    distilled = distil(CONFIG, INV_SQRT, t, sd, shots, jax_key(0, PROFILE))
     posterior = distilled.parameters
     assert set(posterior) == {"a0", "a1"}
     a0, a1 = posterior["a0"], posterior["a1"]
@@ -32,7 +34,7 @@ def test_the_law_s_own_values_give_its_parameters():
     assert abs(a0.mean - 0.1) < 2 * a0.sd + 0.02
     # the data pin A1/sqrt(t) + A0 at the measured t: a larger a0 needs a smaller a1
     assert set(distilled.correlation) == {"a0,a1"} and -0.99 <= distilled.correlation["a0,a1"] < -0.5
-    again = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE))
+    again = distil(CONFIG, INV_SQRT, t, sd, shots, jax_key(0, PROFILE))
     assert again == distilled  # one key, one profile
 
 
@@ -51,7 +53,7 @@ def test_the_correlation_of_draws_is_pearson_s_r_a_constant_one_left_out():
 
 def test_a_larger_a0_moves_the_posterior_with_it():
     t, sd, shots = law_measurements(a0=0.5, a1=1.0)
-    posterior = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE)).parameters
+    posterior = distil(CONFIG, INV_SQRT, t, sd, shots, jax_key(0, PROFILE)).parameters
     assert posterior["a0"].mean == pytest.approx(0.5, abs=2 * posterior["a0"].sd + 0.05)
     assert posterior["a1"].mean == pytest.approx(1.0, rel=0.15)
 
@@ -61,7 +63,7 @@ def test_an_instrument_without_a0_gets_an_honest_spread_not_a_pinned_0():
     # the uniform prior) squeeze to a0 = 0.0001 +- 0.0002; NUTS's posterior spreads over what
     # the data allow, a0 >= 0 pulling a1 a little below 2 along the ridge
     t, sd, shots = law_measurements(a0=0.0)
-    distilled = distil(CONFIG, t, sd, shots, jax_key(0, PROFILE))
+    distilled = distil(CONFIG, INV_SQRT, t, sd, shots, jax_key(0, PROFILE))
     a0, a1 = distilled.parameters["a0"], distilled.parameters["a1"]
     assert 0.03 < a0.sd < 0.15 and 0.0 < a0.mean < 0.2
     assert a1.mean == pytest.approx(2.0, rel=0.1) and a1.sd > 0.07
@@ -91,13 +93,13 @@ def test_a_fit_is_at_a_bound_when_every_draw_is(a0, a1, low, expected):
 )
 def test_measurements_no_law_can_be_fitted_to_say_why(change, message):
     with pytest.raises(NotDistillable, match=message):
-        distil(CONFIG, *change(*law_measurements()), jax_key(0, PROFILE))
+        distil(CONFIG, INV_SQRT, *change(*law_measurements()), jax_key(0, PROFILE))
 
 
 def test_a_noise_field_is_distilled_by_distil_field():
     field = CONFIG.with_overrides(noise_model={"field": {}})
     with pytest.raises(NotDistillable, match="depends on x"):
-        distil(field, *law_measurements(), jax_key(0, PROFILE))
+        distil(field, INV_SQRT, *law_measurements(), jax_key(0, PROFILE))
 
 
 def test_a_field_profile_pools_each_campaign_s_own_fit_with_lengths_in_x_units():
@@ -107,7 +109,7 @@ def test_a_field_profile_pools_each_campaign_s_own_fit_with_lengths_in_x_units()
     wide = field.with_overrides(space={"x_max": 10.0})
     x, t, sd, n = field_measurements()
     distilled = distil_field(
-        [FieldCampaign(field, x, t, sd, n), FieldCampaign(wide, 10 * x, t, sd, n)], jax_key(0, PROFILE)
+        [FieldCampaign(field, x, t, sd, n), FieldCampaign(wide, 10 * x, t, sd, n)], INV_SQRT, jax_key(0, PROFILE)
     )
     posterior = distilled.parameters
     assert set(distilled.correlation) == {"a0,a1"} and distilled.correlation["a0,a1"] < 0
@@ -131,14 +133,14 @@ def test_a_field_profile_pools_each_campaign_s_own_fit_with_lengths_in_x_units()
 def test_field_campaigns_no_law_can_be_fitted_to_say_why(campaigns, message):
     field = CONFIG.with_overrides(noise_model={"field": {}})
     with pytest.raises(NotDistillable, match=message):
-        distil_field(campaigns(field, field_measurements(positions=5)), jax_key(0, PROFILE))
+        distil_field(campaigns(field, field_measurements(positions=5)), INV_SQRT, jax_key(0, PROFILE))
 
 
 def test_a_field_campaign_without_a0_gets_an_honest_spread_not_a_pinned_0():
     # As for one law: A0 = 0 puts the MAP of the level a0 at its bound (Laplace: 0.00015 +- 0.00019);
     # NUTS, given the field's fitted hyperparameters, spreads a0 over what the data allow
     field = CONFIG.with_overrides(noise_model={"field": {}})
-    distilled = distil_field([FieldCampaign(field, *field_measurements(a0=0.0))], jax_key(0, PROFILE))
+    distilled = distil_field([FieldCampaign(field, *field_measurements(a0=0.0))], INV_SQRT, jax_key(0, PROFILE))
     a0, a1 = distilled.parameters["a0"], distilled.parameters["a1"]
     assert 0.02 < a0.sd < 0.15 and 0.0 < a0.mean < 0.2
     assert a1.mean == pytest.approx(2.0, rel=0.1) and a1.sd > 0.07

@@ -6,10 +6,21 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from noisebo import registry
 from noisebo.config import NoiseModelConfig, NoiseProfile, ParameterPosterior, ProfileDriver
 from noisebo.models import profile_check
 from noisebo.models.noise_model import c4
-from noisebo.models.profile_check import NO_PROFILE, p_value, verdict
+from noisebo.models.profile_check import NO_PROFILE
+from noisebo.models.profile_check import p_value as p_value_with
+from noisebo.models.profile_check import verdict as verdict_with
+
+
+def p_value(cfg, *rest):
+    return p_value_with(cfg, registry.noise_law(cfg.mean), *rest)
+
+
+def verdict(cfg, *rest):
+    return verdict_with(cfg, registry.noise_law(cfg.mean), *rest)
 
 
 def profile_config(a0=0.1, a1=2.0, sd0=1e-9, sd1=1e-9, r=None, **extra) -> NoiseModelConfig:
