@@ -17,7 +17,9 @@ JAX reads and writes its entries under a file lock: processes that share the fol
 campaigns, a test run's workers) never read a program another is still writing. Without the cap
 JAX writes entries in place, unlocked, and a torn read costs a recompile and a warning.
 
-``configure()`` runs when the ``flows`` package is imported, before Prefect is. It also repairs
+``configure()`` is called by the command line first thing, before Prefect is imported; importing
+``noisebo.flows`` does not call it, so a Python program that imports the flows keeps its own
+Prefect and JAX settings unless it calls ``configure()`` itself (before it imports Prefect). It also repairs
 an entry a killed process left without its access time (``repair_cache``), which would otherwise
 stop JAX from keeping any new program in the folder.
 

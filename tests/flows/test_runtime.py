@@ -7,11 +7,11 @@ import sys
 from noisebo.flows import runtime
 
 
-def test_importing_flows_sets_the_temporary_servers_defaults_and_keeps_what_is_set():
+def test_configure_sets_the_temporary_servers_defaults_and_keeps_what_is_set():
     env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_")}
     env["PREFECT_LOGGING_LEVEL"] = "DEBUG"
     code = (
-        "import os, flows.campaign\n"
+        "import os\nfrom noisebo.flows import runtime\nruntime.configure()\nimport noisebo.flows.campaign\n"
         "print(os.environ['PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS'], os.environ['PREFECT_LOGGING_LEVEL'],"
         " os.environ['PREFECT_HOME'].endswith('.prefect'))"
     )

@@ -17,10 +17,28 @@ ROOT = Path(__file__).resolve().parents[2]
 DECISIONS = ROOT / "benchmarks" / "compare_decisions.py"
 
 
+# What noisebo.flows.runtime.configure() sets (the test process has run it), so a fresh process
+# starts without them: an import that set them again would show.
+CONFIGURED = {
+    "JAX_ENABLE_X64",
+    "OPENBLAS_NUM_THREADS",
+    "DO_NOT_TRACK",
+    "PREFECT_SERVER_ANALYTICS_ENABLED",
+    "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS",
+    "PREFECT_LOGGING_LEVEL",
+    "TQDM_DISABLE",
+    "TF_CPP_MIN_LOG_LEVEL",
+    "NOISEBO_PROGRAM_CACHE",
+    "JAX_COMPILATION_CACHE_DIR",
+    "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
+    "JAX_COMPILATION_CACHE_MAX_SIZE",
+}
+
+
 def fresh(code: str | Path, *args: str, **env: str) -> subprocess.CompletedProcess:
-    """``code`` (a script's path, or Python source) in a new interpreter, JAX in its default mode
-    unless ``env`` says otherwise."""
-    clean = {k: v for k, v in os.environ.items() if k not in {"JAX_ENABLE_X64", "OPENBLAS_NUM_THREADS"}}
+    """``code`` (a script's path, or Python source) in a new interpreter, without the settings
+    ``CONFIGURED`` (JAX in its default mode) unless ``env`` gives them."""
+    clean = {k: v for k, v in os.environ.items() if k not in CONFIGURED}
     return subprocess.run(
         [sys.executable, *([str(code)] if isinstance(code, Path) else ["-c", code]), *args],
         env={**clean, **env},
@@ -31,16 +49,22 @@ def fresh(code: str | Path, *args: str, **env: str) -> subprocess.CompletedProce
     )
 
 
-def test_importing_noisebo_sets_nothing_in_the_process():
+@pytest.mark.parametrize(
+    "modules",
+    ["noisebo, noisebo.config, noisebo.campaign.driver, noisebo.instruments", "noisebo.flows, noisebo.flows.campaign"],
+    ids=["core", "flows"],
+)
+def test_importing_noisebo_sets_nothing_in_the_process(modules):
     code = (
-        "import os, json\nbefore = dict(os.environ)\n"
-        "import noisebo, noisebo.config, noisebo.campaign.driver, noisebo.instruments\n"
-        "import jax, jax.numpy as jnp\n"
+        # JAX sets two variables of its own when it loads (TF_CPP_MIN_LOG_LEVEL, TPU_SKIP_MDS_QUERY)
+        "import os, json, jax, jax.numpy as jnp\nbefore = dict(os.environ)\n"
+        f"import {modules}\n"
         "changed = sorted(k for k in set(before) | set(os.environ) if before.get(k) != os.environ.get(k))\n"
-        "print(json.dumps([changed, bool(jax.config.jax_enable_x64), str(jnp.ones(2).dtype)]))"
+        "cache = jax.config.jax_compilation_cache_dir\n"
+        "print(json.dumps([changed, bool(jax.config.jax_enable_x64), str(jnp.ones(2).dtype), cache]))"
     )
-    changed, x64, dtype = json.loads(fresh(code).stdout)
-    assert changed == [] and x64 is False and dtype == "float32"
+    changed, x64, dtype, cache = json.loads(fresh(code).stdout)
+    assert changed == [] and x64 is False and dtype == "float32" and not cache
 
 
 def test_a_campaign_leaves_the_process_in_float32_and_computes_in_float64():
