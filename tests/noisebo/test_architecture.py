@@ -19,7 +19,7 @@ PYPROJECT = ROOT / "pyproject.toml"
 LAYERS = "Layers: entry points over adapters over the core"
 FORBIDDEN = "The core imports no orchestration, storage, view or network package"
 EXTERNAL = ["prefect", "h5py", "rerun", "fastapi", "starlette", "uvicorn", "matplotlib", "httpx", "dask"]
-ENTRY_POINTS_AND_ADAPTERS = {"cli", "bridge", "flows", "tasks", "view", "storage", "instruments"}
+ENTRY_POINTS_AND_ADAPTERS = {"cli", "bridge", "flows", "beamline", "tasks", "view", "storage", "instruments"}
 DATA = {"configs", "scans"}
 
 
@@ -106,6 +106,8 @@ def test_the_copy_keeps_the_contracts(package_copy):
         ("storage", "from noisebo.view import frames\n", LAYERS, "noisebo.view.frames"),
         ("tasks", "from noisebo.flows import campaign\n", LAYERS, "noisebo.flows.campaign"),
         ("flows", "from noisebo.cli import main\n", LAYERS, "noisebo.cli.main"),
+        ("beamline", "from noisebo.flows import campaign\n", LAYERS, "noisebo.flows.campaign"),
+        ("campaign", "def f():\n    from bluesky import plan_stubs\n", FORBIDDEN, "bluesky"),
         ("models", "def f():\n    import h5py\n", FORBIDDEN, "h5py"),
         ("acquisition", "from prefect import flow\n", FORBIDDEN, "prefect"),
     ],

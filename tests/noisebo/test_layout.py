@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[2] / "noisebo"
-ADAPTERS = {"flows", "tasks", "instruments", "storage", "view", "cli", "bridge"}
+ADAPTERS = {"flows", "tasks", "instruments", "storage", "view", "cli", "bridge", "beamline"}
 CORE_FILES = sorted(
     p for p in PACKAGE.rglob("*.py") if p.relative_to(PACKAGE).parts[0] not in ADAPTERS | {"configs", "scans"}
 )
@@ -23,6 +23,10 @@ FORBIDDEN = {f"noisebo.{name}" for name in ADAPTERS} | {
     "httpx",
     "prefect_dask",
     "dask",
+    "bluesky",
+    "ophyd_async",
+    "softioc",
+    "aioca",
 }
 
 

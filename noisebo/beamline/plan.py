@@ -1,0 +1,197 @@
+"""A noisebo campaign as a bluesky plan: the user's RunEngine moves their axes, sets the exposure,
+triggers and reads their detector; noisebo decides where, how long and how many shots.
+
+    RE(campaign_plan(config, [stage_x], detector, detector.value, exposure=detector.exposure,
+                     path="runs/sample.h5"))
+
+One bluesky run per call. Its start document carries the campaign (``noisebo``: the config, the
+seed, noisebo's version, the campaign file); its ``primary`` stream has one event per shot (the
+detector's reading, the axes', and the shot's point, index and t); its ``decisions`` stream one
+event per BO decision (x, t, shots, the predicted optimal t, whether the noise model converged).
+The campaign's journal stays the source of truth, written before each shot's event is emitted,
+and its HDF5 file is kept as ``noisebo run`` keeps it: a run that ends early (an abort, a failure,
+a killed process) is continued by calling the plan again with the same ``path``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from bluesky import plan_stubs as bps
+
+import noisebo
+from noisebo.campaign import engine
+from noisebo.campaign.compile_ahead import CompileAhead
+from noisebo.campaign.driver import now_utc
+from noisebo.campaign.engine import EngineState
+from noisebo.config import CampaignConfig
+from noisebo.events import Decided, DecisionDue, Done, DriverInfo, Request, Status
+from noisebo.precision import float64
+from noisebo.reduction import Reading
+from noisebo.storage.recorder import Recorder, package_versions
+
+DECISIONS = "decisions"
+
+
+class Values:
+    """A readable of plain values, for a stream's fields that no device holds (bluesky's
+    ``Readable``: ``name``, ``read()``, ``describe()``). A stream is read from the same objects
+    every event: ``update`` gives the next event's values (the same names, kinds and shapes)."""
+
+    parent = None
+
+    def __init__(self, name: str, values: dict[str, Any]) -> None:
+        self.name, self.values = name, dict(values)
+
+    def update(self, **values: Any) -> Values:
+        self.values.update(values)
+        return self
+
+    def read(self) -> dict[str, dict]:
+        now = time.time()
+        return {f"{self.name}_{key}": {"value": value, "timestamp": now} for key, value in self.values.items()}
+
+    def describe(self) -> dict[str, dict]:
+        return {f"{self.name}_{key}": _data_key(value) for key, value in self.values.items()}
+
+
+def _data_key(value) -> dict:
+    array = np.asarray(value)
+    kind = "string" if array.dtype.kind in "US" else "integer" if array.dtype.kind in "iub" else "number"
+    if array.ndim:
+        return {"source": "noisebo", "dtype": "array", "shape": list(array.shape), "dtype_numpy": array.dtype.str}
+    return {"source": "noisebo", "dtype": kind, "shape": []}
+
+
+def campaign_plan(
+    config: CampaignConfig,
+    axes: Sequence[Any],
+    detector: Any,
+    value: Any,
+    *,
+    exposure: Any = None,
+    path: str | Path,
+    seed: int = 0,
+    shot_key: Any = None,
+    md: dict | None = None,
+):
+    """The whole campaign of ``config`` as one bluesky run (see the module's docstring).
+
+    ``axes``: one bluesky ``Movable`` per axis of x, in the config's order (``space.axes``);
+    ``detector``: a ``Triggerable`` and ``Readable``; ``value``: the signal of the detector's
+    reading that is a shot's value (its ``name`` keys the reading); ``exposure``: a ``Movable``
+    that takes a shot's t in seconds (the detector's exposure time), or None for a detector that is
+    prepared with ``TriggerInfo(livetime=t)`` (an ophyd-async ``StandardDetector``); ``path``: the
+    campaign's HDF5 file (its journal beside it): a new campaign, or one to continue;
+    ``shot_key``: a simulated detector's (seed, point, shot) signals, so a shot is the one
+    noisebo's simulator draws for that key (``noisebo.beamline.sim_ioc``); ``md``: more metadata
+    for the start document. Returns the campaign's final state."""
+    if len(axes) != config.space.dimensions:
+        raise ValueError(f"the config has {config.space.dimensions} axes of x; {len(axes)} movables were given")
+    recorder, resumed = _recorder(config, Path(path), seed)
+    state = recorder.state
+    start = {"noisebo": _campaign_md(state, recorder.h5_path, resumed)} | dict(md or {})
+    ahead = CompileAhead()
+    try:
+        yield from bps.open_run(md=start)
+        ahead.after(state)
+        state = yield from _loop(recorder, state, axes, detector, value, exposure, shot_key, ahead)
+        yield from bps.close_run()
+        return state
+    except BaseException as error:  # a RunEngine abort or stop, a failed device, a closed generator
+        if recorder.state.status is Status.RUNNING:
+            reason = f"the bluesky run ended: {type(error).__name__}: {error}".rstrip(": ")
+            recorder.commit(recorder.state, engine.stop(recorder.state, Status.ABORTED, reason))
+        raise
+    finally:
+        ahead.join()
+        recorder.close()
+
+
+def _recorder(config: CampaignConfig, path: Path, seed: int) -> tuple[Recorder, bool]:
+    if path.exists():
+        recorder = Recorder.resume(path)
+        if recorder.state.config != config or recorder.state.seed != seed:
+            recorder.close()
+            raise ValueError(f"{path} holds another campaign (its own config or seed); give a new path")
+        return recorder, True
+    info = DriverInfo("bluesky", noisebo.__version__, {})
+    started = engine.new_campaign(config, seed, info, package_versions(), now_utc())
+    return Recorder.create(path, started), False
+
+
+def _campaign_md(state: EngineState, path: Path, resumed: bool) -> dict:
+    return {
+        "config": state.config.model_dump(mode="json"),
+        "seed": state.seed,
+        "version": noisebo.__version__,
+        "file": str(path),
+        "resumed": resumed,
+        "points_before": len(state.points),
+    }
+
+
+@float64
+def _decide(state: EngineState):
+    return engine.advance(state)
+
+
+def _loop(recorder: Recorder, state: EngineState, axes, detector, value, exposure, shot_key, ahead: CompileAhead):
+    while True:
+        step = engine.ask(state)
+        if isinstance(step, Done):
+            return state
+        if isinstance(step, DecisionDue):
+            events = _decide(state)
+            state = recorder.commit(state, events)
+            ahead.after(state)
+            for event in events:
+                if isinstance(event, Decided):
+                    yield from _emit_decision(event)
+            continue
+        assert isinstance(step, Request)
+        reading = yield from _shot(state, step, axes, detector, value, exposure, shot_key)
+        state = recorder.commit(state, engine.tell(state, step, {step.taken: reading}, decide_next=False).events)
+
+
+def _shot(state: EngineState, step: Request, axes, detector, value, exposure, shot_key):
+    """One shot of ``step``: move, expose for t, trigger and read; the reading of ``value``."""
+    moves = [arg for axis, x in zip(axes, step.x) for arg in (axis, float(x))]
+    yield from bps.mv(*moves)
+    if exposure is not None:
+        yield from bps.mv(exposure, float(step.t))
+    else:
+        from ophyd_async.core import TriggerInfo
+
+        yield from bps.prepare(detector, TriggerInfo(livetime=float(step.t)), wait=True)
+    if shot_key is not None:
+        yield from bps.mv(shot_key.seed, state.seed, shot_key.point, step.point, shot_key.shot, step.taken)
+    shot = SHOT_INFO.update(point=step.point, shot=step.taken, t=float(step.t))
+    readings = yield from bps.trigger_and_read([detector, *axes, shot])
+    return Reading(float(readings[value.name]["value"]))
+
+
+def _emit_decision(event: Decided):
+    d = event.decision
+    fields = {
+        "step": d.step,
+        "x": np.asarray(d.x, dtype=np.float64),
+        "t": float(d.t),
+        "shots": int(d.shots),
+        "t_opt": float(d.t_opt),
+        "converged": bool(d.converged),
+        "acq_value": float(d.acq_value),
+        "latency_s": float(d.latency_s),
+    }
+    yield from bps.create(name=DECISIONS)
+    yield from bps.read(DECISION.update(**fields))
+    yield from bps.save()
+
+
+# The readables of the two streams' own fields: one object each, as a stream's events must be
+# read from the same objects.
+SHOT_INFO = Values("noisebo", {"point": 0, "shot": 0, "t": 0.0})
+DECISION = Values("decision", {})

@@ -1,0 +1,65 @@
+"""ophyd-async devices over Channel Access for the simulated IOC (``noisebo.beamline.sim_ioc``):
+an axis per dimension of x and a detector whose exposure is the shot's t. They are the devices a
+test, the example and the benchmark hand to the plan; a beamline hands it its own."""
+
+from __future__ import annotations
+
+import time
+
+from bluesky.protocols import Movable, Triggerable
+from ophyd_async.core import AsyncStatus, StandardReadable, StandardReadableFormat
+from ophyd_async.epics.core import epics_signal_r, epics_signal_rw
+
+TIMEOUT_S = 10.0  # how long a put or a read may wait on the IOC beyond what it should take
+
+
+class SimAxis(StandardReadable, Movable[float]):
+    """Axis ``index`` of the IOC: ``set(x)`` puts the setpoint and completes when the readback
+    has arrived (the IOC's put completes then)."""
+
+    def __init__(self, prefix: str, index: int, name: str = "") -> None:
+        with self.add_children_as_readables(StandardReadableFormat.HINTED_SIGNAL):
+            self.readback = epics_signal_r(float, f"{prefix}M{index}:RBV", timeout=TIMEOUT_S)
+        self.setpoint = epics_signal_rw(float, f"{prefix}M{index}", timeout=TIMEOUT_S)
+        super().__init__(name=name)
+
+    @AsyncStatus.wrap
+    async def set(self, value: float) -> None:
+        await self.setpoint.set(float(value), timeout=None)
+
+
+class ShotKey(StandardReadable):
+    """The simulated detector's random stream of a shot: (seed, point, shot)."""
+
+    def __init__(self, prefix: str, name: str = "") -> None:
+        self.seed = epics_signal_rw(int, f"{prefix}SEED", timeout=TIMEOUT_S)
+        self.point = epics_signal_rw(int, f"{prefix}POINT", timeout=TIMEOUT_S)
+        self.shot = epics_signal_rw(int, f"{prefix}SHOT", timeout=TIMEOUT_S)
+        super().__init__(name=name)
+
+
+class SimDetector(StandardReadable, Triggerable):
+    """The IOC's detector: ``exposure`` (s) is set before a shot, ``trigger()`` exposes and
+    completes when ``value`` holds the shot's value. A put that completes sooner than the exposure
+    means the IOC went away (Channel Access completes a put whose server vanished): the trigger
+    fails then, rather than read a stale value."""
+
+    def __init__(self, prefix: str, name: str = "") -> None:
+        with self.add_children_as_readables(StandardReadableFormat.HINTED_UNCACHED_SIGNAL):
+            self.value = epics_signal_r(float, f"{prefix}VALUE", timeout=TIMEOUT_S)
+        with self.add_children_as_readables(StandardReadableFormat.CONFIG_SIGNAL):
+            self.exposure = epics_signal_rw(float, f"{prefix}EXPOSURE", timeout=TIMEOUT_S)
+        self.acquire = epics_signal_rw(bool, f"{prefix}ACQUIRE", timeout=TIMEOUT_S)
+        self.key = ShotKey(prefix)
+        super().__init__(name=name)
+
+    @AsyncStatus.wrap
+    async def trigger(self) -> None:
+        exposure = await self.exposure.get_value()
+        started = time.monotonic()
+        await self.acquire.set(True, timeout=exposure + TIMEOUT_S)
+        took = time.monotonic() - started
+        if took < 0.95 * exposure:
+            raise ConnectionError(
+                f"{self.name}: the exposure of {exposure:g} s ended after {took:.3f} s: the IOC went away"
+            )

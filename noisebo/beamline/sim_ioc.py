@@ -1,0 +1,161 @@
+"""An EPICS IOC (pythonSoftIOC) serving one of noisebo's simulators over Channel Access: a motor
+per axis of x and a detector whose exposure sets the noise, for the bluesky path's tests, example
+and benchmark.
+
+    python -m noisebo.beamline.sim_ioc PREFIX: CONFIG [--velocity UNITS_PER_S]
+
+serves, for the campaign config CONFIG's instrument (a simulator: Forrester, Branin, ...):
+
+    PREFIX:M{i}          ao   axis i's setpoint; a put completes when the axis has arrived
+    PREFIX:M{i}:RBV      ai   axis i's readback (moves at --velocity, units of x per s)
+    PREFIX:EXPOSURE      ao   the exposure t (s)
+    PREFIX:ACQUIRE       bo   put 1: expose for t and read; the put completes when the value is in
+    PREFIX:VALUE         ai   the last shot's value
+    PREFIX:SEED, PREFIX:POINT, PREFIX:SHOT   longout   the shot's random stream: with them set, a
+                         shot is the one noisebo's own simulator draws for (seed, point, shot), so a
+                         campaign through the IOC decides as ``noisebo run`` does. A real detector
+                         has nothing like them.
+
+Channel Access stays on the addresses the environment names (EPICS_CAS_INTF_ADDR_LIST). The line
+``NOISEBO_IOC_READY PREFIX`` on stdout says the records are served.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import math
+import os
+import selectors
+import subprocess
+import sys
+import time
+import uuid
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+READY = "NOISEBO_IOC_READY"
+STEP_S = 0.01  # the readback's update period while an axis moves
+
+
+def serve(prefix: str, config_path: str, velocity: float) -> None:
+    from softioc import asyncio_dispatcher, builder, softioc
+
+    from noisebo.config import load_config
+    from noisebo.instruments import build
+    from noisebo.keys import MEASURE, numpy_rng
+
+    config = load_config(config_path)
+    simulator = build(config.instrument)
+    if not callable(getattr(simulator, "simulate", None)):
+        raise SystemExit(f"sim_ioc: {config.instrument.kind!r} is not a simulator (it has no simulate)")
+    dispatcher = asyncio_dispatcher.AsyncioDispatcher()
+    builder.SetDeviceName(prefix.removesuffix(":"))
+    readbacks = [_axis(builder, i, axis.low, velocity) for i, axis in enumerate(config.space.axes)]
+    exposure = builder.aOut("EXPOSURE", initial_value=config.space.t_min, PREC=6, EGU="s", DRVL=0.0)
+    value = builder.aIn("VALUE", initial_value=math.nan, PREC=9)
+    key = {name: builder.longOut(name, initial_value=0, DRVL=0) for name in ("SEED", "POINT", "SHOT")}
+
+    async def acquire_shot(start) -> None:
+        if not start:
+            return
+        t = float(exposure.get())
+        await asyncio.sleep(t)
+        x = np.array([float(rb.get()) for rb in readbacks])
+        rng = numpy_rng(int(key["SEED"].get()), MEASURE, int(key["POINT"].get()), int(key["SHOT"].get()))
+        value.set(float(simulator.simulate(x, max(t, 1e-9), rng).value))
+        acquire.set(0, process=False)
+
+    acquire = builder.boolOut(
+        "ACQUIRE",
+        initial_value=0,
+        ZNAM="Idle",
+        ONAM="Acquire",
+        on_update=acquire_shot,
+        always_update=True,
+        blocking=True,
+    )
+    builder.LoadDatabase()
+    softioc.iocInit(dispatcher, enable_pva=False)
+    print(f"{READY} {prefix}", flush=True)
+    softioc.non_interactive_ioc()
+
+
+def _axis(builder, index: int, start: float, velocity: float):
+    readback = builder.aIn(f"M{index}:RBV", initial_value=start, PREC=9)
+
+    async def move(target) -> None:
+        position = float(readback.get())
+        while abs(target - position) > 1e-12:
+            position += math.copysign(min(abs(target - position), velocity * STEP_S), target - position)
+            readback.set(position)
+            await asyncio.sleep(STEP_S)
+        readback.set(float(target))
+
+    builder.aOut(f"M{index}", initial_value=start, PREC=9, on_update=move, always_update=True, blocking=True)
+    return readback
+
+
+LOOPBACK = {
+    "EPICS_CA_ADDR_LIST": "127.0.0.1",
+    "EPICS_CA_AUTO_ADDR_LIST": "NO",
+    "EPICS_CAS_INTF_ADDR_LIST": "127.0.0.1",
+}
+
+
+@contextmanager
+def running_ioc(config: str | Path, prefix: str | None = None, velocity: float = 10.0, timeout_s: float = 60.0):
+    """The simulated IOC for ``config`` in a process of its own, for as long as the ``with``
+    lasts; yields its prefix (default a new one, "NB<8 hex digits>:"). Channel Access stays on
+    loopback unless the environment names other addresses (``LOOPBACK``)."""
+    prefix = prefix or f"NB{uuid.uuid4().hex[:8]}:"
+    env = {**LOOPBACK, **os.environ}
+    command = [sys.executable, "-u", "-m", "noisebo.beamline.sim_ioc", prefix, str(config), "--velocity", str(velocity)]
+    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        _wait_until_ready(process, prefix, timeout_s)
+        yield prefix
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        if process.stdout is not None:
+            process.stdout.close()
+
+
+def _wait_until_ready(process: subprocess.Popen, prefix: str, timeout_s: float) -> None:
+    assert process.stdout is not None
+    said: list[str] = []
+    deadline = time.monotonic() + timeout_s
+    with selectors.DefaultSelector() as selector:
+        selector.register(process.stdout, selectors.EVENT_READ)
+        while time.monotonic() < deadline:
+            if not selector.select(timeout=max(deadline - time.monotonic(), 0.0)):
+                break
+            line = process.stdout.readline()
+            if line.startswith(f"{READY} {prefix}"):
+                return
+            if not line and process.poll() is not None:
+                raise RuntimeError(f"the simulated IOC exited ({process.returncode}): {''.join(said[-20:]).strip()}")
+            said.append(line)
+    raise TimeoutError(f"the simulated IOC was not ready within {timeout_s:g} s: {''.join(said[-20:]).strip()}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m noisebo.beamline.sim_ioc", description=__doc__.splitlines()[0])
+    parser.add_argument("prefix", help="the records' prefix, ending in a colon: NB1: serves NB1:M0, NB1:EXPOSURE, ...")
+    parser.add_argument("config", help="a campaign config whose instrument is a simulator")
+    parser.add_argument("--velocity", type=float, default=10.0, help="axis speed, units of x per s (default 10)")
+    args = parser.parse_args(argv)
+    if not args.prefix.endswith(":") or len(args.prefix) < 2:
+        parser.error(f"the prefix must end in a colon, as NB1: does; got {args.prefix!r}")
+    serve(args.prefix, args.config, args.velocity)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
