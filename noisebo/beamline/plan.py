@@ -10,7 +10,14 @@ detector's reading, the axes', and the shot's point, index and t); its ``decisio
 event per BO decision (x, t, shots, the predicted optimal t, whether the noise model converged).
 The campaign's journal stays the source of truth, written before each shot's event is emitted,
 and its HDF5 file is kept as ``noisebo run`` keeps it: a run that ends early (an abort, a failure,
-a killed process) is continued by calling the plan again with the same ``path``.
+a killed process) is continued by calling the plan again with the same ``path``, in a new run.
+
+A pause (Ctrl-C, ``RE.request_pause()``) comes between shots, or goes back to the start of the shot
+under way, which is taken again on resume: nothing of a shot is journaled before its reading. A
+device that fails (a failed status, a put or read that timed out, a detector whose IOC went away)
+makes a failed attempt, journaled with its reason and tried again within the campaign's failure
+budget (``schedule.min_failed``, ``schedule.tolerated_rate``); past it the campaign fails and the
+run closes with exit status "fail", to be continued once the instrument is back.
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ from typing import Any, Sequence
 
 import numpy as np
 from bluesky import plan_stubs as bps
+from bluesky.utils import FailedStatus, RunEngineControlException
 
 import noisebo
 from noisebo.campaign import engine
@@ -28,12 +36,17 @@ from noisebo.campaign.compile_ahead import CompileAhead
 from noisebo.campaign.driver import now_utc
 from noisebo.campaign.engine import EngineState
 from noisebo.config import CampaignConfig
-from noisebo.events import Decided, DecisionDue, Done, DriverInfo, Request, Status
+from noisebo.events import Decided, DecisionDue, Done, DriverInfo, Request, ShotError, Status
 from noisebo.precision import float64
 from noisebo.reduction import Reading
 from noisebo.storage.recorder import Recorder, package_versions
 
 DECISIONS = "decisions"
+
+
+class CampaignNotCompleted(RuntimeError):
+    """The campaign ended without completing (failed: its failure budget exceeded): the run is
+    closed with exit status "fail", and the plan called again with the same path continues it."""
 
 
 class Values:
@@ -99,7 +112,12 @@ def campaign_plan(
         yield from bps.open_run(md=start)
         ahead.after(state)
         state = yield from _loop(recorder, state, axes, detector, value, exposure, shot_key, ahead)
-        yield from bps.close_run()
+        ended_well = state.status in (Status.COMPLETED, Status.BUDGET_SPENT)
+        yield from bps.close_run(exit_status="success" if ended_well else "fail", reason=state.reason)
+        if not ended_well:
+            raise CampaignNotCompleted(
+                f"the campaign {state.status.value}: {state.reason}; continue it with the plan and path={str(path)!r}"
+            )
         return state
     except BaseException as error:  # a RunEngine abort or stop, a failed device, a closed generator
         if recorder.state.status is Status.RUNNING:
@@ -151,10 +169,31 @@ def _loop(recorder: Recorder, state: EngineState, axes, detector, value, exposur
             for event in events:
                 if isinstance(event, Decided):
                     yield from _emit_decision(event)
+            yield from bps.checkpoint()
             continue
         assert isinstance(step, Request)
-        reading = yield from _shot(state, step, axes, detector, value, exposure, shot_key)
-        state = recorder.commit(state, engine.tell(state, step, {step.taken: reading}, decide_next=False).events)
+        yield from bps.checkpoint()  # a pause goes back to the start of the shot, not before
+        outcome = yield from _attempt(state, step, axes, detector, value, exposure, shot_key)
+        state = recorder.commit(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
+        if isinstance(outcome, Reading):  # journaled first: its event follows
+            yield from bps.save()
+        yield from bps.checkpoint()  # nothing before here is taken again after a pause
+
+
+def _attempt(state: EngineState, step: Request, axes, detector, value, exposure, shot_key):
+    """One attempt at the shot ``step`` wants: its reading (its ``primary`` event read and not yet
+    saved: the caller journals the shot first), or the ``ShotError`` that a device's
+    failure (a status that failed, a put or read that timed out, a detector whose IOC went away)
+    makes of it, recorded as a failed attempt that the engine asks for again within the
+    campaign's failure budget. The RunEngine's own pause, stop and abort pass through."""
+    try:
+        return (yield from _shot(state, step, axes, detector, value, exposure, shot_key))
+    except RunEngineControlException:
+        raise
+    except Exception as error:  # noqa: BLE001 - whatever a device raised: a failed attempt, named
+        cause = error.__cause__ if isinstance(error, FailedStatus) and error.__cause__ is not None else error
+        kind = "timeout" if isinstance(cause, TimeoutError) else "instrument error"
+        return ShotError(kind, f"{type(cause).__name__}: {cause}".rstrip(": "))
 
 
 def _shot(state: EngineState, step: Request, axes, detector, value, exposure, shot_key):
@@ -169,9 +208,16 @@ def _shot(state: EngineState, step: Request, axes, detector, value, exposure, sh
         yield from bps.prepare(detector, TriggerInfo(livetime=float(step.t)), wait=True)
     if shot_key is not None:
         yield from bps.mv(shot_key.seed, state.seed, shot_key.point, step.point, shot_key.shot, step.taken)
-    shot = SHOT_INFO.update(point=step.point, shot=step.taken, t=float(step.t))
-    readings = yield from bps.trigger_and_read([detector, *axes, shot])
-    return Reading(float(readings[value.name]["value"]))
+    yield from bps.trigger(detector, wait=True)
+    yield from bps.create(name="primary")
+    try:
+        readings: dict = {}
+        for readable in (detector, *axes, SHOT_INFO.update(point=step.point, shot=step.taken, t=float(step.t))):
+            readings |= yield from bps.read(readable)
+        return Reading(float(readings[value.name]["value"]))
+    except Exception:
+        yield from bps.drop()
+        raise
 
 
 def _emit_decision(event: Decided):

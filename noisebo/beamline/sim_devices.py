@@ -15,26 +15,29 @@ TIMEOUT_S = 10.0  # how long a put or a read may wait on the IOC beyond what it 
 
 class SimAxis(StandardReadable, Movable[float]):
     """Axis ``index`` of the IOC: ``set(x)`` puts the setpoint and completes when the readback
-    has arrived (the IOC's put completes then)."""
+    has arrived (the IOC's put completes then), or fails after ``move_timeout_s``."""
 
-    def __init__(self, prefix: str, index: int, name: str = "") -> None:
+    def __init__(
+        self, prefix: str, index: int, name: str = "", timeout_s: float = TIMEOUT_S, move_timeout_s: float = 60.0
+    ) -> None:
         with self.add_children_as_readables(StandardReadableFormat.HINTED_SIGNAL):
-            self.readback = epics_signal_r(float, f"{prefix}M{index}:RBV", timeout=TIMEOUT_S)
-        self.setpoint = epics_signal_rw(float, f"{prefix}M{index}", timeout=TIMEOUT_S)
+            self.readback = epics_signal_r(float, f"{prefix}M{index}:RBV", timeout=timeout_s)
+        self.setpoint = epics_signal_rw(float, f"{prefix}M{index}", timeout=timeout_s)
+        self._move_timeout_s = move_timeout_s
         super().__init__(name=name)
 
     @AsyncStatus.wrap
     async def set(self, value: float) -> None:
-        await self.setpoint.set(float(value), timeout=None)
+        await self.setpoint.set(float(value), timeout=self._move_timeout_s)
 
 
 class ShotKey(StandardReadable):
     """The simulated detector's random stream of a shot: (seed, point, shot)."""
 
-    def __init__(self, prefix: str, name: str = "") -> None:
-        self.seed = epics_signal_rw(int, f"{prefix}SEED", timeout=TIMEOUT_S)
-        self.point = epics_signal_rw(int, f"{prefix}POINT", timeout=TIMEOUT_S)
-        self.shot = epics_signal_rw(int, f"{prefix}SHOT", timeout=TIMEOUT_S)
+    def __init__(self, prefix: str, name: str = "", timeout_s: float = TIMEOUT_S) -> None:
+        self.seed = epics_signal_rw(int, f"{prefix}SEED", timeout=timeout_s)
+        self.point = epics_signal_rw(int, f"{prefix}POINT", timeout=timeout_s)
+        self.shot = epics_signal_rw(int, f"{prefix}SHOT", timeout=timeout_s)
         super().__init__(name=name)
 
 
@@ -42,22 +45,24 @@ class SimDetector(StandardReadable, Triggerable):
     """The IOC's detector: ``exposure`` (s) is set before a shot, ``trigger()`` exposes and
     completes when ``value`` holds the shot's value. A put that completes sooner than the exposure
     means the IOC went away (Channel Access completes a put whose server vanished): the trigger
-    fails then, rather than read a stale value."""
+    fails then, rather than read a stale value. ``timeout_s``: how long a put or read may wait
+    on the IOC beyond what it should take."""
 
-    def __init__(self, prefix: str, name: str = "") -> None:
+    def __init__(self, prefix: str, name: str = "", timeout_s: float = TIMEOUT_S) -> None:
         with self.add_children_as_readables(StandardReadableFormat.HINTED_UNCACHED_SIGNAL):
-            self.value = epics_signal_r(float, f"{prefix}VALUE", timeout=TIMEOUT_S)
+            self.value = epics_signal_r(float, f"{prefix}VALUE", timeout=timeout_s)
         with self.add_children_as_readables(StandardReadableFormat.CONFIG_SIGNAL):
-            self.exposure = epics_signal_rw(float, f"{prefix}EXPOSURE", timeout=TIMEOUT_S)
-        self.acquire = epics_signal_rw(bool, f"{prefix}ACQUIRE", timeout=TIMEOUT_S)
-        self.key = ShotKey(prefix)
+            self.exposure = epics_signal_rw(float, f"{prefix}EXPOSURE", timeout=timeout_s)
+        self.acquire = epics_signal_rw(bool, f"{prefix}ACQUIRE", timeout=timeout_s)
+        self.key = ShotKey(prefix, timeout_s=timeout_s)
+        self._timeout_s = timeout_s
         super().__init__(name=name)
 
     @AsyncStatus.wrap
     async def trigger(self) -> None:
         exposure = await self.exposure.get_value()
         started = time.monotonic()
-        await self.acquire.set(True, timeout=exposure + TIMEOUT_S)
+        await self.acquire.set(True, timeout=exposure + self._timeout_s)
         took = time.monotonic() - started
         if took < 0.95 * exposure:
             raise ConnectionError(

@@ -32,6 +32,7 @@ import sys
 import time
 import uuid
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -105,18 +106,28 @@ LOOPBACK = {
 }
 
 
+@dataclass(frozen=True)
+class SimIoc:
+    """A simulated IOC running in ``process``, serving its records under ``prefix``."""
+
+    prefix: str
+    process: subprocess.Popen
+
+
 @contextmanager
 def running_ioc(config: str | Path, prefix: str | None = None, velocity: float = 10.0, timeout_s: float = 60.0):
     """The simulated IOC for ``config`` in a process of its own, for as long as the ``with``
-    lasts; yields its prefix (default a new one, "NB<8 hex digits>:"). Channel Access stays on
-    loopback unless the environment names other addresses (``LOOPBACK``)."""
+    lasts (a ``SimIoc``; ``prefix`` default a new one, "NB<8 hex digits>:"). Channel Access stays
+    on loopback unless the environment names other addresses (``LOOPBACK``). Run one at a time
+    on a host: with searches sent to 127.0.0.1 alone, the last IOC to bind the server port
+    answers them all."""
     prefix = prefix or f"NB{uuid.uuid4().hex[:8]}:"
     env = {**LOOPBACK, **os.environ}
     command = [sys.executable, "-u", "-m", "noisebo.beamline.sim_ioc", prefix, str(config), "--velocity", str(velocity)]
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         _wait_until_ready(process, prefix, timeout_s)
-        yield prefix
+        yield SimIoc(prefix, process)
     finally:
         process.terminate()
         try:

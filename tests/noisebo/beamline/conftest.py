@@ -1,13 +1,17 @@
-"""Channel Access on loopback only: set before any CA client or server starts in this process or
-its children, so nothing leaves the machine."""
+"""Channel Access on loopback only, set before any CA client or server starts in this process or
+its children, so nothing leaves the machine; and a server port of this process's own, so IOCs
+that other test processes run at the same time never answer this one's searches."""
 
 import os
 
-LOOPBACK = {
-    "EPICS_CA_ADDR_LIST": "127.0.0.1",
-    "EPICS_CA_AUTO_ADDR_LIST": "NO",
-    "EPICS_CAS_INTF_ADDR_LIST": "127.0.0.1",
-    "EPICS_PVA_ADDR_LIST": "127.0.0.1",
-    "EPICS_PVA_AUTO_ADDR_LIST": "NO",
-}
-os.environ.update(LOOPBACK)
+from tests.noisebo.beamline.ports import free_port
+
+
+os.environ.update(
+    {
+        "EPICS_CA_ADDR_LIST": "127.0.0.1",
+        "EPICS_CA_AUTO_ADDR_LIST": "NO",
+        "EPICS_CAS_INTF_ADDR_LIST": "127.0.0.1",
+        "EPICS_CA_SERVER_PORT": str(free_port()),  # the IOCs started from here inherit it
+    }
+)

@@ -1,7 +1,11 @@
 """A campaign through the bluesky plan, for real: a softioc IOC in its own process serving the
 Forrester simulator over Channel Access, ophyd-async devices, a RunEngine. The journal and the
-HDF5 file are those of ``noisebo run``, and the decisions are the same, shot for shot."""
+HDF5 file are those of ``noisebo run``, and the decisions are the same, shot for shot, through a
+pause, an abort and an IOC that dies mid-campaign."""
 
+import threading
+import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -12,9 +16,11 @@ pytest.importorskip("ophyd_async")
 pytest.importorskip("softioc")
 
 from bluesky import RunEngine  # noqa: E402
+from bluesky import plan_stubs as bps  # noqa: E402
+from bluesky.utils import RunEngineInterrupted  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
-from noisebo.beamline.plan import DECISIONS, campaign_plan  # noqa: E402
+from noisebo.beamline.plan import DECISIONS, CampaignNotCompleted, campaign_plan  # noqa: E402
 from noisebo.beamline.sim_devices import SimAxis, SimDetector  # noqa: E402
 from noisebo.beamline.sim_ioc import running_ioc  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
@@ -25,51 +31,129 @@ from noisebo.storage.record import read_record  # noqa: E402
 ROOT = Path(__file__).resolve().parents[3]
 FORRESTER = ROOT / "data" / "configs" / "forrester.yaml"
 
-
-# Milliseconds of exposure, so the IOC's shots take as long as they say and the test stays short.
+# Milliseconds of exposure, so the IOC's shots take as long as they say and the tests stay short.
 QUICK = load_config(FORRESTER).with_overrides(
     space={"t_min": 0.002, "t_max": 0.05}, schedule={"n_steps": 3, "shots_before": 8}
 )
 
 
-@pytest.fixture(scope="module")
-def forrester_ioc():
-    with running_ioc(FORRESTER) as prefix:
-        yield prefix
-
-
-@pytest.fixture
-def bluesky_devices(forrester_ioc):
+def connected(prefix: str, timeout_s: float = 10.0):
+    """A RunEngine, the IOC's axis and detector connected to it, and the documents it emits."""
     engine = RunEngine({}, call_returns_result=True)
     with init_devices(timeout=10.0):
-        x = SimAxis(forrester_ioc, 0)
-        det = SimDetector(forrester_ioc)
+        x = SimAxis(prefix, 0, timeout_s=timeout_s, move_timeout_s=timeout_s)
+        det = SimDetector(prefix, timeout_s=timeout_s)
     documents: list[tuple[str, dict]] = []
     engine.subscribe(lambda name, doc: documents.append((name, doc)))
     return engine, x, det, documents
 
 
-def test_a_campaign_through_the_run_engine_decides_as_noisebo_run_does(bluesky_devices, tmp_path):
-    engine, x, det, documents = bluesky_devices
-    config = QUICK
-    path = tmp_path / "forrester.h5"
-    result = engine(campaign_plan(config, [x], det, det.value, exposure=det.exposure, path=path, shot_key=det.key))
-    assert result.exit_status == "success"
+@pytest.fixture
+def forrester_ioc():
+    # One IOC at a time: with Channel Access searches sent to 127.0.0.1 only, the last IOC to bind
+    # the server port on this host answers them, so two at once would hide each other.
+    with running_ioc(FORRESTER) as ioc:
+        yield ioc
 
+
+def primary(documents) -> list[dict]:
+    descriptors = {doc["uid"]: doc["name"] for name, doc in documents if name == "descriptor"}
+    return [doc["data"] for name, doc in documents if name == "event" and descriptors[doc["descriptor"]] == "primary"]
+
+
+def same_as_alone(path: Path, config=QUICK):
+    """The campaign file at ``path``, completed with the points ``noisebo run`` takes."""
     alone = run_campaign(config, build(config.instrument), seed=0).state
     record = read_record(path)
     assert record.status == "completed"
     np.testing.assert_array_equal(record.points.x, alone.positions(1)[:, 0])
     np.testing.assert_array_equal(record.points.t, alone.column("t"))
     np.testing.assert_array_equal(record.points.value, alone.column("value"))
+    return record
+
+
+def at_event(engine, documents, count: int, then):
+    """Call ``then()`` from another thread (as an operator would: the RunEngine's own thread
+    emits the documents) once the ``count``-th primary event is out; returns the subscription."""
+
+    def callback(name, doc):
+        if name == "event" and len(primary(documents)) == count:
+            threading.Thread(target=then).start()
+
+    return engine.subscribe(callback)
+
+
+def test_a_campaign_through_the_run_engine_decides_as_noisebo_run_does(forrester_ioc, tmp_path):
+    engine, x, det, documents = connected(forrester_ioc.prefix)
+    path = tmp_path / "forrester.h5"
+    result = engine(campaign_plan(QUICK, [x], det, det.value, exposure=det.exposure, path=path, shot_key=det.key))
+    assert result.exit_status == "success"
+    record = same_as_alone(path)
 
     names = [name for name, _ in documents]
     start = next(doc for name, doc in documents if name == "start")
     stop = next(doc for name, doc in documents if name == "stop")
     assert names[0] == "start" and names[-1] == "stop" and stop["exit_status"] == "success"
     assert start["noisebo"]["seed"] == 0 and start["noisebo"]["file"] == str(path)
+    assert start["noisebo"]["config"]["name"] == QUICK.name and start["noisebo"]["resumed"] is False
     assert stop["num_events"] == {"primary": len(record.shots.t), DECISIONS: len(record.steps.step)}
-    descriptors = {doc["uid"]: doc["name"] for name, doc in documents if name == "descriptor"}
-    shots = [doc["data"] for name, doc in documents if name == "event" and descriptors[doc["descriptor"]] == "primary"]
+    shots = primary(documents)
     assert [s[det.value.name] for s in shots] == list(record.shots.value)
     assert [s["noisebo_t"] for s in shots] == list(record.shots.t)
+    assert [(s["noisebo_point"], s["noisebo_shot"]) for s in shots] == list(zip(record.shots.point, record.shots.shot))
+
+
+def test_a_paused_run_resumes_and_an_aborted_one_continues_in_a_new_run_each_shot_once(forrester_ioc, tmp_path):
+    engine, x, det, documents = connected(forrester_ioc.prefix)
+    path = tmp_path / "forrester.h5"
+    plan = partial(campaign_plan, QUICK, [x], det, det.value, exposure=det.exposure, path=path, shot_key=det.key)
+
+    token = at_event(engine, documents, 12, engine.request_pause)  # as Ctrl-C: at the next checkpoint
+    with pytest.raises(RunEngineInterrupted):
+        engine(plan())
+    engine.unsubscribe(token)
+    token = at_event(engine, documents, 30, engine.request_pause)
+    with pytest.raises(RunEngineInterrupted):
+        engine.resume()
+    engine.unsubscribe(token)
+    aborted = engine.abort("the operator stopped it")
+    assert aborted.exit_status == "abort"
+    first = read_record(path)
+    assert first.status == "aborted" and "RequestAbort" in first.status_reason
+    assert len(first.shots.t) == len(primary(documents)) == 30  # every event a journaled shot, none twice
+
+    assert engine(plan()).exit_status == "success"
+    record = same_as_alone(path)
+    starts = [doc["noisebo"] for name, doc in documents if name == "start"]
+    assert [s["resumed"] for s in starts] == [False, True] and starts[1]["points_before"] == len(first.points)
+    shots = primary(documents)
+    assert [s[det.value.name] for s in shots] == list(record.shots.value)  # each shot once, over both runs
+
+
+def test_an_ioc_that_dies_fails_the_campaign_within_its_budget_and_it_continues_once_back(tmp_path):
+    config = QUICK.with_overrides(schedule={"min_failed": 3, "tolerated_rate": 0.05})
+    path = tmp_path / "forrester.h5"
+    with running_ioc(FORRESTER) as ioc:
+        engine, x, det, documents = connected(ioc.prefix, timeout_s=1.0)
+        at_event(engine, documents, 20, ioc.process.kill)
+        plan = partial(campaign_plan, config, [x], det, det.value, exposure=det.exposure, path=path, shot_key=det.key)
+        with pytest.raises(CampaignNotCompleted, match="the campaign failed: failure budget exceeded"):
+            engine(plan())
+    stop = next(doc for name, doc in documents if name == "stop")
+    assert stop["exit_status"] == "fail" and "failure budget exceeded" in stop["reason"]
+    failed = read_record(path)
+    assert failed.status == "failed" and "failure budget exceeded" in failed.status_reason
+    assert len(failed.shots.t) == 20 and len(failed.failures.reason) == 3
+    assert all("Error" in reason for reason in failed.failures.reason)  # each names what failed
+
+    with running_ioc(FORRESTER, prefix=ioc.prefix):
+        deadline = time.monotonic() + 30
+        while True:  # Channel Access finds the server again within seconds
+            try:
+                engine(bps.rd(det.exposure))
+                break
+            except Exception:
+                assert time.monotonic() < deadline, "the devices did not reconnect"
+        assert engine(plan()).exit_status == "success"
+    record = same_as_alone(path, config)
+    assert len(record.failures.reason) == 3
