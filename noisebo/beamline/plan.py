@@ -44,6 +44,14 @@ from noisebo.storage.recorder import Recorder, package_versions
 DECISIONS = "decisions"
 
 
+class NotInReading(KeyError):
+    """The value's signal is not among what the plan reads: a mistake in the call, not a shot
+    that failed, so the campaign stops at the first shot (journaled as aborted)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 class CampaignNotCompleted(RuntimeError):
     """The campaign ended without completing (failed: its failure budget exceeded): the run is
     closed with exit status "fail", and the plan called again with the same path continues it."""
@@ -104,6 +112,11 @@ def campaign_plan(
     for the start document. Returns the campaign's final state."""
     if len(axes) != config.space.dimensions:
         raise ValueError(f"the config has {config.space.dimensions} axes of x; {len(axes)} movables were given")
+    if exposure is None and not callable(getattr(detector, "prepare", None)):
+        raise ValueError(
+            f"{getattr(detector, 'name', detector)!r} cannot be prepared with an exposure (it has no prepare): "
+            "give exposure=, the signal that sets its exposure time"
+        )
     recorder, resumed = _recorder(config, Path(path), seed)
     state = recorder.state
     start = {"noisebo": _campaign_md(state, recorder.h5_path, resumed)} | dict(md or {})
@@ -188,7 +201,7 @@ def _attempt(state: EngineState, step: Request, axes, detector, value, exposure,
     campaign's failure budget. The RunEngine's own pause, stop and abort pass through."""
     try:
         return (yield from _shot(state, step, axes, detector, value, exposure, shot_key))
-    except RunEngineControlException:
+    except (RunEngineControlException, NotInReading):
         raise
     except Exception as error:  # noqa: BLE001 - whatever a device raised: a failed attempt, named
         cause = error.__cause__ if isinstance(error, FailedStatus) and error.__cause__ is not None else error
@@ -214,6 +227,10 @@ def _shot(state: EngineState, step: Request, axes, detector, value, exposure, sh
         readings: dict = {}
         for readable in (detector, *axes, SHOT_INFO.update(point=step.point, shot=step.taken, t=float(step.t))):
             readings |= yield from bps.read(readable)
+        if value.name not in readings:
+            raise NotInReading(
+                f"the shot's readings have no {value.name!r} (the value); they have {', '.join(readings)}"
+            )
         return Reading(float(readings[value.name]["value"]))
     except Exception:
         yield from bps.drop()

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import time
 
-from bluesky.protocols import Movable, Triggerable
-from ophyd_async.core import AsyncStatus, StandardReadable, StandardReadableFormat
+from bluesky.protocols import Movable, Preparable, Triggerable
+from ophyd_async.core import AsyncStatus, StandardReadable, StandardReadableFormat, TriggerInfo
 from ophyd_async.epics.core import epics_signal_r, epics_signal_rw
 
 TIMEOUT_S = 10.0  # how long a put or a read may wait on the IOC beyond what it should take
@@ -68,3 +68,15 @@ class SimDetector(StandardReadable, Triggerable):
             raise ConnectionError(
                 f"{self.name}: the exposure of {exposure:g} s ended after {took:.3f} s: the IOC went away"
             )
+
+
+class SimPreparedDetector(SimDetector, Preparable):
+    """The IOC's detector as a detector that is prepared for its exposures, as an ophyd-async
+    ``StandardDetector`` is: ``prepare(TriggerInfo(livetime=t))`` sets the exposure (the plan's
+    path when no exposure signal is given)."""
+
+    @AsyncStatus.wrap
+    async def prepare(self, value: TriggerInfo) -> None:
+        if value.livetime is None:
+            raise ValueError(f"{self.name}: prepared without a livetime: no exposure to set")
+        await self.exposure.set(float(value.livetime))

@@ -20,8 +20,8 @@ from bluesky import plan_stubs as bps  # noqa: E402
 from bluesky.utils import RunEngineInterrupted  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
-from noisebo.beamline.plan import DECISIONS, CampaignNotCompleted, campaign_plan  # noqa: E402
-from noisebo.beamline.sim_devices import SimAxis, SimDetector  # noqa: E402
+from noisebo.beamline.plan import DECISIONS, CampaignNotCompleted, NotInReading, campaign_plan  # noqa: E402
+from noisebo.beamline.sim_devices import SimAxis, SimDetector, SimPreparedDetector  # noqa: E402
 from noisebo.beamline.sim_ioc import running_ioc  # noqa: E402
 from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.config import load_config  # noqa: E402
@@ -103,6 +103,16 @@ def test_a_campaign_through_the_run_engine_decides_as_noisebo_run_does(forrester
     assert [(s["noisebo_point"], s["noisebo_shot"]) for s in shots] == list(zip(record.shots.point, record.shots.shot))
 
 
+def test_a_detector_prepared_with_its_livetime_takes_the_same_campaign(forrester_ioc, tmp_path):
+    engine = RunEngine({}, call_returns_result=True)
+    with init_devices(timeout=10.0):
+        x = SimAxis(forrester_ioc.prefix, 0)
+        det = SimPreparedDetector(forrester_ioc.prefix)
+    path = tmp_path / "forrester.h5"
+    assert engine(campaign_plan(QUICK, [x], det, det.value, path=path, shot_key=det.key)).exit_status == "success"
+    same_as_alone(path)
+
+
 def test_a_paused_run_resumes_and_an_aborted_one_continues_in_a_new_run_each_shot_once(forrester_ioc, tmp_path):
     engine, x, det, documents = connected(forrester_ioc.prefix)
     path = tmp_path / "forrester.h5"
@@ -157,3 +167,48 @@ def test_an_ioc_that_dies_fails_the_campaign_within_its_budget_and_it_continues_
         assert engine(plan()).exit_status == "success"
     record = same_as_alone(path, config)
     assert len(record.failures.reason) == 3
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "message"),
+    [
+        (
+            lambda x, det, path: campaign_plan(QUICK, [x, x], det, det.value, exposure=det.exposure, path=path),
+            ValueError,
+            "the config has 1 axes of x; 2 movables were given",
+        ),
+        (
+            lambda x, det, path: campaign_plan(QUICK, [x], det, det.value, path=path),
+            ValueError,
+            "cannot be prepared with an exposure .* give exposure=",
+        ),
+        (
+            lambda x, det, path: campaign_plan(QUICK, [x], det, det.value, exposure=det.exposure, path=path, seed=1),
+            ValueError,
+            "holds another campaign",
+        ),
+        (
+            lambda x, det, path: campaign_plan(QUICK, [x], det, det.acquire, exposure=det.exposure, path=path),
+            NotInReading,
+            "the shot's readings have no 'det-acquire' \\(the value\\); they have det-value",
+        ),
+    ],
+    ids=["axes", "no exposure", "another campaign", "value not read"],
+)
+def test_a_plan_called_wrongly_says_what_is_wrong(forrester_ioc, tmp_path, call, error, message):
+    engine, x, det, _ = connected(forrester_ioc.prefix)
+    path = tmp_path / "forrester.h5"
+    if "another" in message:  # a campaign of seed 0 is there already
+        engine(
+            campaign_plan(
+                QUICK.with_overrides(schedule={"n_steps": 1}),
+                [x],
+                det,
+                det.value,
+                exposure=det.exposure,
+                path=path,
+                shot_key=det.key,
+            )
+        )
+    with pytest.raises(error, match=message):
+        engine(call(x, det, path))
