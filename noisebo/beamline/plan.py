@@ -23,6 +23,7 @@ run closes with exit status "fail", to be continued once the instrument is back.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -121,10 +122,11 @@ def campaign_plan(
     state = recorder.state
     start = {"noisebo": _campaign_md(state, recorder.h5_path, resumed)} | dict(md or {})
     ahead = CompileAhead()
+    rig = Rig(tuple(axes), detector, value, exposure, shot_key)
     try:
         yield from bps.open_run(md=start)
         ahead.after(state)
-        state = yield from _loop(recorder, state, axes, detector, value, exposure, shot_key, ahead)
+        state = yield from _loop(recorder, state, rig, ahead)
         ended_well = state.status in (Status.COMPLETED, Status.BUDGET_SPENT)
         yield from bps.close_run(exit_status="success" if ended_well else "fail", reason=state.reason)
         if not ended_well:
@@ -170,7 +172,21 @@ def _decide(state: EngineState):
     return engine.advance(state)
 
 
-def _loop(recorder: Recorder, state: EngineState, axes, detector, value, exposure, shot_key, ahead: CompileAhead):
+@dataclass
+class Rig:
+    """The devices a campaign runs on (see ``campaign_plan``), and where they were last set:
+    ``placed``, the (x, t) of the shots under way (None: not known, as after a failed attempt).
+    The shots of a point after its first move nothing."""
+
+    axes: tuple
+    detector: Any
+    value: Any
+    exposure: Any
+    shot_key: Any
+    placed: tuple | None = None
+
+
+def _loop(recorder: Recorder, state: EngineState, rig: Rig, ahead: CompileAhead):
     while True:
         step = engine.ask(state)
         if isinstance(step, Done):
@@ -186,46 +202,62 @@ def _loop(recorder: Recorder, state: EngineState, axes, detector, value, exposur
             continue
         assert isinstance(step, Request)
         yield from bps.checkpoint()  # a pause goes back to the start of the shot, not before
-        outcome = yield from _attempt(state, step, axes, detector, value, exposure, shot_key)
+        outcome = yield from _attempt(state, step, rig)
         state = recorder.commit(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
         if isinstance(outcome, Reading):  # journaled first: its event follows
             yield from bps.save()
         yield from bps.checkpoint()  # nothing before here is taken again after a pause
 
 
-def _attempt(state: EngineState, step: Request, axes, detector, value, exposure, shot_key):
+def _attempt(state: EngineState, step: Request, rig: Rig):
     """One attempt at the shot ``step`` wants: its reading (its ``primary`` event read and not yet
     saved: the caller journals the shot first), or the ``ShotError`` that a device's
     failure (a status that failed, a put or read that timed out, a detector whose IOC went away)
     makes of it, recorded as a failed attempt that the engine asks for again within the
     campaign's failure budget. The RunEngine's own pause, stop and abort pass through."""
     try:
-        return (yield from _shot(state, step, axes, detector, value, exposure, shot_key))
+        return (yield from _shot(state, step, rig))
     except (RunEngineControlException, NotInReading):
+        rig.placed = None
         raise
     except Exception as error:  # noqa: BLE001 - whatever a device raised: a failed attempt, named
+        rig.placed = None
         cause = error.__cause__ if isinstance(error, FailedStatus) and error.__cause__ is not None else error
         kind = "timeout" if isinstance(cause, TimeoutError) else "instrument error"
         return ShotError(kind, f"{type(cause).__name__}: {cause}".rstrip(": "))
 
 
-def _shot(state: EngineState, step: Request, axes, detector, value, exposure, shot_key):
-    """One shot of ``step``: move, expose for t, trigger and read; the reading of ``value``."""
-    moves = [arg for axis, x in zip(axes, step.x) for arg in (axis, float(x))]
-    yield from bps.mv(*moves)
-    if exposure is not None:
-        yield from bps.mv(exposure, float(step.t))
+def _place(state: EngineState, step: Request, rig: Rig):
+    """Move the axes to the shot's x and set its exposure (a detector without an exposure signal is
+    prepared with it), unless they are there already."""
+    where = (step.x, step.t)
+    if rig.placed == where:
+        return
+    rig.placed = None
+    yield from bps.mv(*[arg for axis, x in zip(rig.axes, step.x) for arg in (axis, float(x))])
+    if rig.exposure is not None:
+        yield from bps.mv(rig.exposure, float(step.t))
     else:
         from ophyd_async.core import TriggerInfo
 
-        yield from bps.prepare(detector, TriggerInfo(livetime=float(step.t)), wait=True)
-    if shot_key is not None:
-        yield from bps.mv(shot_key.seed, state.seed, shot_key.point, step.point, shot_key.shot, step.taken)
-    yield from bps.trigger(detector, wait=True)
+        yield from bps.prepare(rig.detector, TriggerInfo(livetime=float(step.t)), wait=True)
+    if rig.shot_key is not None:
+        yield from bps.mv(rig.shot_key.seed, state.seed)
+    rig.placed = where
+
+
+def _shot(state: EngineState, step: Request, rig: Rig):
+    """One shot of ``step``: in place, expose for t, trigger and read; the reading of the value."""
+    yield from _place(state, step, rig)
+    if rig.shot_key is not None:
+        yield from bps.mv(rig.shot_key.point, step.point, rig.shot_key.shot, step.taken)
+    yield from bps.trigger(rig.detector, wait=True)
     yield from bps.create(name="primary")
+    value = rig.value
     try:
         readings: dict = {}
-        for readable in (detector, *axes, SHOT_INFO.update(point=step.point, shot=step.taken, t=float(step.t))):
+        shot = SHOT_INFO.update(point=step.point, shot=step.taken, t=float(step.t))
+        for readable in (rig.detector, *rig.axes, shot):
             readings |= yield from bps.read(readable)
         if value.name not in readings:
             raise NotInReading(
