@@ -118,7 +118,7 @@ def campaign_plan(
             f"{getattr(detector, 'name', detector)!r} cannot be prepared with an exposure (it has no prepare): "
             "give exposure=, the signal that sets its exposure time"
         )
-    recorder, resumed = _recorder(config, Path(path), seed)
+    recorder, resumed = open_campaign(config, Path(path), seed)
     state = recorder.state
     start = {"noisebo": _campaign_md(state, recorder.h5_path, resumed)} | dict(md or {})
     ahead = CompileAhead()
@@ -144,7 +144,9 @@ def campaign_plan(
         recorder.close()
 
 
-def _recorder(config: CampaignConfig, path: Path, seed: int) -> tuple[Recorder, bool]:
+def open_campaign(config: CampaignConfig, path: Path, seed: int) -> tuple[Recorder, bool]:
+    """The campaign at ``path``: continued when it holds one of this config and seed (True), else
+    begun there (False); another campaign there is refused."""
     if path.exists():
         recorder = Recorder.resume(path)
         if recorder.state.config != config or recorder.state.seed != seed:
@@ -168,7 +170,8 @@ def _campaign_md(state: EngineState, path: Path, resumed: bool) -> dict:
 
 
 @float64
-def _decide(state: EngineState):
+def decide_due(state: EngineState):
+    """The events of the decision that is due (``engine.advance``), computed in float64."""
     return engine.advance(state)
 
 
@@ -192,7 +195,7 @@ def _loop(recorder: Recorder, state: EngineState, rig: Rig, ahead: CompileAhead)
         if isinstance(step, Done):
             return state
         if isinstance(step, DecisionDue):
-            events = _decide(state)
+            events = decide_due(state)
             state = recorder.commit(state, events)
             ahead.after(state)
             for event in events:
