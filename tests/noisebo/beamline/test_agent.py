@@ -2,8 +2,6 @@
 acquisition over the simulated IOC's devices, the outcomes read from the documents. The campaign
 it runs is the one ``noisebo run`` runs, point for point."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -18,16 +16,7 @@ from ophyd_async.core import init_devices  # noqa: E402
 from noisebo.beamline.agent import NoiseboOptimizer, ReadOutcomes  # noqa: E402
 from noisebo.beamline.sim_devices import SimAxis, SimDetector  # noqa: E402
 from noisebo.beamline.sim_ioc import running_ioc  # noqa: E402
-from noisebo.campaign.driver import run_campaign  # noqa: E402
-from noisebo.config import load_config  # noqa: E402
-from noisebo.instruments import build  # noqa: E402
-from noisebo.storage.record import read_record  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[3]
-FORRESTER = ROOT / "data" / "configs" / "forrester.yaml"
-QUICK = load_config(FORRESTER).with_overrides(
-    space={"t_min": 0.002, "t_max": 0.05}, schedule={"n_steps": 3, "shots_before": 8}
-)
+from tests.noisebo.beamline.quick import FORRESTER, QUICK, same_as_alone  # noqa: E402
 
 
 def test_blop_s_optimize_plan_runs_the_campaign_noisebo_run_runs(tmp_path):
@@ -49,12 +38,7 @@ def test_blop_s_optimize_plan_runs_the_campaign_noisebo_run_runs(tmp_path):
         best = optimizer.get_best_points()
         optimizer.close()
     assert result.exit_status == "success"
-    alone = run_campaign(QUICK, build(QUICK.instrument), seed=0).state
-    record = read_record(path)
-    assert record.status == "completed"
-    np.testing.assert_array_equal(record.points.x, alone.positions(1)[:, 0])
-    np.testing.assert_array_equal(record.points.t, alone.column("t"))
-    np.testing.assert_array_equal(record.points.value, alone.column("value"))
+    record = same_as_alone(path)
     [(trial, where, value)] = best
     k = int(np.argmax(record.points.value))
     assert trial == str(k) and where == {"x": record.points.x[k], "det-exposure": record.points.t[k]}

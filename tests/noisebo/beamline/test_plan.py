@@ -6,9 +6,7 @@ pause, an abort and an IOC that dies mid-campaign."""
 import threading
 import time
 from functools import partial
-from pathlib import Path
 
-import numpy as np
 import pytest
 
 pytest.importorskip("bluesky")
@@ -23,18 +21,8 @@ from ophyd_async.core import init_devices  # noqa: E402
 from noisebo.beamline.plan import DECISIONS, CampaignNotCompleted, NotInReading, campaign_plan  # noqa: E402
 from noisebo.beamline.sim_devices import SimAxis, SimDetector, SimPreparedDetector  # noqa: E402
 from noisebo.beamline.sim_ioc import running_ioc  # noqa: E402
-from noisebo.campaign.driver import run_campaign  # noqa: E402
-from noisebo.config import load_config  # noqa: E402
-from noisebo.instruments import build  # noqa: E402
 from noisebo.storage.record import read_record  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[3]
-FORRESTER = ROOT / "data" / "configs" / "forrester.yaml"
-
-# Milliseconds of exposure, so the IOC's shots take as long as they say and the tests stay short.
-QUICK = load_config(FORRESTER).with_overrides(
-    space={"t_min": 0.002, "t_max": 0.05}, schedule={"n_steps": 3, "shots_before": 8}
-)
+from tests.noisebo.beamline.quick import FORRESTER, QUICK, same_as_alone  # noqa: E402
 
 
 def connected(prefix: str, timeout_s: float = 10.0):
@@ -59,17 +47,6 @@ def forrester_ioc():
 def primary(documents) -> list[dict]:
     descriptors = {doc["uid"]: doc["name"] for name, doc in documents if name == "descriptor"}
     return [doc["data"] for name, doc in documents if name == "event" and descriptors[doc["descriptor"]] == "primary"]
-
-
-def same_as_alone(path: Path, config=QUICK):
-    """The campaign file at ``path``, completed with the points ``noisebo run`` takes."""
-    alone = run_campaign(config, build(config.instrument), seed=0).state
-    record = read_record(path)
-    assert record.status == "completed"
-    np.testing.assert_array_equal(record.points.x, alone.positions(1)[:, 0])
-    np.testing.assert_array_equal(record.points.t, alone.column("t"))
-    np.testing.assert_array_equal(record.points.value, alone.column("value"))
-    return record
 
 
 def at_event(engine, documents, count: int, then):
