@@ -27,8 +27,10 @@ import asyncio
 import math
 import os
 import selectors
+import signal
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from contextlib import contextmanager
@@ -124,6 +126,7 @@ def running_ioc(config: str | Path, prefix: str | None = None, velocity: float =
     prefix = prefix or f"NB{uuid.uuid4().hex[:8]}:"
     env = {**LOOPBACK, **os.environ}
     command = [sys.executable, "-u", "-m", "noisebo.beamline.sim_ioc", prefix, str(config), "--velocity", str(velocity)]
+    command += ["--parent", str(os.getpid())]
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         _wait_until_ready(process, prefix, timeout_s)
@@ -157,12 +160,35 @@ def _wait_until_ready(process: subprocess.Popen, prefix: str, timeout_s: float) 
     raise TimeoutError(f"the simulated IOC was not ready within {timeout_s:g} s: {''.join(said[-20:]).strip()}")
 
 
+def _end_with(parent: int) -> None:
+    """End this process (SIGTERM: the IOC exits cleanly) once ``parent`` is gone, so a killed
+    campaign never leaves its IOC serving: at once on Linux (the kernel's parent-death signal),
+    within half a second elsewhere (a thread that watches)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch, name="noisebo-ioc-parent", daemon=True).start()
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m noisebo.beamline.sim_ioc", description=__doc__.splitlines()[0])
     parser.add_argument("prefix", help="the records' prefix, ending in a colon: NB1: serves NB1:M0, NB1:EXPOSURE, ...")
     parser.add_argument("config", help="a campaign config whose instrument is a simulator")
     parser.add_argument("--velocity", type=float, default=10.0, help="axis speed, units of x per s (default 10)")
+    parser.add_argument("--parent", type=int, help="end when this process ends (running_ioc passes its own)")
     args = parser.parse_args(argv)
+    if args.parent is not None:
+        _end_with(args.parent)
     if not args.prefix.endswith(":") or len(args.prefix) < 2:
         parser.error(f"the prefix must end in a colon, as NB1: does; got {args.prefix!r}")
     serve(args.prefix, args.config, args.velocity)
