@@ -178,8 +178,8 @@ def decide_due(state: EngineState):
 @dataclass
 class Rig:
     """The devices a campaign runs on (see ``campaign_plan``), and where they were last set:
-    ``placed``, the (x, t) of the shots under way (None: not known, as after a failed attempt).
-    The shots of a point after its first move nothing."""
+    ``placed``, the (point, x, t) of the shots under way (None: not known, as after a failed
+    attempt). The shots of a point after its first move and set nothing."""
 
     axes: tuple
     detector: Any
@@ -232,8 +232,9 @@ def _attempt(state: EngineState, step: Request, rig: Rig):
 
 def _place(state: EngineState, step: Request, rig: Rig):
     """Move the axes to the shot's x and set its exposure (a detector without an exposure signal is
-    prepared with it), unless they are there already."""
-    where = (step.x, step.t)
+    prepared with it), and a simulated detector's seed and point, unless the point's earlier
+    shots did."""
+    where = (step.point, step.x, step.t)
     if rig.placed == where:
         return
     rig.placed = None
@@ -245,7 +246,7 @@ def _place(state: EngineState, step: Request, rig: Rig):
 
         yield from bps.prepare(rig.detector, TriggerInfo(livetime=float(step.t)), wait=True)
     if rig.shot_key is not None:
-        yield from bps.mv(rig.shot_key.seed, state.seed)
+        yield from bps.mv(rig.shot_key.seed, state.seed, rig.shot_key.point, step.point)
     rig.placed = where
 
 
@@ -253,7 +254,7 @@ def _shot(state: EngineState, step: Request, rig: Rig):
     """One shot of ``step``: in place, expose for t, trigger and read; the reading of the value."""
     yield from _place(state, step, rig)
     if rig.shot_key is not None:
-        yield from bps.mv(rig.shot_key.point, step.point, rig.shot_key.shot, step.taken)
+        yield from bps.mv(rig.shot_key.shot, step.taken)
     yield from bps.trigger(rig.detector, wait=True)
     yield from bps.create(name="primary")
     value = rig.value
