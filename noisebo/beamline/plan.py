@@ -23,7 +23,7 @@ run closes with exit status "fail", to be continued once the instrument is back.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -187,6 +187,10 @@ class Rig:
     exposure: Any
     shot_key: Any
     placed: tuple | None = None
+    # The readables of the streams' own fields, one each per campaign: a stream's events are read
+    # from the same objects every time.
+    shot_info: Values = field(default_factory=lambda: Values("noisebo", {"point": 0, "shot": 0, "t": 0.0}))
+    decision: Values = field(default_factory=lambda: Values("decision", {}))
 
 
 def _loop(recorder: Recorder, state: EngineState, rig: Rig, ahead: CompileAhead):
@@ -200,7 +204,7 @@ def _loop(recorder: Recorder, state: EngineState, rig: Rig, ahead: CompileAhead)
             ahead.after(state)
             for event in events:
                 if isinstance(event, Decided):
-                    yield from _emit_decision(event)
+                    yield from _emit_decision(event, rig.decision)
             yield from bps.checkpoint()
             continue
         assert isinstance(step, Request)
@@ -260,7 +264,7 @@ def _shot(state: EngineState, step: Request, rig: Rig):
     value = rig.value
     try:
         readings: dict = {}
-        shot = SHOT_INFO.update(point=step.point, shot=step.taken, t=float(step.t))
+        shot = rig.shot_info.update(point=step.point, shot=step.taken, t=float(step.t))
         for readable in (rig.detector, *rig.axes, shot):
             readings |= yield from bps.read(readable)
         if value.name not in readings:
@@ -273,9 +277,9 @@ def _shot(state: EngineState, step: Request, rig: Rig):
         raise
 
 
-def _emit_decision(event: Decided):
+def _emit_decision(event: Decided, decision: Values):
     d = event.decision
-    fields = {
+    values = {
         "step": d.step,
         "x": np.asarray(d.x, dtype=np.float64),
         "t": float(d.t),
@@ -286,11 +290,5 @@ def _emit_decision(event: Decided):
         "latency_s": float(d.latency_s),
     }
     yield from bps.create(name=DECISIONS)
-    yield from bps.read(DECISION.update(**fields))
+    yield from bps.read(decision.update(**values))
     yield from bps.save()
-
-
-# The readables of the two streams' own fields: one object each, as a stream's events must be
-# read from the same objects.
-SHOT_INFO = Values("noisebo", {"point": 0, "shot": 0, "t": 0.0})
-DECISION = Values("decision", {})
