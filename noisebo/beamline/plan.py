@@ -5,7 +5,7 @@ triggers and reads their detector; noisebo decides where, how long and how many 
                      path="runs/sample.h5"))
 
 One bluesky run per call. Its start document carries the campaign (``noisebo``: the config, the
-seed, noisebo's version, the campaign file); its ``primary`` stream has one event per shot (the
+seed, noisebo's version, the campaign file, the uids of the runs that took it before this one); its ``primary`` stream has one event per shot (the
 detector's reading, the axes', and the shot's point, index and t); its ``decisions`` stream one
 event per BO decision (x, t, shots, the predicted optimal t, whether the noise model converged).
 The campaign's journal stays the source of truth, written before each shot's event is emitted,
@@ -22,6 +22,7 @@ run closes with exit status "fail", to be continued once the instrument is back.
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,7 @@ from noisebo.config import CampaignConfig
 from noisebo.events import Decided, DecisionDue, Done, DriverInfo, Request, ShotError, Status
 from noisebo.precision import float64
 from noisebo.reduction import Reading
+from noisebo.storage import steps as numbering
 from noisebo.storage.recorder import Recorder, package_versions
 
 DECISIONS = "decisions"
@@ -51,6 +53,11 @@ class NotInReading(KeyError):
 
     def __str__(self) -> str:
         return str(self.args[0])
+
+
+class BeyondLimits(ValueError):
+    """An axis whose travel limits do not hold the config's range of x: refused before anything
+    moves."""
 
 
 class CampaignNotCompleted(RuntimeError):
@@ -80,6 +87,56 @@ class Values:
         return {f"{self.name}_{key}": _data_key(value) for key, value in self.values.items()}
 
 
+@dataclass(frozen=True)
+class Spectrum:
+    """A shot that is a sweep, as the PFM instruments take: three of the detector's array signals,
+    the sweep's ``frequency`` (Hz), ``amplitude`` (pm) and ``phase`` (deg), that ``reduction``
+    (the SHO fit) turns into the shot's value. Samples past the sweep's end may be NaN (a
+    fixed-length waveform holding a shorter sweep): the frequency's NaN mark them, and they are
+    dropped."""
+
+    frequency: Any
+    amplitude: Any
+    phase: Any
+    reduction: str = "sho"
+
+    def reading(self, readings: dict) -> Reading:
+        rows = np.stack(
+            [np.asarray(_field(readings, s), dtype=np.float32) for s in (self.frequency, self.amplitude, self.phase)]
+        )
+        return Reading(None, rows[:, np.isfinite(rows[0])], self.reduction)
+
+
+def _field(readings: dict, signal: Any):
+    if signal.name not in readings:
+        raise NotInReading(f"the shot's readings have no {signal.name!r} (the value); they have {', '.join(readings)}")
+    return readings[signal.name]["value"]
+
+
+def reading_of(value: Any, readings: dict) -> Reading:
+    """The shot that ``readings`` (a bluesky reading, by signal name) holds: ``value`` is the signal
+    whose number is the shot's value, or a ``Spectrum``."""
+    if isinstance(value, Spectrum):
+        return value.reading(readings)
+    return Reading(float(_field(readings, value)))
+
+
+class DecisionLines:
+    """A RunEngine subscriber that prints a line per decision of the ``decisions`` stream:
+    ``step 3: x 0.372, t 0.026 s, 8 shots``."""
+
+    def __init__(self, write=print) -> None:
+        self.write, self.streams = write, {}
+
+    def __call__(self, name: str, doc: dict) -> None:
+        if name == "descriptor":
+            self.streams[doc["uid"]] = doc["name"]
+        elif name == "event" and self.streams.get(doc["descriptor"]) == DECISIONS:
+            d = doc["data"]
+            x = ", ".join(f"{v:.4g}" for v in np.ravel(d["decision_x"]))
+            self.write(f"step {d['decision_step']}: x {x}, t {d['decision_t']:.4g} s, {d['decision_shots']} shots")
+
+
 def _data_key(value) -> dict:
     array = np.asarray(value)
     kind = "string" if array.dtype.kind in "US" else "integer" if array.dtype.kind in "iub" else "number"
@@ -99,18 +156,22 @@ def campaign_plan(
     seed: int = 0,
     shot_key: Any = None,
     md: dict | None = None,
+    rerun: str | None = None,
 ):
     """The whole campaign of ``config`` as one bluesky run (see the module's docstring).
 
     ``axes``: one bluesky ``Movable`` per axis of x, in the config's order (``space.axes``);
     ``detector``: a ``Triggerable`` and ``Readable``; ``value``: the signal of the detector's
-    reading that is a shot's value (its ``name`` keys the reading); ``exposure``: a ``Movable``
+    reading that is a shot's value (its ``name`` keys the reading), or a ``Spectrum`` of three
+    for a detector whose shot is a sweep; ``exposure``: a ``Movable``
     that takes a shot's t in seconds (the detector's exposure time), or None for a detector that is
     prepared with ``TriggerInfo(livetime=t)`` (an ophyd-async ``StandardDetector``); ``path``: the
     campaign's HDF5 file (its journal beside it): a new campaign, or one to continue;
     ``shot_key``: a simulated detector's (seed, point, shot) signals, so a shot is the one
     noisebo's simulator draws for that key (``noisebo.beamline.sim_ioc``); ``md``: more metadata
-    for the start document. Returns the campaign's final state."""
+    for the start document; ``rerun``: the campaign's Rerun view as ``noisebo run`` draws it,
+    "record" (NAME.rrd beside the file), "spawn" (a local viewer) or a viewer's gRPC url, or None.
+    Returns the campaign's final state."""
     if len(axes) != config.space.dimensions:
         raise ValueError(f"the config has {config.space.dimensions} axes of x; {len(axes)} movables were given")
     if exposure is None and not callable(getattr(detector, "prepare", None)):
@@ -118,15 +179,26 @@ def campaign_plan(
             f"{getattr(detector, 'name', detector)!r} cannot be prepared with an exposure (it has no prepare): "
             "give exposure=, the signal that sets its exposure time"
         )
+    yield from check_limits(config, axes)
     recorder, resumed = open_campaign(config, Path(path), seed)
     state = recorder.state
-    start = {"noisebo": _campaign_md(state, recorder.h5_path, resumed)} | dict(md or {})
+    runs = RunsFile.beside(recorder.h5_path)
+    start = {"noisebo": _campaign_md(state, recorder.h5_path, resumed, runs.uids())} | dict(md or {})
     ahead = CompileAhead()
     rig = Rig(tuple(axes), detector, value, exposure, shot_key)
+    view: Any = None
+
+    def commit(state: EngineState, events) -> EngineState:
+        state = recorder.commit(state, events)
+        if view is not None:
+            view.update(state)
+        return state
+
     try:
-        yield from bps.open_run(md=start)
+        view = _rerun_view(recorder, rerun)
+        runs.add((yield from bps.open_run(md=start)))
         ahead.after(state)
-        state = yield from _loop(recorder, state, rig, ahead)
+        state = yield from _loop(commit, state, rig, ahead)
         ended_well = state.status in (Status.COMPLETED, Status.BUDGET_SPENT)
         yield from bps.close_run(exit_status="success" if ended_well else "fail", reason=state.reason)
         if not ended_well:
@@ -142,6 +214,25 @@ def campaign_plan(
     finally:
         ahead.join()
         recorder.close()
+        if view is not None:
+            view.close()
+
+
+def check_limits(config: CampaignConfig, axes: Sequence[Any]):
+    """Refuse (``BeyondLimits``) an axis whose travel limits, where it has them as an
+    ophyd-async ``Motor`` does (``low_limit_travel``, ``high_limit_travel``; both 0: none), leave
+    out part of the config's range for it; a plan of reads only."""
+    for axis, spec in zip(axes, config.space.axes):
+        signals = getattr(axis, "low_limit_travel", None), getattr(axis, "high_limit_travel", None)
+        if None in signals:
+            continue
+        low = float((yield from bps.rd(signals[0])))
+        high = float((yield from bps.rd(signals[1])))
+        if (low, high) != (0.0, 0.0) and not low <= spec.low <= spec.high <= high:
+            raise BeyondLimits(
+                f"{axis.name}: its travel limits [{low:g}, {high:g}] do not hold the config's "
+                f"{spec.name} in [{spec.low:g}, {spec.high:g}]; nothing was moved"
+            )
 
 
 def open_campaign(config: CampaignConfig, path: Path, seed: int) -> tuple[Recorder, bool]:
@@ -158,7 +249,7 @@ def open_campaign(config: CampaignConfig, path: Path, seed: int) -> tuple[Record
     return Recorder.create(path, started), False
 
 
-def _campaign_md(state: EngineState, path: Path, resumed: bool) -> dict:
+def _campaign_md(state: EngineState, path: Path, resumed: bool, previous_runs: list[str]) -> dict:
     return {
         "config": state.config.model_dump(mode="json"),
         "seed": state.seed,
@@ -166,7 +257,48 @@ def _campaign_md(state: EngineState, path: Path, resumed: bool) -> dict:
         "file": str(path),
         "resumed": resumed,
         "points_before": len(state.points),
+        "previous_runs": previous_runs,
     }
+
+
+@dataclass(frozen=True)
+class RunsFile:
+    """The uids of the bluesky runs that took a campaign, oldest first, one per line in
+    ``<campaign file>.bluesky-runs`` beside it: a run that continues the campaign names those
+    before it (``previous_runs`` in its start document), so a catalogue links them."""
+
+    path: Path
+
+    @classmethod
+    def beside(cls, h5_path: Path) -> RunsFile:
+        return cls(h5_path.with_name(h5_path.name + ".bluesky-runs"))
+
+    def uids(self) -> list[str]:
+        if not self.path.exists():
+            return []
+        return [line for line in self.path.read_text(encoding="utf-8").splitlines() if line.strip()]
+
+    def add(self, uid: str) -> None:
+        with open(self.path, "a", encoding="utf-8") as file:
+            file.write(uid + "\n")
+            file.flush()
+            os.fsync(file.fileno())
+
+
+def _rerun_view(recorder: Recorder, rerun: str | None):
+    """The campaign's Rerun view (``campaign_plan``'s ``rerun``), or None."""
+    if rerun is None:
+        return None
+    from noisebo.view.recording import CampaignRecording, instrument_curves, rrd_path_for
+    from noisebo.view.rerun_view import RerunView
+
+    config = recorder.state.config
+    truth, law = instrument_curves(config, warn=print)
+    rrd, live = (rrd_path_for(recorder.h5_path), None) if rerun == "record" else (None, rerun)
+    view = RerunView(config, recorder.h5_path.stem, rrd=rrd, live=live, truth=truth, noise_law=law)
+    recording = CampaignRecording(view, config)
+    recording.update(recorder.state)
+    return recording
 
 
 @float64
@@ -193,14 +325,14 @@ class Rig:
     decision: Values = field(default_factory=lambda: Values("decision", {}))
 
 
-def _loop(recorder: Recorder, state: EngineState, rig: Rig, ahead: CompileAhead):
+def _loop(commit, state: EngineState, rig: Rig, ahead: CompileAhead):
     while True:
         step = engine.ask(state)
         if isinstance(step, Done):
             return state
         if isinstance(step, DecisionDue):
             events = decide_due(state)
-            state = recorder.commit(state, events)
+            state = commit(state, events)
             ahead.after(state)
             for event in events:
                 if isinstance(event, Decided):
@@ -210,7 +342,7 @@ def _loop(recorder: Recorder, state: EngineState, rig: Rig, ahead: CompileAhead)
         assert isinstance(step, Request)
         yield from bps.checkpoint()  # a pause goes back to the start of the shot, not before
         outcome = yield from _attempt(state, step, rig)
-        state = recorder.commit(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
+        state = commit(state, engine.tell(state, step, {step.taken: outcome}, decide_next=False).events)
         if isinstance(outcome, Reading):  # journaled first: its event follows
             yield from bps.save()
         yield from bps.checkpoint()  # nothing before here is taken again after a pause
@@ -223,7 +355,7 @@ def _attempt(state: EngineState, step: Request, rig: Rig):
     makes of it, recorded as a failed attempt that the engine asks for again within the
     campaign's failure budget. The RunEngine's own pause, stop and abort pass through."""
     try:
-        return (yield from _shot(state, step, rig))
+        return (yield from _shot(state.seed, step, rig))
     except (RunEngineControlException, NotInReading):
         rig.placed = None
         raise
@@ -234,7 +366,7 @@ def _attempt(state: EngineState, step: Request, rig: Rig):
         return ShotError(kind, f"{type(cause).__name__}: {cause}".rstrip(": "))
 
 
-def _place(state: EngineState, step: Request, rig: Rig):
+def _place(seed: int, step: Request, rig: Rig):
     """Move the axes to the shot's x and set its exposure (a detector without an exposure signal is
     prepared with it), and a simulated detector's seed and point, unless the point's earlier
     shots did."""
@@ -250,28 +382,38 @@ def _place(state: EngineState, step: Request, rig: Rig):
 
         yield from bps.prepare(rig.detector, TriggerInfo(livetime=float(step.t)), wait=True)
     if rig.shot_key is not None:
-        yield from bps.mv(rig.shot_key.seed, state.seed, rig.shot_key.point, step.point)
+        yield from bps.mv(rig.shot_key.seed, seed, rig.shot_key.point, step.point)
     rig.placed = where
 
 
-def _shot(state: EngineState, step: Request, rig: Rig):
-    """One shot of ``step``: in place, expose for t, trigger and read; the reading of the value."""
-    yield from _place(state, step, rig)
+def expose(seed: int, step: Request, rig: Rig):
+    """The exposure of one shot of ``step`` (of the campaign of random ``seed``): the axes and
+    the exposure in place, the detector triggered and done; nothing read yet."""
+    yield from _place(seed, step, rig)
     if rig.shot_key is not None:
         yield from bps.mv(rig.shot_key.shot, step.taken)
     yield from bps.trigger(rig.detector, wait=True)
+
+
+def shot_plan(seed: int, step: Request, rig: Rig):
+    """One shot outside a bluesky run (the ``bluesky`` driver's, under ``noisebo run``): exposed
+    and read, no documents emitted; its ``Reading``."""
+    yield from expose(seed, step, rig)
+    readings = yield from bps.read(rig.detector)
+    return reading_of(rig.value, readings)
+
+
+def _shot(seed: int, step: Request, rig: Rig):
+    """One shot of ``step``: exposed, then read as the ``primary`` stream's next event; the
+    reading of the value."""
+    yield from expose(seed, step, rig)
     yield from bps.create(name="primary")
-    value = rig.value
     try:
         readings: dict = {}
         shot = rig.shot_info.update(point=step.point, shot=step.taken, t=float(step.t))
         for readable in (rig.detector, *rig.axes, shot):
             readings |= yield from bps.read(readable)
-        if value.name not in readings:
-            raise NotInReading(
-                f"the shot's readings have no {value.name!r} (the value); they have {', '.join(readings)}"
-            )
-        return Reading(float(readings[value.name]["value"]))
+        return reading_of(rig.value, readings)
     except Exception:
         yield from bps.drop()
         raise
@@ -280,7 +422,7 @@ def _shot(state: EngineState, step: Request, rig: Rig):
 def _emit_decision(event: Decided, decision: Values):
     d = event.decision
     values = {
-        "step": d.step,
+        "step": numbering.shown(d.step),  # counted from 1, as in the campaign file
         "x": np.asarray(d.x, dtype=np.float64),
         "t": float(d.t),
         "shots": int(d.shots),

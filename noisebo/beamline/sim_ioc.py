@@ -6,11 +6,16 @@ and benchmark.
 
 serves, for the campaign config CONFIG's instrument (a simulator: Forrester, Branin, ...):
 
-    PREFIX:M{i}          ao   axis i's setpoint; a put completes when the axis has arrived
+    PREFIX:M{i}          ao   axis i's setpoint; a put completes when the axis has arrived; its
+                              DRVL, DRVH fields are the travel limits (the config's range, or
+                              --limits), a setpoint beyond them held at the limit as EPICS does
     PREFIX:M{i}:RBV      ai   axis i's readback (moves at --velocity, units of x per s)
     PREFIX:EXPOSURE      ao   the exposure t (s)
     PREFIX:ACQUIRE       bo   put 1: expose for t and read; the put completes when the value is in
-    PREFIX:VALUE         ai   the last shot's value
+    PREFIX:VALUE         ai   the last shot's value (NaN where a shot is a spectrum)
+    PREFIX:FREQUENCY, PREFIX:AMPLITUDE, PREFIX:PHASE   waveform (float32), for a simulator whose
+                         shots are resonance sweeps (PFM): the last sweep's rows (Hz, pm, deg),
+                         each as long as the longest sweep (t_max), NaN past the sweep's end
     PREFIX:SEED, PREFIX:POINT, PREFIX:SHOT   longout   the shot's random stream: with them set, a
                          shot is the one noisebo's own simulator draws for (seed, point, shot), so a
                          campaign through the IOC decides as ``noisebo run`` does. A real detector
@@ -43,7 +48,7 @@ READY = "NOISEBO_IOC_READY"
 STEP_S = 0.01  # the readback's update period while an axis moves
 
 
-def serve(prefix: str, config_path: str, velocity: float) -> None:
+def serve(prefix: str, config_path: str, velocity: float, limits: tuple[float, float] | None = None) -> None:
     from softioc import asyncio_dispatcher, builder, softioc
 
     from noisebo.config import load_config
@@ -56,10 +61,15 @@ def serve(prefix: str, config_path: str, velocity: float) -> None:
         raise SystemExit(f"sim_ioc: {config.instrument.kind!r} is not a simulator (it has no simulate)")
     dispatcher = asyncio_dispatcher.AsyncioDispatcher()
     builder.SetDeviceName(prefix.removesuffix(":"))
-    readbacks = [_axis(builder, i, axis.low, velocity) for i, axis in enumerate(config.space.axes)]
+    readbacks = [
+        _axis(builder, i, axis.low, velocity, limits or (axis.low, axis.high))
+        for i, axis in enumerate(config.space.axes)
+    ]
     exposure = builder.aOut("EXPOSURE", initial_value=config.space.t_min, PREC=6, EGU="s", DRVL=0.0)
     value = builder.aIn("VALUE", initial_value=math.nan, PREC=9)
     key = {name: builder.longOut(name, initial_value=0, DRVL=0) for name in ("SEED", "POINT", "SHOT")}
+    sweep = _longest_sweep(simulator, config)
+    rows = [builder.WaveformIn(name, np.full(sweep, np.nan, np.float32)) for name in SPECTRUM] if sweep else []
 
     async def acquire_shot(start) -> None:
         if not start:
@@ -68,7 +78,14 @@ def serve(prefix: str, config_path: str, velocity: float) -> None:
         await asyncio.sleep(t)
         x = np.array([float(rb.get()) for rb in readbacks])
         rng = numpy_rng(int(key["SEED"].get()), MEASURE, int(key["POINT"].get()), int(key["SHOT"].get()))
-        value.set(float(simulator.simulate(x, max(t, 1e-9), rng).value))
+        reading = simulator.simulate(x, max(t, 1e-9), rng)
+        if reading.spectrum is None:
+            value.set(float(reading.value))
+        else:
+            padded = np.full((len(SPECTRUM), sweep), np.nan, np.float32)
+            padded[:, : reading.spectrum.shape[1]] = reading.spectrum[:, :sweep]
+            for record, row in zip(rows, padded):
+                record.set(row)
         acquire.set(0, process=False)
 
     acquire = builder.boolOut(
@@ -86,7 +103,20 @@ def serve(prefix: str, config_path: str, velocity: float) -> None:
     softioc.non_interactive_ioc()
 
 
-def _axis(builder, index: int, start: float, velocity: float):
+SPECTRUM = ("FREQUENCY", "AMPLITUDE", "PHASE")
+
+
+def _longest_sweep(simulator, config) -> int:
+    """The samples of the longest sweep (at t_max) of a simulator whose shots are spectra; 0 for
+    one whose shots are values."""
+    from noisebo.keys import MEASURE, numpy_rng
+
+    x = np.array([axis.low for axis in config.space.axes])
+    shot = simulator.simulate(x, config.space.t_max, numpy_rng(0, MEASURE, 0, 0))
+    return 0 if shot.spectrum is None else int(shot.spectrum.shape[1])
+
+
+def _axis(builder, index: int, start: float, velocity: float, limits: tuple[float, float]):
     readback = builder.aIn(f"M{index}:RBV", initial_value=start, PREC=9)
 
     async def move(target) -> None:
@@ -97,14 +127,21 @@ def _axis(builder, index: int, start: float, velocity: float):
             await asyncio.sleep(STEP_S)
         readback.set(float(target))
 
-    builder.aOut(f"M{index}", initial_value=start, PREC=9, on_update=move, always_update=True, blocking=True)
+    low, high = limits
+    start = min(max(start, low), high)
+    builder.aOut(
+        f"M{index}", initial_value=start, PREC=9, DRVL=low, DRVH=high, on_update=move, always_update=True, blocking=True
+    )
     return readback
 
 
-LOOPBACK = {
+# Channel Access on loopback, and arrays up to 4 MB (a PFM sweep of 2 s is 80 kB; the default
+# limit is 16 kB): the IOC and its clients need the same settings.
+CA_ENVIRONMENT = {
     "EPICS_CA_ADDR_LIST": "127.0.0.1",
     "EPICS_CA_AUTO_ADDR_LIST": "NO",
     "EPICS_CAS_INTF_ADDR_LIST": "127.0.0.1",
+    "EPICS_CA_MAX_ARRAY_BYTES": "4000000",
 }
 
 
@@ -117,16 +154,23 @@ class SimIoc:
 
 
 @contextmanager
-def running_ioc(config: str | Path, prefix: str | None = None, velocity: float = 10.0, timeout_s: float = 60.0):
+def running_ioc(
+    config: str | Path,
+    prefix: str | None = None,
+    velocity: float = 10.0,
+    timeout_s: float = 60.0,
+    limits: tuple[float, float] | None = None,
+):
     """The simulated IOC for ``config`` in a process of its own, for as long as the ``with``
-    lasts (a ``SimIoc``; ``prefix`` default a new one, "NB<8 hex digits>:"). Channel Access stays
-    on loopback unless the environment names other addresses (``LOOPBACK``). Run one at a time
+    lasts (a ``SimIoc``; ``prefix`` default a new one, "NB<8 hex digits>:"; ``limits``: every
+    axis's travel limits, default the config's range). Channel Access stays
+    on loopback unless the environment names other addresses (``CA_ENVIRONMENT``). Run one at a time
     on a host: with searches sent to 127.0.0.1 alone, the last IOC to bind the server port
     answers them all."""
     prefix = prefix or f"NB{uuid.uuid4().hex[:8]}:"
-    env = {**LOOPBACK, **os.environ}
+    env = {**CA_ENVIRONMENT, **os.environ}
     command = [sys.executable, "-u", "-m", "noisebo.beamline.sim_ioc", prefix, str(config), "--velocity", str(velocity)]
-    command += ["--parent", str(os.getpid())]
+    command += ["--parent", str(os.getpid())] + (["--limits", *map(str, limits)] if limits else [])
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         _wait_until_ready(process, prefix, timeout_s)
@@ -185,13 +229,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("prefix", help="the records' prefix, ending in a colon: NB1: serves NB1:M0, NB1:EXPOSURE, ...")
     parser.add_argument("config", help="a campaign config whose instrument is a simulator")
     parser.add_argument("--velocity", type=float, default=10.0, help="axis speed, units of x per s (default 10)")
+    parser.add_argument("--limits", type=float, nargs=2, metavar=("LOW", "HIGH"), help="every axis's travel limits")
     parser.add_argument("--parent", type=int, help="end when this process ends (running_ioc passes its own)")
     args = parser.parse_args(argv)
     if args.parent is not None:
         _end_with(args.parent)
     if not args.prefix.endswith(":") or len(args.prefix) < 2:
         parser.error(f"the prefix must end in a colon, as NB1: does; got {args.prefix!r}")
-    serve(args.prefix, args.config, args.velocity)
+    serve(args.prefix, args.config, args.velocity, tuple(args.limits) if args.limits else None)
 
 
 if __name__ == "__main__":

@@ -127,7 +127,7 @@ def config_of(kind, **settings):
         (
             config_of("laser"),
             registry.DriverNotInstalled,
-            "no installed instrument driver 'laser'; installed: branin, counter, forrester, halfdone, ",
+            "no installed instrument driver 'laser'; installed: bluesky, branin, counter, forrester, halfdone, ",
         ),
         (config_of("lamp", watts=-1), ConfigError, "instrument.settings.watts: Input should be greater than 0"),
         (config_of("lamp", colour="red"), ConfigError, "instrument.settings.colour: Extra inputs are not permitted"),

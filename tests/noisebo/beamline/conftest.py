@@ -12,6 +12,7 @@ os.environ.update(
         "EPICS_CA_ADDR_LIST": "127.0.0.1",
         "EPICS_CA_AUTO_ADDR_LIST": "NO",
         "EPICS_CAS_INTF_ADDR_LIST": "127.0.0.1",
+        "EPICS_CA_MAX_ARRAY_BYTES": "4000000",  # a PFM sweep's rows
         "EPICS_CA_SERVER_PORT": str(free_port()),  # the IOCs started from here inherit it
     }
 )

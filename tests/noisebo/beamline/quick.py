@@ -4,6 +4,7 @@ the campaign ``noisebo run`` takes with the same seed."""
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from noisebo.campaign.driver import run_campaign
 from noisebo.config import load_config
@@ -28,3 +29,18 @@ def same_as_alone(path: Path, config=QUICK):
     np.testing.assert_array_equal(record.points.t, alone.column("t"))
     np.testing.assert_array_equal(record.points.value, alone.column("value"))
     return record
+
+
+PFM = ROOT / "data" / "configs" / "pfm.yaml"
+# The PFM line with sweeps of 20-100 ms (200-1000 samples), two BO steps.
+QUICK_PFM = load_config(PFM).with_overrides(
+    space={"t_min": 0.02, "t_max": 0.1}, schedule={"n_steps": 2, "shots_before": 6}
+)
+
+
+def written(config, folder: Path) -> Path:
+    """``config`` as a YAML file in ``folder``, for an IOC that serves it (its longest sweep is
+    this config's t_max)."""
+    path = folder / f"{config.name}.yaml"
+    path.write_text(yaml.safe_dump(config.model_dump(mode="json")))
+    return path

@@ -32,10 +32,17 @@ def test_the_example_runs_a_campaign_through_the_run_engine(tmp_path):
     )
     assert done.returncode == 0, done.stdout + done.stderr
     lines = done.stdout.splitlines()
-    assert [line.split(":")[0] for line in lines[:-1]] == [f"step {k}" for k in range(6)]
-    assert lines[-1] == f"success: {out}"
+    assert [line.split(":")[0] for line in lines[:-1]] == [f"step {k}" for k in range(1, 7)]
+    assert lines[-1].startswith(f"success: {out} (run ")
     record = read_record(out)
     assert record.status == "completed" and len(record.points) == 3 + 6
+
+
+def test_the_beamline_page_shows_the_example_as_it_is():
+    page = (ROOT / "docs" / "instruments" / "beamline.md").read_text()
+    script = (ROOT / "examples" / "beamline" / "run_plan.py").read_text()
+    assert f"```python\n{script}```" in page
+    assert len(script.splitlines()) <= 40
 
 
 @pytest.mark.e2e

@@ -15,10 +15,16 @@ pytest.importorskip("softioc")
 
 from bluesky import RunEngine  # noqa: E402
 from bluesky import plan_stubs as bps  # noqa: E402
-from bluesky.utils import RunEngineInterrupted  # noqa: E402
+from bluesky.utils import FailedStatus, RunEngineInterrupted  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
-from noisebo.beamline.plan import DECISIONS, CampaignNotCompleted, NotInReading, campaign_plan  # noqa: E402
+from noisebo.beamline.plan import (  # noqa: E402
+    DECISIONS,
+    BeyondLimits,
+    CampaignNotCompleted,
+    NotInReading,
+    campaign_plan,
+)
 from noisebo.beamline.sim_devices import SimAxis, SimDetector, SimPreparedDetector  # noqa: E402
 from noisebo.beamline.sim_ioc import running_ioc  # noqa: E402
 from noisebo.storage.record import read_record  # noqa: E402
@@ -86,8 +92,10 @@ def test_a_detector_prepared_with_its_livetime_takes_the_same_campaign(forrester
         x = SimAxis(forrester_ioc.prefix, 0)
         det = SimPreparedDetector(forrester_ioc.prefix)
     path = tmp_path / "forrester.h5"
-    assert engine(campaign_plan(QUICK, [x], det, det.value, path=path, shot_key=det.key)).exit_status == "success"
+    plan = campaign_plan(QUICK, [x], det, det.value, path=path, shot_key=det.key, rerun="record")
+    assert engine(plan).exit_status == "success"
     same_as_alone(path)
+    assert path.with_suffix(".rrd").stat().st_size > 10_000  # the campaign's Rerun recording beside it
 
 
 def test_a_paused_run_resumes_and_an_aborted_one_continues_in_a_new_run_each_shot_once(forrester_ioc, tmp_path):
@@ -113,6 +121,8 @@ def test_a_paused_run_resumes_and_an_aborted_one_continues_in_a_new_run_each_sho
     record = same_as_alone(path)
     starts = [doc["noisebo"] for name, doc in documents if name == "start"]
     assert [s["resumed"] for s in starts] == [False, True] and starts[1]["points_before"] == len(first.points)
+    uids = [doc["uid"] for name, doc in documents if name == "start"]
+    assert [s["previous_runs"] for s in starts] == [[], uids[:1]]  # the new run names the one it continues
     shots = primary(documents)
     assert [s[det.value.name] for s in shots] == list(record.shots.value)  # each shot once, over both runs
 
@@ -144,6 +154,20 @@ def test_an_ioc_that_dies_fails_the_campaign_within_its_budget_and_it_continues_
         assert engine(plan()).exit_status == "success"
     record = same_as_alone(path, config)
     assert len(record.failures.reason) == 3
+
+
+def test_axes_whose_limits_leave_out_part_of_x_are_refused_before_anything_moves(tmp_path):
+    with running_ioc(FORRESTER, limits=(0.0, 0.5)) as ioc:
+        engine, x, det, documents = connected(ioc.prefix)
+        path = tmp_path / "forrester.h5"
+        plan = campaign_plan(QUICK, [x], det, det.value, exposure=det.exposure, path=path, shot_key=det.key)
+        with pytest.raises(
+            BeyondLimits, match=r"^x: its travel limits \[0, 0.5\] do not hold the config's x in \[0, 1\]"
+        ):
+            engine(plan)
+        assert documents == [] and not path.exists()
+        with pytest.raises(FailedStatus, match="stopped at 0.5, short of 0.7 \\(a travel limit\\)"):
+            engine(bps.mv(x, 0.7))  # a move past a limit fails, as a shot's would
 
 
 @pytest.mark.parametrize(
