@@ -126,7 +126,8 @@ class DecisionLines:
     ``step 3: x 0.372, t 0.026 s, 8 shots``."""
 
     def __init__(self, write=print) -> None:
-        self.write, self.streams = write, {}
+        self.write = write
+        self.streams: dict[str, str] = {}
 
     def __call__(self, name: str, doc: dict) -> None:
         if name == "descriptor":

@@ -1,7 +1,7 @@
 """The bluesky path's documents in Tiled, for real: a Tiled server of the test's own, the
-bluesky-tiled-plugins writer subscribed to the RunEngine, a Forrester campaign and a PFM-line
-campaign through the simulated IOC, each read back from Tiled equal to its HDF5 file, shot for
-shot (the PFM sweeps sample for sample)."""
+bluesky-tiled-plugins writer subscribed to the RunEngine, a PFM-line campaign and the example's
+Forrester campaign through the simulated IOC, each read back from Tiled equal to its HDF5 file,
+shot for shot (the PFM sweeps sample for sample)."""
 
 import os
 import re
@@ -20,12 +20,12 @@ from bluesky_tiled_plugins import TiledWriter  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
 from noisebo.beamline.plan import Spectrum, campaign_plan  # noqa: E402
-from noisebo.beamline.sim_devices import SimAxis, SimDetector, SimSpectrumDetector  # noqa: E402
+from noisebo.beamline.sim_devices import SimAxis, SimSpectrumDetector  # noqa: E402
 from noisebo.beamline.sim_ioc import running_ioc  # noqa: E402
 from noisebo.storage.hdf5 import spectra_reader  # noqa: E402
 from noisebo.storage.record import read_record  # noqa: E402
 from tests.noisebo.beamline.ports import free_port  # noqa: E402
-from tests.noisebo.beamline.quick import FORRESTER, QUICK, QUICK_PFM, ROOT, same_as_alone, written  # noqa: E402
+from tests.noisebo.beamline.quick import QUICK_PFM, ROOT, same_as_alone, written  # noqa: E402
 from tests.noisebo.beamline.tiled_server import running_tiled  # noqa: E402
 
 pytestmark = pytest.mark.e2e
@@ -67,25 +67,6 @@ def decisions_match(run, record) -> None:
     np.testing.assert_array_equal(decisions["decision_x"].read()[:, 0], record.steps.x)
 
 
-def test_a_forrester_campaign_reads_back_from_tiled_as_its_file_holds_it(tiled, tmp_path):
-    path = tmp_path / "forrester.h5"
-    run_plan = into_tiled(tiled)
-    with running_ioc(FORRESTER) as ioc:
-        with init_devices(timeout=10.0):
-            x = SimAxis(ioc.prefix, 0)
-            det = SimDetector(ioc.prefix)
-        run = run_plan(campaign_plan(QUICK, [x], det, det.value, exposure=det.exposure, path=path, shot_key=det.key))
-    record = same_as_alone(path)
-    primary = run["primary"]
-    np.testing.assert_array_equal(primary["det-value"].read(), record.shots.value)
-    np.testing.assert_array_equal(primary["noisebo_t"].read(), record.shots.t)
-    np.testing.assert_array_equal(primary["noisebo_point"].read(), record.shots.point)
-    np.testing.assert_array_equal(primary["noisebo_shot"].read(), record.shots.shot)
-    decisions_match(run, record)
-    start = run.metadata["start"]["noisebo"]
-    assert start["seed"] == 0 and start["config"]["name"] == QUICK.name and start["file"] == str(path)
-
-
 def test_a_pfm_line_campaign_reads_back_from_tiled_sweep_for_sweep(tiled, tmp_path):
     path = tmp_path / "pfm.h5"
     run_plan = into_tiled(tiled)
@@ -117,6 +98,13 @@ def test_the_example_writes_its_run_to_tiled(server, tiled, tmp_path):
     assert done.returncode == 0, done.stdout + done.stderr
     uid = re.fullmatch(rf"success: {re.escape(str(out))} \(run (\S+)\)", done.stdout.splitlines()[-1]).group(1)
     record = read_record(out)
-    primary = tiled[uid]["primary"]
+    assert record.status == "completed"
+    run = tiled[uid]
+    primary = run["primary"]
     np.testing.assert_array_equal(primary["det-value"].read(), record.shots.value)
     np.testing.assert_array_equal(primary["noisebo_t"].read(), record.shots.t)
+    np.testing.assert_array_equal(primary["noisebo_point"].read(), record.shots.point)
+    np.testing.assert_array_equal(primary["noisebo_shot"].read(), record.shots.shot)
+    decisions_match(run, record)
+    start = run.metadata["start"]["noisebo"]
+    assert start["seed"] == 0 and start["file"] == str(out) and start["previous_runs"] == []
