@@ -1,12 +1,16 @@
 """What the bluesky path costs: a campaign through a RunEngine, ophyd-async devices and a softioc
-IOC over Channel Access on loopback, against the same campaign driven as ``noisebo run`` drives it,
-with the simulator called directly (each shot sleeping its t there too, as an instrument would);
-both journal every shot and keep the HDF5 file.
+IOC over Channel Access on loopback (the bluesky plan), the same devices driven by ``noisebo run``'s
+loop (the instrument kind ``bluesky``), against the same campaign driven as ``noisebo run`` drives
+it with the simulator called directly (each shot sleeping its t there too, as an instrument
+would); all three journal every shot and keep the HDF5 file.
 
-    python benchmarks/beamline.py [--t 0.1] [--steps 8] [--repeats 3] [--velocity 1e6] [--json FILE]
+    python benchmarks/beamline.py [--instrument forrester|pfm] [--t 0.1] [--steps 8] [--repeats 3]
+                                  [--velocity 1e6] [--json FILE]
 
-The campaign is the Forrester one with every BO point at t (``acquisition.fixed_t``; the seed points
-spread over [t/2, 2t]), 10 shots per noise-measuring point, 3 per point after. Figures, medians over ``--repeats`` campaigns each way:
+The campaign is the Forrester one (or the PFM line's: each shot a resonance sweep of t seconds,
+served by the IOC as waveforms and fitted with the SHO model) with every BO point at t
+(``acquisition.fixed_t``; the seed points spread over [t/2, 2t]), 10 shots per noise-measuring
+point, 3 per point after. Figures, medians over ``--repeats`` campaigns each way:
 the wall time, the time outside the decisions (each decision's ``latency_s`` taken off), the
 overhead per shot (that time, less the shots' exposure, per shot), its share of the campaign's wall
 time, the documents emitted per point and their size as JSON, and whether the two ways took the same
@@ -33,6 +37,7 @@ for name, value in {"EPICS_CA_ADDR_LIST": "127.0.0.1", "EPICS_CA_AUTO_ADDR_LIST"
     os.environ.setdefault(name, value)  # Channel Access stays on this machine
 
 import numpy as np  # noqa: E402
+import yaml  # noqa: E402
 
 from noisebo.campaign import engine  # noqa: E402
 from noisebo.campaign.driver import drive, now_utc  # noqa: E402
@@ -43,7 +48,7 @@ from noisebo.instruments import build  # noqa: E402
 from noisebo.storage.record import read_record  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-FORRESTER = ROOT / "data" / "configs" / "forrester.yaml"
+CONFIGS = {name: ROOT / "data" / "configs" / f"{name}.yaml" for name in ("forrester", "pfm")}
 TARGET_MS, TARGET_SHARE = 20.0, 0.10
 
 
@@ -65,21 +70,22 @@ class Sleeping:
         return self._simulator.noise_law(t)
 
 
-def campaign_config(t: float, steps: int):
-    return load_config(FORRESTER).with_overrides(
+def campaign_config(instrument: str, t: float, steps: int):
+    return load_config(CONFIGS[instrument]).with_overrides(
         space={"t_min": t / 2, "t_max": 2 * t},
         acquisition={"fixed_t": t},
         schedule={"n_steps": steps, "shots_before": 10, "shots_after": 3},
     )
 
 
-def direct(config) -> dict:
+def direct(config, instrument=None) -> dict:
     """The campaign as ``noisebo run`` drives it in its process: the same engine loop, the journal
-    and the HDF5 file written as the plan writes them, the simulator called for each shot."""
-    instrument = Sleeping(build(config.instrument))
+    and the HDF5 file written as the plan writes them, the simulator called for each shot (or
+    ``instrument``'s ``measure``)."""
+    instrument = instrument or Sleeping(build(config.instrument))
     with tempfile.TemporaryDirectory() as folder:
-        started_at = engine.new_campaign(config, 0, DriverInfo("forrester", "", {}), {}, now_utc())
-        with Recorder.create(Path(folder) / "forrester.h5", started_at) as recorder:
+        started_at = engine.new_campaign(config, 0, DriverInfo(instrument.name, "", {}), {}, now_utc())
+        with Recorder.create(Path(folder) / "campaign.h5", started_at) as recorder:
             started = time.perf_counter()
             final = drive(recorder.state, instrument, recorder.commit)
             wall = time.perf_counter() - started
@@ -90,23 +96,41 @@ def direct(config) -> dict:
     }
 
 
+def on_devices(config, prefix: str) -> dict:
+    """The campaign as ``noisebo run`` drives it on the IOC's devices (the ``bluesky`` driver)."""
+    from noisebo.beamline.driver import BlueskyInstrument
+
+    settings = {"devices": "noisebo.beamline.sim_devices:sim_ioc_devices", "arguments": devices_of(config, prefix)}
+    instrument = BlueskyInstrument(BlueskyInstrument.Settings(**settings))
+    instrument.open()
+    try:
+        return direct(config, instrument)
+    finally:
+        instrument.close()
+
+
+def devices_of(config, prefix: str) -> dict:
+    return {"prefix": prefix, "spectra": config.instrument.kind == "pfm"}
+
+
 def through_bluesky(config, prefix: str) -> dict:
     from bluesky import RunEngine
-    from ophyd_async.core import init_devices
 
     from noisebo.beamline.plan import campaign_plan
-    from noisebo.beamline.sim_devices import SimAxis, SimDetector
+    from noisebo.beamline.sim_devices import sim_ioc_devices
 
     engine = RunEngine({}, call_returns_result=True)
-    with init_devices():
-        x = SimAxis(prefix, 0)
-        det = SimDetector(prefix)
+    devices = sim_ioc_devices(**devices_of(config, prefix))
+    from ophyd_async.plan_stubs import ensure_connected
+
+    engine(ensure_connected(*devices.all()))
     documents: list[tuple[str, dict]] = []
     engine.subscribe(lambda name, doc: documents.append((name, doc)))
     with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "forrester.h5"
+        path = Path(folder) / "campaign.h5"
         started = time.perf_counter()
-        engine(campaign_plan(config, [x], det, det.value, exposure=det.exposure, path=path, shot_key=det.key))
+        d = devices
+        engine(campaign_plan(config, d.axes, d.detector, d.value, exposure=d.exposure, path=path, shot_key=d.shot_key))
         wall = time.perf_counter() - started
         record = read_record(path)
     latencies = [float(v) for v in record.steps.latency_s]
@@ -141,6 +165,7 @@ def median(runs: list[dict], key: str) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--instrument", choices=sorted(CONFIGS), default="forrester", help="default forrester")
     parser.add_argument("--t", type=float, default=0.1, help="every shot's exposure (s), default 0.1")
     parser.add_argument("--steps", type=int, default=8, help="BO steps per campaign, default 8")
     parser.add_argument("--repeats", type=int, default=3, help="campaigns each way, default 3")
@@ -154,16 +179,24 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     from noisebo.beamline.sim_ioc import running_ioc
 
-    config = campaign_config(args.t, args.steps)
+    config = campaign_config(args.instrument, args.t, args.steps)
     direct(config)  # compiles the decision programs, outside the timing
-    mine, theirs = [], []
-    with running_ioc(FORRESTER, velocity=args.velocity) as ioc:
-        for _ in range(args.repeats):
-            mine.append(through_bluesky(config, ioc.prefix))
-            theirs.append(direct(config))
-    same = all(m["values"] == d["values"] for m, d in zip(mine, theirs))
-    rows = [("bluesky plan, IOC over CA", mine), ("noisebo's loop, simulator", theirs)]
-    print(f"Forrester, BO points at t = {args.t:g} s, {args.steps} BO steps, median of {args.repeats}")
+    mine, driven, theirs = [], [], []
+    with tempfile.TemporaryDirectory() as folder:
+        served = Path(folder) / "served.yaml"  # the IOC's sweeps are as long as this config's longest
+        served.write_text(yaml.safe_dump(config.model_dump(mode="json")))
+        with running_ioc(served, velocity=args.velocity) as ioc:
+            for _ in range(args.repeats):
+                mine.append(through_bluesky(config, ioc.prefix))
+                driven.append(on_devices(config, ioc.prefix))
+                theirs.append(direct(config))
+    same = all(m["values"] == d["values"] == o["values"] for m, o, d in zip(mine, driven, theirs))
+    rows = [
+        ("bluesky plan, IOC over CA", mine),
+        ("noisebo's loop, IOC over CA", driven),
+        ("noisebo's loop, simulator", theirs),
+    ]
+    print(f"{args.instrument}, BO points at t = {args.t:g} s, {args.steps} BO steps, median of {args.repeats}")
     print(f"{'way':28} {'wall s':>8} {'outside decisions s':>20} {'shots':>6} {'overhead ms/shot':>17} {'share':>7}")
     for label, runs in rows:
         print(
@@ -177,14 +210,28 @@ def main(argv: list[str] | None = None) -> int:
         f"the bluesky path adds {per_shot:.1f} ms per shot (target <= {TARGET_MS:g}), "
         f"{100 * share:.1f} % of the wall time (target <= {100 * TARGET_SHARE:g} %)"
     )
+    per_shot = median(driven, "overhead_ms_per_shot") - median(theirs, "overhead_ms_per_shot")
+    share = median(driven, "overhead_share") - median(theirs, "overhead_share")
+    print(f"noisebo's loop on the devices adds {per_shot:.1f} ms per shot, {100 * share:.1f} % of the wall time")
     print(
         f"documents per point {median(mine, 'documents_per_point'):.1f}, "
         f"{median(mine, 'bytes_per_point') / 1024:.1f} KiB of JSON per point"
     )
-    print(f"the same points and values both ways: {'yes' if same else 'NO'}")
+    print(f"the same points and values all three ways: {'yes' if same else 'NO'}")
     if args.json:
         args.json.write_text(
-            json.dumps({"t": args.t, "steps": args.steps, "bluesky": mine, "direct": theirs, "same": same}, indent=1)
+            json.dumps(
+                {
+                    "instrument": args.instrument,
+                    "t": args.t,
+                    "steps": args.steps,
+                    "bluesky": mine,
+                    "driver": driven,
+                    "direct": theirs,
+                    "same": same,
+                },
+                indent=1,
+            )
         )
     return 0 if same else 1
 
