@@ -89,7 +89,7 @@ def tell(
                 + "); nothing is wanted"
             )
         if point is not None and point != request.point:
-            raise ManualError(f"--point {point}: the point being measured is {request.point}")
+            raise ManualError(f"--point {point}: {_not_under_way(point, request.point)}")
         left = request.wanted - request.taken
         if not outcomes or len(outcomes) > left:
             raise ManualError(
@@ -104,12 +104,18 @@ def tell(
         return recorder.state, next_step(recorder, say, commit), len(outcomes)
 
 
+def _not_under_way(point: int, measured: int) -> str:
+    if point < measured:
+        return f"point {point} is finished (its shots are all recorded); the point being measured is {measured}"
+    return f"point {point} has not been asked for yet; the point being measured is {measured}"
+
+
 def parse_values(texts: Sequence[str], shape: ReadingShape) -> list[Reading]:
     """Numbers from the command line as scalar readings; ``ManualError`` naming a bad one."""
     if shape.reading != "scalar":
         raise ManualError("this campaign's readings are spectra: give them with --spectrum FILE")
     out = []
-    for text in texts:
+    for text in _after_options_end(texts):
         try:
             value = float(text)
         except ValueError:
@@ -118,6 +124,15 @@ def parse_values(texts: Sequence[str], shape: ReadingShape) -> list[Reading]:
             raise ManualError(f"{text!r} is not a finite number; record a failed shot with --error REASON")
         out.append(Reading(value))
     return out
+
+
+def _after_options_end(texts: Sequence[str]) -> Sequence[str]:
+    """The values without the ``--`` that ends the options (``tell FILE --point 2 -- -0.5``), which
+    argparse keeps among them."""
+    texts = list(texts)
+    if "--" in texts:
+        texts.remove("--")
+    return texts
 
 
 def load_spectrum(path: Path, shape: ReadingShape, reduction: str | None) -> Reading:

@@ -81,7 +81,8 @@ def started(tmp_path, capsys):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--point", "3", "1.0"], "--point 3: the point being measured is 0"),
+        (["--point", "3", "1.0"], "--point 3: point 3 has not been asked for yet; the point being measured is 0"),
+        (["--point", "0", "--", "--", "-1.0"], "'--' is not a number"),  # only the first ends the options
         (["1", "2", "3", "4", "5"], "point 0 wants 4 more shots (shots 0-3); got 5"),
         (["1.0", "nan"], "'nan' is not a finite number"),
         (["1.0", "high"], "'high' is not a number"),
@@ -95,6 +96,20 @@ def test_a_tell_that_does_not_fit_is_refused_and_records_nothing(started, capsys
     code, _, err = cli(capsys, "tell", started, *argv)
     assert code == 2 and message in err
     assert started.with_suffix(".journal").read_bytes() == before
+
+
+def test_a_negative_value_after_the_end_of_the_options_is_recorded(started, capsys):
+    code, _, err = cli(capsys, "tell", started, "--point", "0", "--", "-0.5", "-1e-3")
+    assert code == 0 and "recorded 2 shots" in err
+    with Recorder.attach(started) as recorder:
+        assert [s.reading.value for s in recorder.state.taken] == [-0.5, -1e-3]
+
+
+def test_a_finished_point_is_named_as_finished(started, capsys):
+    cli(capsys, "tell", started, "1", "2", "3", "4")  # point 0's four shots
+    code, _, err = cli(capsys, "tell", started, "--point", "0", "1.0")
+    assert code == 2
+    assert "--point 0: point 0 is finished (its shots are all recorded); the point being measured is 1" in err
 
 
 def test_a_campaign_held_by_another_process_is_refused(started, capsys):
