@@ -23,9 +23,10 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence, cast
 
+import numpy as np
+
 from noisebo.campaign.engine import EngineState
 from noisebo.events import Event, ShotFailed, Status, StatusChanged
-from noisebo.state import format_position
 from noisebo.storage.steps import shown as shown_step
 
 if TYPE_CHECKING:
@@ -92,7 +93,9 @@ def progress_percent(state: EngineState) -> float:
 def summary_markdown(state: EngineState, path: str | Path, resumed: bool = False) -> str:
     """The flow run's summary: status, points, shots, instrument time, predicted optimal t, the BO
     step at which the noise model converged (counted from 1, as the progress lines count), the
-    file and the commands that look at it."""
+    file (its absolute path: the flow may have run in another folder) and the commands that look
+    at it."""
+    path = Path(path).absolute()
     n_shots, seconds = shots_and_time(state)
     n_seed = sum(1 for entry in state.points if entry.committed.step < 0)
     t_opt = predicted_t_opt(state)
@@ -126,16 +129,17 @@ def summary_markdown(state: EngineState, path: str | Path, resumed: bool = False
 
 def points_table(state: EngineState) -> list[dict]:
     """One row per committed point: point, step (the BO step counted from 1; 0 for a seed point,
-    as in the file and ``noisebo inspect --json``), x, t (s), shots, value, noise and whether the
-    noise was measured from the shots."""
+    as in the file and ``noisebo inspect --json``), its coordinate on each axis (a number, by the
+    axis's name), t (s), shots, value, noise and whether the noise was measured from the shots."""
     rows = []
+    axes = [axis.name for axis in state.config.space.axes]
     for entry in state.points:
         c, p = entry.committed, entry.committed.point
         rows.append(
             {
                 "point": c.index,
                 "step": shown_step(c.step),
-                "x": format_position(p.x),
+                **{name: float(f"{v:.6g}") for name, v in zip(axes, np.ravel(p.x))},
                 "t_s": float(f"{p.t:.6g}"),
                 "shots": p.n_shots,
                 "value": float(f"{p.value:.6g}"),

@@ -7,6 +7,7 @@ that reacts to it.
 
 Marked e2e: not in the default run (it starts servers), run by `.ci/run`."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -140,7 +141,9 @@ def test_a_campaign_is_named_tagged_logged_summarised_and_announced(prefect_serv
     assert "| status | completed |" in summary and "| points | 7 of 7 (3 seed, 4 BO) |" in summary
     assert f"noisebo inspect {path}" in summary and f"`{path}`" in summary
     assert by_key["tiny-reward-s4-points"].type == "table"
-    assert '"point": 0, "step": 0,' in str(by_key["tiny-reward-s4-points"].data)  # seed points are step 0
+    table = str(by_key["tiny-reward-s4-points"].data)
+    assert '"point": 0, "step": 0,' in table  # seed points are step 0
+    assert re.search(r'"step": 0, "x": \d\.\d+, "t_s": \d', table)  # numbers, x among them
 
     announced = lambda: events_named(api, "noisebo.campaign.completed", "noisebo.campaign.tiny-reward-s4")  # noqa: E731
     wait_for(lambda: bool(announced()), 60, "the completed event")

@@ -129,7 +129,7 @@ def test_the_points_table(state):
         {
             "point": 0,
             "step": 0,
-            "x": "0.25",
+            "x": 0.25,
             "t_s": 1.0,
             "shots": 3,
             "value": 2.0,
@@ -139,7 +139,7 @@ def test_the_points_table(state):
         {
             "point": 1,
             "step": 0,
-            "x": "0.5",
+            "x": 0.5,
             "t_s": 2.0,
             "shots": 2,
             "value": 5.0,
@@ -149,7 +149,7 @@ def test_the_points_table(state):
         {
             "point": 2,
             "step": 1,
-            "x": "0.125",
+            "x": 0.125,
             "t_s": 0.5,
             "shots": 1,
             "value": -1.0,
