@@ -21,7 +21,7 @@ from prefect import flow
 from prefect.utilities.annotations import quote
 
 from noisebo.flows import abort
-from noisebo.flows.reporting import RunReport, run_name
+from noisebo.flows.reporting import RunReport, campaign_run_name, resumed_run_name, run_name
 from noisebo.instruments import build, registry
 from noisebo.campaign.driver import drive, now_utc
 from noisebo.campaign.engine import KEEP_BUDGET, EngineState, advance, ask, new_campaign
@@ -173,9 +173,28 @@ def _viewed(recorder: Recorder, instrument, record_rrd: bool, live: str | None, 
         recording.close()
 
 
-@flow(name="campaign", persist_result=True, result_serializer="json")
+DEFAULT_CONFIG = "data/configs/forrester.yaml"
+
+
+def _campaign_run_name() -> str:
+    from prefect.runtime import flow_run
+
+    return campaign_run_name(flow_run.parameters, DEFAULT_CONFIG)
+
+
+def _resume_run_name() -> str:
+    from prefect.runtime import flow_run
+
+    from noisebo.registry import policy_names
+
+    return resumed_run_name(flow_run.parameters.get("path", "campaign"), policy_names())
+
+
+# Named from their parameters as they start, before anything is loaded (RunReport names them
+# again, the same, once the campaign is open).
+@flow(name="campaign", flow_run_name=_campaign_run_name, persist_result=True, result_serializer="json")
 def campaign(
-    config: str | CampaignConfig = "data/configs/forrester.yaml",
+    config: str | CampaignConfig = DEFAULT_CONFIG,
     seed: int = 0,
     policy: str | None = None,
     out_dir: str = "data/runs",
@@ -211,7 +230,7 @@ def run_folder(name: str) -> str:
     return f"{name}-{stamp}" + (f"-{run_id}" if run_id else "")
 
 
-@flow(name="resume", persist_result=True, result_serializer="json")
+@flow(name="resume", flow_run_name=_resume_run_name, persist_result=True, result_serializer="json")
 def resume(
     path: str,
     show_progress: bool = True,

@@ -32,6 +32,8 @@ from noisebo.storage.steps import shown as shown_step
 if TYPE_CHECKING:
     from uuid import UUID
 
+    from noisebo.config import CampaignConfig
+
 PROGRESS_INTERVAL_S = 1.0
 EVENT_PREFIX = "noisebo.campaign"
 LOGGER_NAME = "noisebo.campaign"
@@ -43,6 +45,48 @@ LOGGER_NAME = "noisebo.campaign"
 def run_name(config: str, policy: str, seed: int, resumed: bool = False) -> str:
     """The flow run's name: ``{config}-{policy}-s{seed}``, ``-resumed`` after it when resumed."""
     return f"{config}-{policy}-s{seed}" + ("-resumed" if resumed else "")
+
+
+def _config_of(config) -> CampaignConfig | None:
+    """The config a flow's ``config`` parameter names (a path or a config), or None where it
+    cannot be read (the flow then says why)."""
+    from noisebo.config import CampaignConfig, ConfigError, load_config
+
+    try:
+        return config if isinstance(config, CampaignConfig) else load_config(config)
+    except (ConfigError, OSError, TypeError, ValueError):
+        return None
+
+
+def campaign_run_name(parameters: dict, default_config: str) -> str:
+    """A campaign flow run's name from its parameters (``config``, ``policy``, ``seed``): the
+    name ``run_name`` gives once the campaign has started; "campaign-sSEED" for a config that
+    cannot be read."""
+    cfg, seed = _config_of(parameters.get("config", default_config)), int(parameters.get("seed", 0))
+    if cfg is None:
+        return f"campaign-s{seed}"
+    return run_name(cfg.name, parameters.get("policy") or cfg.acquisition.policy, seed)
+
+
+def sweep_run_name(parameters: dict, default_config: str) -> str:
+    """A sweep flow run's name from its parameters: sweep-NAME-sFIRST-LAST where its seeds are a
+    range, else with them listed (sweep-NAME-s0,2,5)."""
+    seeds = [int(seed) for seed in parameters.get("seeds", [0, 1, 2, 3])]
+    cfg = _config_of(parameters.get("config", default_config))
+    ranged = len(seeds) > 1 and seeds == list(range(seeds[0], seeds[0] + len(seeds)))
+    span = f"{seeds[0]}-{seeds[-1]}" if ranged else ",".join(map(str, seeds))
+    return f"sweep-{'campaign' if cfg is None else cfg.name}-s{span}"
+
+
+def resumed_run_name(path: str | Path, policies: Sequence[str]) -> str:
+    """A resume flow run's name from its campaign file's name, NAME_POLICY_sSEED.h5, the
+    ``policies`` installed telling where NAME ends (a policy's name may hold an underscore)."""
+    stem = Path(path).stem
+    for policy in sorted(policies, key=len, reverse=True):
+        match = re.fullmatch(rf"(.+)_{re.escape(policy)}_s(\d+)", stem)
+        if match:
+            return run_name(match[1], policy, int(match[2]), resumed=True)
+    return f"{stem}-resumed"
 
 
 def run_name_of(state: EngineState, resumed: bool = False) -> str:

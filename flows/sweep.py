@@ -16,8 +16,8 @@ from prefect.cache_policies import NO_CACHE
 from prefect.exceptions import PrefectHTTPStatusError
 from prefect.task_runners import ThreadPoolTaskRunner
 
-from noisebo.flows.campaign import campaign, campaign_path, resolve_config, resume
-from noisebo.flows.reporting import report_sweep
+from noisebo.flows.campaign import DEFAULT_CONFIG, campaign, campaign_path, resolve_config, resume
+from noisebo.flows.reporting import report_sweep, run_name
 from noisebo.config import CampaignConfig
 from noisebo.view.report import write_summary
 
@@ -66,7 +66,11 @@ def campaign_on_workers(deployment: str, config: CampaignConfig, seed: int, out_
     key = f"{flow_run.id}:{deployment}:{policy}:{seed}"
     # called from sync code, Prefect's dispatcher returns the flow run itself rather than a coroutine
     parameters = {"seed": seed, "policy": policy, "out_dir": out_dir, "per_run_dir": False}
-    run = cast("FlowRun", run_deployment(deployment, parameters=parameters, timeout=None, idempotency_key=key))
+    name = run_name(config.name, policy, seed)  # named as it is created, not renamed as it starts
+    run = cast(
+        "FlowRun",
+        run_deployment(deployment, parameters=parameters, timeout=None, idempotency_key=key, flow_run_name=name),
+    )
     state = run.state
     if state is None or not state.is_completed():
         ended = f"{state.name}: {state.message}" if state is not None else "with no state"
@@ -76,9 +80,17 @@ def campaign_on_workers(deployment: str, config: CampaignConfig, seed: int, out_
 
 # Prefect types task_runner as TaskRunner[PrefectFuture[Any]], invariant in the future type, which no
 # ThreadPoolTaskRunner (TaskRunner[PrefectConcurrentFuture]) matches; Prefect's own examples pass one.
-@flow(name="sweep", task_runner=ThreadPoolTaskRunner(max_workers=2))  # type: ignore[arg-type]
+def _sweep_run_name() -> str:
+    from prefect.runtime import flow_run
+
+    from noisebo.flows.reporting import sweep_run_name
+
+    return sweep_run_name(flow_run.parameters, DEFAULT_CONFIG)
+
+
+@flow(name="sweep", flow_run_name=_sweep_run_name, task_runner=ThreadPoolTaskRunner(max_workers=2))  # type: ignore[arg-type]
 def sweep(
-    config: str | CampaignConfig = "data/configs/forrester.yaml",
+    config: str | CampaignConfig = DEFAULT_CONFIG,
     seeds: list[int] = [0, 1, 2, 3],  # noqa: B006 - Prefect parameters are validated copies
     policies: list[str] | None = None,
     out_dir: str = "data/runs/sweep",

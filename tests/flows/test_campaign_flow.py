@@ -126,6 +126,8 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
         artifact = client.read_artifacts(
             artifact_filter=ArtifactFilter(key=ArtifactFilterKey(any_=["sweep-tiny-summary"]))
         )[-1]
+        swept_by = client.read_flow_run(artifact.flow_run_id)
+    assert swept_by.name == "sweep-tiny-s5-6"  # named from its parameters, not at random
     assert artifact.data.startswith(f"# sweep tiny\n\n4 of 4 campaigns finished; files in `{tmp_path}`\n")
     assert "| reward | 2 |" in artifact.data
     assert (tmp_path / "convergence_steps.png").stat().st_size > 10_000

@@ -288,3 +288,36 @@ noisebo report /runs/sweep
 ```
 """
     )
+
+
+@pytest.mark.parametrize(
+    ("parameters", "name"),
+    [
+        ({"seed": 3}, "forrester-reward-s3"),
+        ({"config": "data/configs/pfm.yaml", "policy": "info_rate"}, "pfm-info_rate-s0"),
+        ({"config": "no/such.yaml", "seed": 2}, "campaign-s2"),
+    ],
+    ids=["default config", "policy given", "unreadable config"],
+)
+def test_a_campaign_run_is_named_from_its_parameters(parameters, name):
+    assert reporting.campaign_run_name(parameters, "data/configs/forrester.yaml") == name
+
+
+@pytest.mark.parametrize(
+    ("seeds", "name"),
+    [([0, 1, 2, 3], "sweep-forrester-s0-3"), ([5], "sweep-forrester-s5"), ([0, 2, 5], "sweep-forrester-s0,2,5")],
+)
+def test_a_sweep_run_is_named_from_its_parameters(seeds, name):
+    assert reporting.sweep_run_name({"seeds": seeds}, "data/configs/forrester.yaml") == name
+
+
+@pytest.mark.parametrize(
+    ("path", "name"),
+    [
+        ("runs/pfm_info_rate_s0007.h5", "pfm-info_rate-s7-resumed"),
+        ("runs/forrester_5shots_reward_s0000.h5", "forrester_5shots-reward-s0-resumed"),
+        ("runs/elsewhere.h5", "elsewhere-resumed"),
+    ],
+)
+def test_a_resume_run_is_named_from_its_file(path, name):
+    assert reporting.resumed_run_name(path, ["reward", "double", "info_rate", "rate"]) == name
