@@ -9,8 +9,8 @@ Entities (timeline ``step``, see ``view.frames``; live campaigns also carry ``wa
     acquisition/map      the acquisition over the (x, t) grid as an image (t upwards)
     acquisition/points   measured points on that image, coloured by the step that measured them
     f/{mean,band,truth,points}, noise/{mean,band,law,points}, reward/{curve,t_opt}
-                         curves in plot boxes (Rerun's 2D views have no axes: corner labels
-                         give the ranges)
+                         curves in plot boxes, each with its axes (f/axes, noise/axes: lines,
+                         ticks at round values, the axes' names and units)
     spectrum/{data,fit}  PFM: the latest sweep and its SHO fit
     traces/*             t_opt_s, a0, a1, latency_s, measurement_time_s as scalars
     campaign/points      the measured points in raw units (columns x, t, value, noise, from_step)
@@ -73,18 +73,31 @@ def colour_image(values: np.ndarray, cmap: str = "viridis", limits: tuple[float,
 
 
 class Box:
-    """Maps data (u, v) into a BOX_W x BOX_H plot box, v upwards (2D views draw y downwards)."""
+    """Maps data (u, v) into a BOX_W x BOX_H plot box, v upwards (2D views draw y downwards).
+    ``floor``: the lowest v the box shows (0 for a standard deviation), padding or not."""
 
-    def __init__(self, u_range: tuple[float, float], v_range: tuple[float, float]):
+    def __init__(self, u_range: tuple[float, float], v_range: tuple[float, float], floor: float = -np.inf):
         self.u0, self.u1 = u_range
         lo, hi = v_range
         pad = 0.05 * (hi - lo if hi > lo else 1.0)
-        self.v0, self.v1 = lo - pad, hi + pad
+        self.v0, self.v1 = max(lo - pad, floor), hi + pad
 
     def __call__(self, u, v) -> np.ndarray:
         u = (np.asarray(u, dtype=np.float64) - self.u0) / (self.u1 - self.u0 or 1.0) * BOX_W
         v = (1.0 - (np.asarray(v, dtype=np.float64) - self.v0) / (self.v1 - self.v0 or 1.0)) * BOX_H
         return np.stack(np.broadcast_arrays(u, v), axis=-1)
+
+
+def ticks(low: float, high: float, count: int = 5) -> np.ndarray:
+    """Round values from ``low`` to ``high`` for an axis's ticks, about ``count`` of them (steps
+    of 1, 2 or 5 times a power of ten)."""
+    if not high > low:
+        return np.array([low])
+    raw = (high - low) / count
+    power = 10.0 ** np.floor(np.log10(raw))
+    step = power * next(m for m in (1.0, 2.0, 5.0, 10.0) if m * power >= raw)
+    first = np.ceil(low / step - 1e-9) * step
+    return np.round(np.arange(first, high + 1e-9 * step, step), 12) + 0.0  # no -0
 
 
 def reachable(url: str, timeout_s: float = 0.5) -> bool:
@@ -116,7 +129,10 @@ class RerunView:
         warn: Callable[[str], None] = print,
         wall_clock: bool = True,
     ):
+        from noisebo.instruments.registry import description
+
         self.config, self.warn, self.wall_clock = config, warn, wall_clock
+        self._described = description(config.instrument.kind)
         self.truth, self.noise_law = truth, noise_law
         self.enabled = True
         self._f_range: tuple[float, float] | None = None
@@ -212,9 +228,10 @@ class RerunView:
         self._f_range = _grow(self._f_range, np.concatenate([np.ravel(v) for v in values]))
         noise = [frame.points["shot_std"][frame.points["noise_measured"]]]
         if frame.noise is not None:
-            noise += [frame.noise.mean + 2 * frame.noise.sd, frame.noise.mean - 2 * frame.noise.sd]
+            noise += [frame.noise.mean + 2 * frame.noise.sd]
         self._noise_range = _grow(self._noise_range, np.concatenate([np.ravel(v) for v in noise] + [[0.0]]))
-        return Box((s.lows[0], s.highs[0]), self._f_range), Box((s.t_min, s.t_max), self._noise_range)
+        f_box = Box((s.lows[0], s.highs[0]), self._f_range)
+        return f_box, Box((s.t_min, s.t_max), self._noise_range, floor=0.0)  # a standard deviation: never below 0
 
     def _log(self, frame: Frame, spectrum, fit) -> None:
         rr, st = self.rr, self._recording
@@ -308,11 +325,46 @@ class RerunView:
             ),
         )
 
+    def _log_axes(self, path: str, box: Box, u_label: str, v_label: str) -> None:
+        """Axes for a plot box (Rerun's 2D views draw none): the left and bottom lines, ticks at
+        round values with their numbers, and each axis's name and units."""
+        rr, st = self.rr, self._recording
+        u_ticks = ticks(min(box.u0, box.u1), max(box.u0, box.u1))
+        v_ticks = ticks(box.v0, box.v1)
+        tick = 4.0
+        lines = [np.array([[0.0, 0.0], [0.0, BOX_H], [BOX_W, BOX_H]])]
+        lines += [box([u, u], [box.v0, box.v0]) + [[0.0, 0.0], [0.0, tick]] for u in u_ticks]
+        lines += [box([box.u0, box.u0], [v, v]) + [[0.0, 0.0], [-tick, 0.0]] for v in v_ticks]
+        st.log(f"{path}/lines", rr.LineStrips2D(lines, colors=[(90, 90, 90)], radii=0.3))
+        u_at = box(u_ticks, np.full(u_ticks.shape, box.v0)) + [0.0, 3 * tick]
+        v_at = box(np.full(v_ticks.shape, box.u0), v_ticks) - [4 * tick, 0.0]
+        st.log(
+            f"{path}/ticks",
+            rr.Points2D(
+                np.concatenate([u_at, v_at]),
+                radii=0.01,
+                show_labels=True,
+                labels=[f"{v:g}" for v in u_ticks] + [f"{v:.3g}" for v in v_ticks],
+                colors=[(90, 90, 90)],
+            ),
+        )
+        st.log(
+            f"{path}/names",
+            rr.Points2D(
+                [[BOX_W / 2, BOX_H + 9 * tick], [-14 * tick, BOX_H / 2]],
+                radii=0.01,
+                show_labels=True,
+                labels=[u_label, v_label],
+                colors=[(40, 40, 40)],
+            ),
+        )
+
     def _log_curve(self, path: str, box: Box, curve: Curve, colour, band: bool = True) -> None:
         rr, st = self.rr, self._recording
         st.log(f"{path}/mean", rr.LineStrips2D([box(curve.grid, curve.mean)], colors=[colour], radii=0.6))
         if band:
-            upper, lower = box(curve.grid, curve.mean + 2 * curve.sd), box(curve.grid, curve.mean - 2 * curve.sd)
+            lowest = np.maximum(curve.mean - 2 * curve.sd, box.v0)  # a noise band stops at 0
+            upper, lower = box(curve.grid, curve.mean + 2 * curve.sd), box(curve.grid, lowest)
             st.log(f"{path}/band", rr.LineStrips2D([upper, lower], colors=[colour], radii=0.25))
 
     def _log_f(self, frame: Frame, box: Box) -> None:
@@ -332,15 +384,8 @@ class RerunView:
                 show_labels=False,
             ),
         )
-        st.log(
-            "f/corners",
-            rr.Points2D(
-                box([s.x_min, s.x_max], [box.v0, box.v1]),
-                radii=0.1,
-                show_labels=True,
-                labels=[f"x={s.x_min:g}, f={box.v0:.3g}", f"x={s.x_max:g}, f={box.v1:.3g}"],
-            ),
-        )
+        axis = s.axes[0]
+        self._log_axes("f/axes", box, self._described.axis_label(axis.name, axis.units), self._described.value_label)
 
     def _log_noise(self, frame: Frame, box: Box) -> None:
         rr, st, s, p = self.rr, self._recording, self.config.space, frame.points
@@ -356,15 +401,8 @@ class RerunView:
                 colors=colour_by_step(p["frame"][measured], self.config.schedule.n_steps),
             ),
         )
-        st.log(
-            "noise/corners",
-            rr.Points2D(
-                box([s.t_min, s.t_max], [box.v0, box.v1]),
-                radii=0.1,
-                show_labels=True,
-                labels=[f"t={s.t_min:g} s, sd={box.v0:.3g}", f"t={s.t_max:g} s, sd={box.v1:.3g}"],
-            ),
-        )
+        units = f" ({self._described.value_units})" if self._described.value_units else ""
+        self._log_axes("noise/axes", box, "t (s)", f"single-shot noise sd{units}")
         if frame.noise is None:
             return
         self._log_curve("noise", box, frame.noise, (214, 39, 40), band=bool(np.any(frame.noise.sd > 0)))

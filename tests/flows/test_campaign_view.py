@@ -35,6 +35,7 @@ ENTITIES = {
     "/traces/measurement_time_s",
     "/log",
     "/campaign/points",
+    *(f"/{plot}/axes/{part}" for plot in ("f", "noise") for part in ("lines", "ticks", "names")),
 }
 RAW = ("Scalars:scalars", "TextLog:text", "x", "t", "value", "noise", "from_step")
 
@@ -82,6 +83,25 @@ def test_recording_holds_every_view_and_the_campaigns_numbers(recorded, tiny_con
     assert logged[("/campaign/points", "from_step")][n + 1] == [0, 0, 0, 1, 2, 3, 4]
     text = logged[("/log", "TextLog:text")]
     assert text[0] == ["3 seed points measured"] and text[1][0].startswith("step 1: measure x=")
+
+
+def labels(rrd, entity: str) -> list[list[str]]:
+    """The labels of every frame logged to ``entity``."""
+    out = []
+    for chunk in rerun.chunk.RrdReader(rrd).stream():
+        if str(chunk.entity_path) == entity:
+            batch = chunk.to_record_batch()
+            out += [row for row in batch.column("Points2D:labels").to_pylist() if row is not None]
+    return out
+
+
+def test_each_plot_has_axes_with_names_units_and_round_ticks_and_no_negative_noise(recorded):
+    rrd = recorded.replace(".h5", ".rrd")
+    assert labels(rrd, "/f/axes/names")[-1] == ["x", "f(x)"]
+    assert labels(rrd, "/noise/axes/names")[-1] == ["t (s)", "single-shot noise sd"]
+    for frame in labels(rrd, "/noise/axes/ticks"):
+        assert all(float(label) >= 0 for label in frame)  # the t ticks, then the sd ticks: never below 0
+    assert all(len(frame) >= 4 for frame in labels(rrd, "/f/axes/ticks"))
 
 
 def test_replay_from_the_file_alone_equals_the_live_recording(recorded, tmp_path):
