@@ -7,7 +7,7 @@ Needs headless Chromium (Debian: ``apt-get install -y chromium``). It runs the r
 behind the bridge) on a free loopback port, with a random token and its files in a temporary folder,
 and the instrument PC's side, the stdlib client ``noisebo.bridge.client.serve_instrument``, on a
 thread of this process measuring the simulated Forrester instrument (each shot drawn as the
-campaign's own simulator draws it, as examples/instrument_pc/serve_simulator.py does). The client
+campaign's own simulator draws it, as noisebo/bridge/serve_simulator.py does). The client
 holds the first shot of point N (``--points``, 8 by default: the 3 seed points and 5 BO steps) until
 the page has been shot, so the page shows a campaign under way: N points measured, the models'
 pictures, point N being measured. The page's DOM (``--dump-dom``) is checked to show the campaign

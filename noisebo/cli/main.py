@@ -17,7 +17,7 @@ from noisebo.cli import configs, noise_profile
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
 from noisebo.storage.integrity import CampaignFileError
 
-from noisebo.cli import by_hand, campaigns, files, listing, serving
+from noisebo.cli import by_hand, campaigns, client, files, listing, serving
 from noisebo.cli.common import (
     Aborted,
     EXIT_FAILED,
@@ -38,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {noisebo.__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
-    for group in (campaigns, serving, by_hand, files, listing, configs, noise_profile):
+    for group in (campaigns, serving, by_hand, client, files, listing, configs, noise_profile):
         group.add_parser(commands)
     return parser
 

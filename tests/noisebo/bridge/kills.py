@@ -42,7 +42,7 @@ def start_client(url: str, capture: bool = False) -> subprocess.Popen:
     """The instrument PC's process; its output captured only for one that will not be killed."""
     out = subprocess.PIPE if capture else subprocess.DEVNULL
     return subprocess.Popen(
-        [sys.executable, "examples/instrument_pc/serve_simulator.py", url, SOURCE],
+        [sys.executable, "-m", "noisebo.bridge.serve_simulator", url, SOURCE],
         env=os.environ,
         stdout=out,
         stderr=out,

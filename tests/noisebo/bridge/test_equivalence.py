@@ -29,7 +29,7 @@ def test_a_simulator_served_from_another_process_gives_the_in_process_campaign(t
     config = remote_config(source, CASES[name])
     with served(config, tmp_path / f"{name}.h5", seed=5) as running:
         client = subprocess.run(
-            [sys.executable, "examples/instrument_pc/serve_simulator.py", running.url, source],
+            [sys.executable, "-m", "noisebo.bridge.serve_simulator", running.url, source],
             capture_output=True,
             text=True,
             timeout=300,
