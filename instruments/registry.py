@@ -26,7 +26,7 @@ from pydantic import BaseModel, ValidationError
 from noisebo.instruments.base import Description, Instrument
 from noisebo.instruments.faults import FaultyInstrument
 from noisebo.instruments.guard import TimeoutGuard
-from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors
+from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors, loose_values
 from noisebo.events import DriverInfo
 from noisebo.reduction import register_reduction
 from noisebo.registry import Installed
@@ -98,9 +98,13 @@ def settings_of(config: InstrumentConfig, cls: Driver | None = None) -> BaseMode
     registered as ``config.kind``)."""
     cls = cls or driver_class(config.kind)
     try:
-        return cls.Settings.model_validate(config.settings)
+        settings = cls.Settings.model_validate(config.settings)
     except ValidationError as error:
         raise ConfigError(describe_errors(error, prefix="instrument.settings")) from None
+    loose = loose_values(cls.Settings, config.settings, "instrument.settings.")
+    if loose:  # a driver's lax model took it; noisebo refuses what its own numbers and flags refuse
+        raise ConfigError("; ".join(loose))
+    return settings
 
 
 def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:

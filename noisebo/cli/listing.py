@@ -22,6 +22,7 @@ def _policies_listed(args) -> int:
 
 
 def _instruments(args) -> int:
+    from noisebo.config import lax_fields
     from noisebo.instruments.registry import DriverBroken, driver_class, installed
 
     for name, found in installed().items():
@@ -35,6 +36,9 @@ def _instruments(args) -> int:
             )
             print(line.rstrip())
             print(f"{'':<16} settings: {fields or '(none)'}")
+            lax = lax_fields(cls.Settings)
+            if lax:
+                print(f"{'':<16} checked strictly by noisebo (the driver's own model is lax): {', '.join(lax)}")
         except DriverBroken as error:
             print(f"{name:<16} {'?':<10} {found.distribution} {found.distribution_version}: BROKEN: {error}")
     return 0

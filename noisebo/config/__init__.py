@@ -40,6 +40,7 @@ from noisebo.config.numbers import (
     Rate,
     given,
     lax_fields,
+    loose_values,
     refusal,
 )
 from noisebo.config.profile_format import (
@@ -115,6 +116,7 @@ __all__ = [
     "field_length_names",
     "given",
     "lax_fields",
+    "loose_values",
     "load_config",
     "migrate_v1",
     "parse_config",

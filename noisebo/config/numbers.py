@@ -128,6 +128,37 @@ def lax_fields(model: type[BaseModel], prefix: str = "") -> list[str]:
     return lax
 
 
+def loose_values(model: type[BaseModel], raw: Any, prefix: str = "") -> list[str]:
+    """What ``raw`` (the values a config gives ``model``) holds that a lax field of ``model`` takes
+    and ``Number``, ``Count`` and ``Flag`` refuse (a quoted number or a boolean for a number,
+    anything but true or false for a flag), each as "path: what is wanted, not what was given":
+    noisebo checks a driver's settings this strictly whatever its own model says."""
+    found: list[str] = []
+    if not isinstance(raw, dict):
+        return found
+    for name, field in model.model_fields.items():
+        if name in raw:
+            found += _loose(_members(field.annotation), raw[name], f"{prefix}{name}")
+    return found
+
+
+def _loose(members: list[Any], value: Any, path: str) -> list[str]:
+    for member in members:
+        if isinstance(member, type) and issubclass(member, BaseModel) and isinstance(value, dict):
+            return loose_values(member, value, f"{path}.")
+        if get_origin(member) is tuple and isinstance(value, (list, tuple)):
+            args = [_members(a) for a in get_args(member) if a is not Ellipsis]
+            return [p for i, item in enumerate(value) for p in _loose(args[min(i, len(args) - 1)], item, f"{path}.{i}")]
+    numeric = any(m in (float, int) for m in members)
+    if isinstance(value, bool) and numeric and bool not in members:
+        return [f"{path}: a number, not {value!r}"]
+    if isinstance(value, str) and numeric and str not in members:
+        return [f"{path}: a number, not the text {value!r}"]
+    if members == [bool] and not isinstance(value, bool):
+        return [f"{path}: true or false, not {value!r}"]
+    return []
+
+
 def _refuses(model: type[BaseModel], name: str, value: Any, where: set[tuple]) -> bool:
     """Whether ``model`` refuses ``value`` for ``name`` at every place ``where`` with our errors."""
     try:

@@ -108,6 +108,17 @@ def test_built_in_and_third_party_drivers_are_listed(drivers):
     assert found["forrester"].distribution == "noisebo" and found["lamp"].distribution == "test-drivers"
 
 
+def test_the_listing_says_which_settings_of_a_lax_driver_noisebo_checks_strictly(drivers, capsys):
+    from noisebo.cli.listing import _instruments as instruments
+
+    assert instruments(None) == 0
+    lines = capsys.readouterr().out.splitlines()
+    lamp = lines.index(next(line for line in lines if line.startswith("lamp ")))
+    assert lines[lamp + 2].split() == "checked strictly by noisebo (the driver's own model is lax): watts".split()
+    forrester = lines.index(next(line for line in lines if line.startswith("forrester ")))
+    assert "checked strictly" not in lines[forrester + 2]  # its own numbers are strict
+
+
 def test_a_third_party_driver_is_validated_built_and_recorded(drivers):
     config = registry.validated(CampaignConfig().with_overrides(instrument={"kind": "lamp", "settings": {"watts": 2}}))
     assert config.instrument.settings == {"watts": 2.0}
@@ -131,6 +142,8 @@ def config_of(kind, **settings):
         ),
         (config_of("lamp", watts=-1), ConfigError, "instrument.settings.watts: Input should be greater than 0"),
         (config_of("lamp", colour="red"), ConfigError, "instrument.settings.colour: Extra inputs are not permitted"),
+        (config_of("lamp", watts="8"), ConfigError, "instrument.settings.watts: a number, not the text '8'"),
+        (config_of("lamp", watts=True), ConfigError, "instrument.settings.watts: a number, not True"),
         (
             config_of("forrester", a1="loud"),
             ConfigError,
@@ -148,6 +161,8 @@ def config_of(kind, **settings):
         "unknown kind",
         "refused value",
         "unknown setting",
+        "quoted number to a lax model",
+        "boolean to a lax model",
         "wrong type",
         "incomplete driver",
         "import error",

@@ -294,3 +294,36 @@ def test_the_config_of_a_schema_1_file_still_loads():
 def test_max_inputs_unset_grows_with_the_axes(max_inputs, axes, cap):
     inference = parse_config({"inference": {"max_inputs": max_inputs}}).inference
     assert inference.max_inputs_for(axes) == cap
+
+
+def test_loose_values_names_what_a_lax_model_took_that_noiseboes_numbers_and_flags_refuse():
+    from noisebo.config import loose_values
+
+    class Inner(BaseModel):
+        gain: float = 1.0
+
+    class Plain(BaseModel):
+        rate: float = 1.0
+        label: str | float = "a"
+        verbose: bool = False
+        span: tuple[float, float] = (0.0, 1.0)
+        inner: Inner | None = None
+        inners: tuple[Inner, ...] = ()
+
+    raw = {
+        "rate": "8",
+        "label": "8",  # text is one of its types
+        "verbose": 1,
+        "span": [0, True],
+        "inner": {"gain": "2"},
+        "inners": [{"gain": 1.5}, {"gain": False}],
+    }
+    Plain.model_validate(raw)  # the lax model takes all of it
+    assert loose_values(Plain, raw, "s.") == [
+        "s.rate: a number, not the text '8'",
+        "s.verbose: true or false, not 1",
+        "s.span.1: a number, not True",
+        "s.inner.gain: a number, not the text '2'",
+        "s.inners.1.gain: a number, not False",
+    ]
+    assert loose_values(Plain, {"rate": 8, "verbose": True, "span": [0, 1.5], "inners": [{"gain": 2}]}) == []
