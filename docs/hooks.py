@@ -1,10 +1,9 @@
-"""mkdocs hooks (mkdocs.yml, ``hooks:``): the reference pages' generated parts, filled in where a
-page says ``<!-- generated: NAME -->``, and the repository files that pages link to outside docs/
+"""mkdocs hooks (mkdocs.yml, ``hooks:``): the reference pages' generated parts, made anew from the code where a
+page says ``<!-- generated: NAME -->`` (docs/generate/pages.py), and the repository files that pages link to outside docs/
 (the benchmarks' figures), copied into the site."""
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
@@ -13,23 +12,8 @@ from mkdocs.plugins import event_priority
 DOCS = Path(__file__).resolve().parent
 sys.path.insert(0, str(DOCS))
 
-from generate import bridge_reference, cli_reference, config_reference, hdf5_reference  # noqa: E402
 from generate.outside_files import outside_links, pointed_into_site, repository_file  # noqa: E402
-
-GENERATORS = {
-    "configuration": config_reference.page,
-    "cli": cli_reference.page,
-    "hdf5": hdf5_reference.page,
-    "bridge-api": bridge_reference.page,
-}
-MARKER = re.compile(r"<!-- generated: ([a-z0-9-]+) -->")
-
-
-def generated(match: re.Match) -> str:
-    name = match.group(1)
-    if name not in GENERATORS:
-        raise KeyError(f"no generator for <!-- generated: {name} -->; known: {', '.join(GENERATORS)}")
-    return GENERATORS[name]()
+from generate.pages import for_site  # noqa: E402
 
 
 @event_priority(100)  # before mkdocstrings builds its handlers from their config
@@ -58,4 +42,4 @@ def on_files(files, config):
 def on_page_markdown(markdown, page, config, files):
     """The page with its links outside docs/ pointed into the site and its generated parts filled in."""
     links = outside_links(Path(config["docs_dir"]), page.file.src_uri, markdown)
-    return MARKER.sub(generated, pointed_into_site(markdown, page.file.src_uri, links))
+    return for_site(pointed_into_site(markdown, page.file.src_uri, links))

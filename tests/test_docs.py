@@ -123,3 +123,17 @@ def test_a_root_attribute_without_words_stops_the_build(generate):
     names = [*hdf5_reference.ROOT_ATTRIBUTES, "new_attribute"]
     with pytest.raises(hdf5_reference.Undocumented, match="new_attribute"):
         hdf5_reference.checked(hdf5_reference.ROOT_ATTRIBUTES, names, "root attributes")
+
+
+def test_the_reference_pages_hold_what_the_code_generates(generate):
+    """The pages carry their generated parts, so they read whole in the repository; a copy that
+    the code no longer gives fails here (`python docs/generate/pages.py` writes them anew)."""
+    from generate import pages
+
+    found = pages.pages()
+    assert {p.name for p in found} >= {"cli.md", "configuration.md", "hdf5.md", "bridge-protocol.md"}
+    made = pages.generators()
+    for page in found:
+        text = page.read_text(encoding="utf-8")
+        assert "<!-- end generated -->" in text, page
+        assert pages.filled(text, made) == text, f"{page} is stale: run python docs/generate/pages.py"
