@@ -193,7 +193,7 @@ def rendered(text: str, running: Running, status: dict) -> list[str]:
         f"noisebo campaign {status['campaign']}",
         f"measuring point {running.held_at} (BO step {current['step']})",
         f"shot 1 of {current['shots_wanted']}",
-        f"{running.held_at} of {status['points_total']} points, {status['shots']} shots",
+        f"{running.held_at} of {status['points_total']} points finished, {status['shots']} shots",  # none under way yet
         "instrument PC: connected",
         "What the campaign has learned",
         "f: the model (mean ± 2 sd) and the measured points",

@@ -78,19 +78,24 @@ def _now(status: dict, state: EngineState) -> str:
 
 
 def _progress(status: dict, state: EngineState) -> str:
+    """Finished work only: the committed points and their shots (the point being measured is
+    counted apart), instrument time, budget, and the predicted optimal t once there is one."""
     done, total = status["points"], status["points_total"]
+    finished_shots = sum(len(entry.shots) for entry in state.points)
+    under_way = len(state.taken)
     budget = (
         ""
         if state.budget_s is None
         else f"; budget {number(state.budget_s)} s, {number(max(state.budget_s - state.spent_s, 0.0))} s left"
     )
-    t_opt = number(state.decisions[-1].t_opt) if state.decisions else "-"
+    t_opt = f"{number(state.decisions[-1].t_opt)} s" if state.decisions else "not yet (after the first decision)"
     converged = "yes" if state.data.is_converged else "not yet"
+    more = f" (and {under_way} of the point being measured)" if under_way else ""
     return (
-        f"<h2>Progress</h2><p><progress value='{done}' max='{max(total, 1)}'></progress> {done} of {total} points, "
-        f"{status['shots']} shots, {status['failed_attempts']} failed attempt{'s' * (status['failed_attempts'] != 1)}; "
-        f"instrument time "
-        f"{number(state.spent_s)} s{budget}</p><p>predicted optimal t {t_opt} s; noise model converged: "
+        f"<h2>Progress</h2><p><progress value='{done}' max='{max(total, 1)}'></progress> {done} of {total} points "
+        f"finished, {finished_shots} shots{more}, {status['failed_attempts']} failed "
+        f"attempt{'s' * (status['failed_attempts'] != 1)}; instrument time "
+        f"{number(state.spent_s)} s{budget}</p><p>predicted optimal t: {t_opt}; noise model converged: "
         f"{converged}</p>"
     )
 
@@ -138,7 +143,10 @@ def _f_plot(state: EngineState) -> str:
         ]
     if pts:
         series.append(("points", [p.x[0] for p in pts], [p.value for p in pts], None, "#d2540a"))
-    return plot("f: the model (mean ± 2 sd) and the measured points", "x", "f", series)
+    space = state.config.space
+    return plot(
+        "f: the model (mean ± 2 sd) and the measured points", "x", "f", series, x_range=(space.x_min, space.x_max)
+    )
 
 
 def _noise_plot(state: EngineState) -> str:
@@ -161,7 +169,16 @@ def _noise_plot(state: EngineState) -> str:
             ]
     if measured:
         series.append(("points", [p.t for p in measured], [p.shot_std for p in measured], None, "#d2540a"))
-    return plot("single-shot noise: the model and the measured sd", "t (s)", "noise", series, log_x=True)
+    space = state.config.space
+    return plot(
+        "single-shot noise: the model and the measured sd",
+        "t (s)",
+        "noise",
+        series,
+        log_x=True,
+        x_range=(space.t_min, space.t_max),
+        y_floor=0.0,
+    )
 
 
 def _message_plot(title: str, message: str) -> str:
@@ -181,9 +198,18 @@ def ticks(lo: float, hi: float, n: int = 5) -> list[float]:
     return [first + k * step for k in range(int((hi - first) / step + 1e-9) + 1)]
 
 
-def plot(title: str, xlabel: str, ylabel: str, series: Sequence[tuple], log_x: bool = False) -> str:
+def plot(
+    title: str,
+    xlabel: str,
+    ylabel: str,
+    series: Sequence[tuple],
+    log_x: bool = False,
+    x_range: tuple[float, float] | None = None,
+    y_floor: float = -math.inf,
+) -> str:
     """An SVG chart of ``series``: ("line" | "points", xs, ys, None, colour) or ("band", xs, lo, hi,
-    colour); x on a log scale when ``log_x``."""
+    colour); x on a log scale when ``log_x``, over ``x_range`` (the config's space) when given, else
+    over the data; y never below ``y_floor`` (0 for a standard deviation)."""
     if not series:
         return _message_plot(title, "nothing measured yet")
     fx = (lambda v: np.log10(np.asarray(v, dtype=float))) if log_x else (lambda v: np.asarray(v, dtype=float))
@@ -195,11 +221,11 @@ def plot(title: str, xlabel: str, ylabel: str, series: Sequence[tuple], log_x: b
     xs, ys = xs[np.isfinite(xs)], ys[np.isfinite(ys)]
     if not len(xs) or not len(ys):
         return _message_plot(title, "nothing measured yet")
-    x0, x1 = float(xs.min()), float(xs.max())
+    x0, x1 = (float(xs.min()), float(xs.max())) if x_range is None else (float(fx(x_range[0])), float(fx(x_range[1])))
     y0, y1 = float(ys.min()), float(ys.max())
     x0, x1 = (x0 - 0.5, x1 + 0.5) if x1 == x0 else (x0, x1)
     pad = 0.05 * (y1 - y0) if y1 > y0 else 0.5
-    y0, y1 = y0 - pad, y1 + pad
+    y0, y1 = max(y0 - pad, y_floor), y1 + pad
     left, right, top, bottom = MARGIN
     px = lambda v: left + (v - x0) / (x1 - x0) * (WIDTH - left - right)  # noqa: E731
     py = lambda v: HEIGHT - bottom - (v - y0) / (y1 - y0) * (HEIGHT - top - bottom)  # noqa: E731

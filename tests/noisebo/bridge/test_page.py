@@ -70,9 +70,10 @@ def test_the_page_of_a_campaign_under_way(finished):
     page = render(RUNNING, finished)
     text = re.sub(r"<[^>]+>", " ", page)
     assert "measuring point 7 (BO step 5) at x = 0.25, t = 1.5 s: shot 2 of 3" in text
-    assert "7 of 7 points, 42 shots, 1 failed attempt; instrument time" in text
+    shots = sum(len(e.shots) for e in finished.points)
+    assert f"7 of 7 points finished, {shots} shots, 1 failed attempt; instrument time" in text
     assert f"instrument time {number(finished.spent_s)} s" in text
-    assert f"predicted optimal t {number(finished.decisions[-1].t_opt)} s" in text
+    assert f"predicted optimal t: {number(finished.decisions[-1].t_opt)} s" in text
     assert "instrument PC: connected, waiting for the next shot" in text
     assert page.count("<svg") == 2 and page.count("<polyline") == 2 and page.count("<polygon") == 2
     assert page.count("<circle") == len(finished.points) + sum(
@@ -95,6 +96,20 @@ def test_before_any_decision_the_pictures_show_the_points_only(seeds_only):
     page = render(RUNNING | {"current": None, "now": "deciding"}, seeds_only)
     assert "deciding where and how long to measure next" in page
     assert page.count("<polyline") == 0 and page.count("<circle") > 0
+    assert "predicted optimal t: not yet (after the first decision)" in re.sub(r"<[^>]+>", " ", page)
+    f_plot = page[page.index("<svg") : page.index("</svg>")]
+    space = seeds_only.config.space
+    labels = [float(v) for v in re.findall(r"text-anchor='middle'>([-0-9.e]+)</text>", f_plot)]
+    assert min(labels) == space.x_min and max(labels) == space.x_max  # the config's x, not the points' spread
+
+
+def test_the_shots_of_the_point_being_measured_are_counted_apart(finished):
+    from dataclasses import replace
+
+    under_way = replace(finished, taken=finished.points[-1].shots[:2])
+    text = re.sub(r"<[^>]+>", " ", render(RUNNING, under_way))
+    shots = sum(len(e.shots) for e in finished.points)
+    assert f"{shots} shots (and 2 of the point being measured)" in text
 
 
 def test_a_campaign_not_started_and_a_disconnected_pc():
