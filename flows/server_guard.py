@@ -52,7 +52,7 @@ def watch_parent(parent: int, every_s: float = 0.5, grace_s: float = 3.0) -> thr
     def watch() -> None:
         while os.getppid() == parent:
             time.sleep(every_s)
-        os.kill(os.getpid(), signal.SIGTERM)  # uvicorn's graceful shutdown
+        os.kill(os.getpid(), signal.SIGTERM)  # handle_exit: the parent is gone, so at once
         time.sleep(grace_s)
         os._exit(1)
 
@@ -79,14 +79,17 @@ class QuietWhenTaken(logging.Filter):
         return True
 
 
-def serve(port: int) -> None:
+def serve(port: int, parent: int | None = None) -> None:
     """Prefect's server app on 127.0.0.1:``port``, as Prefect 3.8.8 runs its temporary server
     (``python -m uvicorn --factory ... --log-level error --lifespan on``); exit code 3 if it
-    cannot start."""
+    cannot start. Signalled once ``parent`` is gone, it exits at once: nobody is left to serve,
+    and a graceful shutdown takes seconds on a busy machine."""
     import uvicorn
 
     class QuietServer(uvicorn.Server):
         def handle_exit(self, sig, frame) -> None:
+            if parent is not None and os.getppid() != parent:
+                os._exit(0)
             go_quiet()
             super().handle_exit(sig, frame)
 
@@ -106,7 +109,7 @@ def main(argv: list[str]) -> None:
     if os.getppid() != parent:  # the parent died before this process could watch it
         raise SystemExit(0)
     watch_parent(parent)
-    serve(port)
+    serve(port, parent)
 
 
 if __name__ == "__main__":
