@@ -84,7 +84,8 @@ def run(
         if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
             line = (
                 f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
-                "(about 10 s the first time on this machine, 1-2 s once an earlier run kept them)"
+                "(about 10 s the first time on an idle 2-core machine, longer on a busy one; 1-2 s once an "
+                "earlier run kept them)"
             )
             say(line)
             if report is not None:

@@ -119,7 +119,7 @@ def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
     text = (
         f"step {bo + 1}: measure x={format_position(x)} at t={t:.4g} s with {int(steps.shots[bo])} shots; "
         f"predicted optimal t {t_opt:.4g} s{' (noise model converged)' if steps.converged[bo] else ''}; "
-        f"decision {latency:.3f} s"
+        f"decision {latency:.3f} s" + (" (the first: it compiles or loads the models)" if bo == 0 else "")
     )
     return Frame(
         bo + 1,

@@ -90,6 +90,7 @@ def test_bo_frame_shows_its_decision_and_point():
     np.testing.assert_allclose(frame.noise.sd, [0.1, 0.2])
     assert frame.scalars == {"measurement_time_s": 7.5, "t_opt_s": 1.2, "latency_s": 0.5, "a0": 0.1, "a1": 1.0}
     assert frame.text.startswith("step 1: measure x=0.5 at t=1.5 s with 1 shots")
+    assert frame.text.endswith("decision 0.500 s (the first: it compiles or loads the models)")
 
 
 @pytest.mark.parametrize("with_summary, expected", [(False, 2), (True, 3)])
