@@ -197,6 +197,16 @@ def description(kind: str) -> Description:
         return Description()
 
 
+def preflight(config: InstrumentConfig) -> None:
+    """The driver's checks that need nothing opened (``preflight(settings)`` on its class, where it
+    has one: a token, a certificate), so a command can refuse before it starts anything; they
+    raise ``noisebo.failures.InstrumentUnavailable`` naming what is wrong."""
+    cls = driver_class(config.kind)
+    check = getattr(cls, "preflight", None)
+    if callable(check):
+        check(settings_of(config, cls))
+
+
 def build(config: InstrumentConfig):
     """The driver of ``config``, inside the fault injector if ``faults`` is set and the timeout
     guard if ``timeout_s`` is."""

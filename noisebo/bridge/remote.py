@@ -186,6 +186,16 @@ class RemoteInstrument:
     version = noisebo.__version__
     Settings = RemoteSettings
 
+    @staticmethod
+    def preflight(settings: RemoteSettings) -> None:
+        """What ``open`` would refuse that needs nothing started: the certificate and key, and
+        the token off loopback (its file is not written here)."""
+        if settings.tls is not None:
+            check_tls(settings)
+        existing = os.environ.get(TOKEN_ENV, "").strip() or Path(settings.token_file).expanduser().exists()
+        if existing:
+            bridge_token(settings.token_file, settings.host, say=lambda line: None)
+
     def __init__(self, settings: RemoteSettings | None = None):
         from noisebo.bridge.exchange import Exchange
 

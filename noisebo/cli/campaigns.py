@@ -47,6 +47,18 @@ def outcome_line(path: Path) -> str:
     )
 
 
+def _preflight(config, source) -> None:
+    """The driver's checks that need nothing opened, before Prefect starts: a refusal is one line
+    (exit 2), with no log written."""
+    from noisebo.failures import InstrumentUnavailable
+    from noisebo.instruments.registry import preflight
+
+    try:
+        preflight(config.instrument)
+    except InstrumentUnavailable as error:
+        raise UsageError(f"{source}: {error}; nothing was started") from None
+
+
 def _run(args) -> int:
     config = validated_config(args.config)
     if config.instrument.kind == "manual":  # refused here, before Prefect starts and logs the driver's refusal
@@ -55,6 +67,7 @@ def _run(args) -> int:
         raise UsageError(f"{args.config}: {MEASURED_BY_HAND.format(config=args.config)}")
     if args.policy:
         config = config.with_overrides(acquisition={"policy": args.policy})
+    _preflight(config, args.config)
     from noisebo.storage.recorder import campaign_path
 
     path = campaign_path(config, args.seed, args.out)

@@ -75,11 +75,13 @@ def test_a_short_token_off_loopback_stops_noisebo_run_in_one_line(tmp_path, pref
         timeout=300,
         check=False,
     )
-    assert done.returncode == 3
+    assert done.returncode == 2  # refused as a usage error, before Prefect starts: no log, no traceback
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, done.stderr
     assert lines[0].startswith(
-        "noisebo: error: instrument.settings.host 0.0.0.0 lets other computers reach the bridge, "
+        f"noisebo: error: {config}: instrument.settings.host 0.0.0.0 lets other computers reach the bridge, "
         "which then needs a token of at least 32 characters; $NOISEBO_BRIDGE_TOKEN holds one of 9"
     )
+    assert lines[0].endswith("; nothing was started") and "details in" not in lines[0]
+    assert "starting: loading Prefect" not in done.stdout
     assert not (tmp_path / "runs").exists() and not (tmp_path / "bridge.token").exists()

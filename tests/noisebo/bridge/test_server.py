@@ -240,7 +240,11 @@ def test_a_short_token_off_loopback_is_refused_before_anything_is_bound_or_writt
     if file_token is not None:
         token_file.write_text(file_token + "\n")
     port = free_port()
-    instrument = RemoteInstrument(RemoteSettings(host=host, port=port, token_file=str(token_file)))
+    settings = RemoteSettings(host=host, port=port, token_file=str(token_file))
+    with pytest.raises(InstrumentUnavailable) as checked:
+        RemoteInstrument.preflight(settings)  # the same refusal, before a command starts anything
+    assert message.replace("TOKEN_FILE", str(token_file)) in str(checked.value)
+    instrument = RemoteInstrument(settings)
     with pytest.raises(InstrumentUnavailable) as refused:
         instrument.open()
     assert message.replace("TOKEN_FILE", str(token_file)) in str(refused.value)
@@ -249,6 +253,13 @@ def test_a_short_token_off_loopback_is_refused_before_anything_is_bound_or_writt
     assert capfd.readouterr() == ("", "")
     with socket.socket() as s:
         s.bind(("127.0.0.1", port))  # free: nothing was bound
+
+
+def test_preflight_writes_no_token_file_and_passes_a_missing_one(tmp_path, monkeypatch):
+    monkeypatch.delenv("NOISEBO_BRIDGE_TOKEN", raising=False)
+    token_file = tmp_path / "bridge.token"
+    RemoteInstrument.preflight(RemoteSettings(host="0.0.0.0", token_file=str(token_file)))  # open makes a new one
+    assert not token_file.exists()
 
 
 @pytest.mark.parametrize(
