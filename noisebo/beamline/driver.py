@@ -145,7 +145,7 @@ class BlueskyInstrument:
     def measure(self, x: np.ndarray, t: float) -> Reading:
         from bluesky.utils import FailedStatus
 
-        from noisebo.beamline.plan import shot_plan
+        from noisebo.beamline.plan import device_failure, shot_plan
 
         if self._engine is None:
             raise RuntimeError("the bluesky driver is not open: open() connects its devices")
@@ -154,7 +154,7 @@ class BlueskyInstrument:
             return self._engine(shot_plan(seed, step, self._rig)).plan_result
         except (FailedStatus, TimeoutError, ConnectionError, OSError) as error:
             self._rig.placed = None
-            cause = error.__cause__ if isinstance(error, FailedStatus) and error.__cause__ is not None else error
+            cause = device_failure(error)
             raise InstrumentError(f"{type(cause).__name__}: {cause}".rstrip(": ")) from error
 
     def _wanted(self, x: np.ndarray, t: float) -> tuple[int, Request]:

@@ -362,9 +362,23 @@ def _attempt(state: EngineState, step: Request, rig: Rig):
         raise
     except Exception as error:  # noqa: BLE001 - whatever a device raised: a failed attempt, named
         rig.placed = None
-        cause = error.__cause__ if isinstance(error, FailedStatus) and error.__cause__ is not None else error
+        cause = device_failure(error)
         kind = "timeout" if isinstance(cause, TimeoutError) else "instrument error"
         return ShotError(kind, f"{type(cause).__name__}: {cause}".rstrip(": "))
+
+
+def device_failure(error: BaseException) -> BaseException:
+    """What failed behind ``error``: a failed status's own exception (its cause, or the status's
+    ``exception()`` when it was raised without one), else the error itself."""
+    if isinstance(error, FailedStatus):
+        if error.__cause__ is not None:
+            return error.__cause__
+        status = error.args[0] if error.args else None
+        exception = getattr(status, "exception", None)
+        found = exception() if callable(exception) else None
+        if isinstance(found, BaseException):
+            return found
+    return error
 
 
 def _place(seed: int, step: Request, rig: Rig):

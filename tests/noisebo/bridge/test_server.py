@@ -144,7 +144,7 @@ def test_every_call_needs_the_token_and_the_status_shows_progress(campaign):
     assert progress["current"]["point"] == 1 and progress["instrument_pc"]["connected"] is True
     assert progress["current"]["step"] == 0  # a seed point
     status, page = call(campaign.url, "GET", f"/?token={TOKEN}", token=None)
-    assert status == 200 and "1 of 2 points, 2 shots" in page and "measuring point 1 (seed point)" in page
+    assert status == 200 and "1 of 2 points finished, 2 shots" in page and "measuring point 1 (seed point)" in page
     assert "instrument PC: connected" in page and page.count("<svg") == 2
     status, schema = call(campaign.url, "GET", "/openapi.json", token=None)
     assert {"/next", "/shots/{point}/{shot}", "/status"} <= set(schema["paths"])
