@@ -1,6 +1,7 @@
 """A Tiled server of its own for a test (``tiled serve catalog --temp``, writable, on loopback),
 and a campaign read back from it."""
 
+import os
 import secrets
 import subprocess
 import sys
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.noisebo.beamline.ports import free_port
+from noisebo.flows.processes import free_port, start, stop
 
 
 @dataclass(frozen=True)
@@ -32,20 +33,14 @@ def running_tiled(workdir: Path, timeout_s: float = 60.0):
     port, key = free_port(), secrets.token_hex(16)
     tiled = Path(sys.executable).with_name("tiled")
     command = [str(tiled), "serve", "catalog", "--temp", "--api-key", key, "--host", "127.0.0.1", "--port", str(port)]
-    log = open(workdir / "tiled.log", "w")
-    process = subprocess.Popen(command, cwd=workdir, stdout=log, stderr=subprocess.STDOUT)
+    log = workdir / "tiled.log"
+    process = start(command, dict(os.environ), log)
     try:
         uri = f"http://127.0.0.1:{port}"
-        _wait_healthy(uri, process, timeout_s, workdir / "tiled.log")
+        _wait_healthy(uri, process, timeout_s, log)
         yield LocalTiled(uri, key)
     finally:
-        process.terminate()
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-        log.close()
+        stop(process)
 
 
 def _wait_healthy(uri: str, process: subprocess.Popen, timeout_s: float, log: Path) -> None:
