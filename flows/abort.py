@@ -1,16 +1,27 @@
 """Clean abort on SIGINT and SIGTERM.
 
-The first signal asks the campaign to stop: the point being measured is finished and committed,
-then the campaign records the status "aborted" (with the signal as the reason) and stops; the
-file is intact and ``noisebo resume`` continues it. A second signal stops at once: the shots
-already taken of the current point stay in the journal, so a resume still takes each shot once.
+The first signal asks the campaign to stop: the shot being taken is finished and committed (a
+decision being made is dropped: ``unless_stopped``), then the campaign records the status "aborted"
+(with the signal as the reason) and stops; the file is intact, the shots already taken of a point
+under way included, and ``noisebo resume`` takes that point's remaining shots. A second signal
+stops at once, even inside a shot that hangs: what was committed stays in the journal, so a resume
+still takes each shot once.
 """
 
 from __future__ import annotations
 
+import contextvars
 import signal
 import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as NotYet
 from contextlib import contextmanager
+from typing import Callable, TypeVar
+
+from noisebo.campaign import background
+
+T = TypeVar("T")
+WATCH_S = 0.05  # how often a thread waiting on ``unless_stopped`` looks for a stop request
 
 
 class CampaignAborted(RuntimeError):
@@ -45,7 +56,7 @@ class AbortFlag:
             raise StoppedAtOnce(signal.Signals(signum).name)
         self.signal_name = signal.Signals(signum).name
         print(
-            f"noisebo: {self.signal_name} received: finishing the current point, then stopping "
+            f"noisebo: {self.signal_name} received: stopping after the shot under way, if any "
             "(send it again to stop at once)",
             flush=True,
         )
@@ -103,3 +114,44 @@ def stopping_signal(stopped: BaseException) -> str:
 def requested() -> str | None:
     """The name of the signal that asked the running campaign to stop, or None."""
     return _active.requested()
+
+
+_WORKER: list[ThreadPoolExecutor] = []
+
+
+def unless_stopped(work: Callable[[], T], stopped: Callable[[str], T]) -> T:
+    """``work()``'s result, or ``stopped(signal_name)`` as soon as a signal asks the campaign to
+    stop while it runs (a decision: seconds, more while its models compile). Under a clean abort
+    (``installed``) the work runs in one worker thread (always the same, in this thread's
+    context) while this thread watches; work that a stop leaves behind runs on unused
+    (``noisebo.campaign.background``). Without one it simply runs here."""
+    if _active is NO_ABORT:
+        return work()
+    if not _WORKER:
+        _WORKER.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="noisebo-decision"))
+    future: Future = _WORKER[0].submit(contextvars.copy_context().run, work)
+    while True:
+        try:
+            return future.result(timeout=WATCH_S)
+        except NotYet:
+            name = requested()
+            if name is not None:
+                _interrupt(_WORKER[0])
+                background.leave(future)
+                return stopped(name)
+
+
+class Abandoned(BaseException):
+    """Raised inside work that a stop left behind, to end it early: a BaseException, so nothing
+    on its way catches it as an ordinary error."""
+
+
+def _interrupt(pool: ThreadPoolExecutor) -> None:
+    """Raise ``Abandoned`` in the pool's thread at its next Python instruction, so that it stops
+    taking the interpreter from the threads that end the campaign (a compilation in native code
+    runs on until it returns)."""
+    import ctypes
+
+    for thread in pool._threads:
+        if thread.ident is not None:
+            ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread.ident), ctypes.py_object(Abandoned))

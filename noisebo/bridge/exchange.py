@@ -80,8 +80,9 @@ class Exchange:
         ``InstrumentTimeout`` once it has gone silent, ``InstrumentError`` for a failure it
         reports. The reading stays held until the campaign journals it, so a campaign that
         stopped waiting (a timeout) finds it again on its next try. Once ``stop_requested()``
-        names a signal (checked every ``WAIT_SLICE_S``), ``MeasurementStopped`` ends the wait
-        unless the instrument PC is at work on the shot (polling, or measuring it)."""
+        names a signal (checked every ``WAIT_SLICE_S``), ``MeasurementStopped`` ends the wait,
+        whatever the instrument PC is doing: the client keeps a reading the campaign did not take
+        and hands it in again when the campaign is resumed."""
         with self._cond:
             request = self._wanted()
             if request is None or tuple(float(v) for v in x) != request.x or float(t) != request.t:
@@ -104,15 +105,9 @@ class Exchange:
                 if self.closed:
                     raise InstrumentError("the bridge was shut down")
                 signal_name = stop_requested()
-                if signal_name is not None and not self._at_work(key, t):
+                if signal_name is not None:
                     raise MeasurementStopped(f"{signal_name} received")
                 self._cond.wait(WAIT_SLICE_S)
-
-    def _at_work(self, key: tuple[int, int], t: float) -> bool:
-        """Whether the instrument PC is polling, or took shot ``key`` less than its ``t`` plus
-        ``silence_s`` ago (its reading may still come). Holds the lock."""
-        taken = self._taken_at.get(key)
-        return self._polling > 0 or (taken is not None and self._clock() - taken <= t + self.silence_s)
 
     def _silent_since(self, key: tuple[int, int], t: float, started: float) -> bool:
         """Whether the instrument PC has been silent for ``silence_s`` since the campaign began

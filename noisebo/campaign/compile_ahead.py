@@ -11,6 +11,7 @@ import threading
 import jax
 
 from noisebo.acquisition.method import Method
+from noisebo.campaign import background
 from noisebo.acquisition.proposal import _propose_nd, propose_key, shot_choices
 from noisebo.acquisition.records import Decision
 from noisebo.campaign.steps import seed_points
@@ -157,7 +158,7 @@ class CompileAhead:
                 return
             self._done.add(key)
         # Not a daemon: a thread inside an XLA compilation as the interpreter exits aborts the
-        # process; ``drive`` joins it before returning.
+        # process; ``drive`` joins it before returning, or leaves it (``leave``) on a stop.
         self._thread = threading.Thread(target=_quietly, args=(work,), name="noisebo-compile-ahead")
         self._thread.start()
 
@@ -168,6 +169,13 @@ class CompileAhead:
     def join(self) -> None:
         if self._thread is not None:
             self._thread.join()
+
+    def leave(self) -> None:
+        """Stop waiting for this compilation: the campaign has stopped. The interpreter still
+        joins the thread as it exits; a command that must end at once asks
+        ``background.still_running`` and ends the process without it once its files are closed."""
+        if self.busy:
+            background.leave(self._thread)
 
 
 def _quietly(work) -> None:

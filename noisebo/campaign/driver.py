@@ -106,40 +106,48 @@ def drive(
 ) -> EngineState:
     """Step the campaign from ``state`` until the engine says it is done, and return the final
     state: ``decide`` when a decision is due, else ``measure_point`` (``take_point``: every shot
-    committed as it is taken) for the point under way. After each committed point, ``stop_requested()`` may name a reason to stop: the
-    campaign is then committed as aborted with that reason. An instrument with ``committed``
-    (``instruments.base.Follower``) sees the state at the start and after every commit."""
+    committed as it is taken) for the point under way. After every commit (a shot, a point, a
+    decision), ``stop_requested()`` may name a reason to stop: the campaign is then committed as
+    aborted with that reason, mid-point if need be (``noisebo resume`` takes the point's remaining
+    shots). An instrument with ``committed`` (``instruments.base.Follower``) sees the state at the
+    start and after every commit."""
     follow = getattr(instrument, "committed", lambda state: None)
 
     def committed(state: EngineState, events: Sequence[Event]) -> EngineState:
         state = commit(state, events)
         follow(state)
+        reason = stop_requested()
+        stop = () if reason is None else engine.stop(state, Status.ABORTED, reason)
+        if stop:  # nothing when the campaign has already ended
+            state = commit(state, stop)
+            follow(state)
         return state
 
     follow(state)
     ahead = CompileAhead()
     ahead.after(state)
     try:
-        return _loop(state, instrument, committed, measure_point, decide, stop_requested, ahead)
-    finally:
-        ahead.join()  # never leave a thread compiling as the process winds down
+        final = _loop(state, instrument, committed, measure_point, decide, ahead)
+    except BaseException:
+        ahead.leave()  # a stop at once or an error: do not wait for a compilation no one will use
+        raise
+    if final.status is Status.ABORTED:
+        ahead.leave()
+    else:
+        ahead.join()
+    return final
 
 
-def _loop(state, instrument, committed, measure_point, decide, stop_requested, ahead: CompileAhead) -> EngineState:
+def _loop(state, instrument, committed, measure_point, decide, ahead: CompileAhead) -> EngineState:
     while True:
         step = engine.ask(state)
         if isinstance(step, Done):
             return state
-        before = len(state.points)
         if isinstance(step, DecisionDue):
             state = committed(state, decide(state))
             ahead.after(state)
         else:
             state = measure_point(instrument, state, committed)
-        if len(state.points) > before:  # a point was committed, by its last shot or its reduction
-            reason = stop_requested()
-            if reason is not None:
-                state = committed(state, engine.stop(state, Status.ABORTED, reason))
 
 
 @dataclass(frozen=True)

@@ -81,12 +81,14 @@ def flow_settings():
     return settings()
 
 
-def validated_config(path) -> CampaignConfig:
-    """A config file loaded, its instrument settings checked by the driver it names."""
+def validated_config(path, load_plugins: bool = True) -> CampaignConfig:
+    """A config file loaded, its instrument settings checked by the driver it names; with
+    ``load_plugins`` false its policy and noise law are checked by name only, without loading
+    their JAX code (a command's checks before the heavy imports)."""
     from noisebo.config import load_config
     from noisebo.instruments.registry import validated
 
-    return validated(load_config(config_path(path)), str(path))
+    return validated(load_config(config_path(path), load_plugins), str(path))
 
 
 EXIT_SIGNAL = {"SIGINT": 130, "SIGTERM": 143}
@@ -102,7 +104,7 @@ class Aborted(Exception):
 
 @contextlib.contextmanager
 def abortable(path: Path):
-    """SIGINT/SIGTERM stop the campaign cleanly after the current point (see flows/abort.py)."""
+    """SIGINT/SIGTERM stop the campaign cleanly after the shot under way (see flows/abort.py)."""
     from prefect.exceptions import TerminationSignal
 
     from noisebo.flows.abort import AbortFlag, CampaignAborted, stopping_signal

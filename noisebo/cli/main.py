@@ -10,6 +10,7 @@ and `inspect` load neither Prefect nor JAX (``benchmarks/cli.py`` times them).
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 
@@ -44,6 +45,38 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    code = _main(argv)
+    if argv is None:  # the command itself, not a caller in the same process
+        end_now_if_compiling(code)
+        # The interpreter's last garbage collection walks every object left (seconds, once Prefect
+        # and JAX are loaded) to free memory that the process's end frees anyway.
+        gc.freeze()
+    return code
+
+
+def end_now_if_compiling(code: int) -> None:
+    """End the process with ``code`` now if a stopped campaign left a compilation or a decision
+    running in a background thread (``noisebo.campaign.background``): the interpreter would wait
+    for it (seconds, more on a busy machine). Its files are closed by now; exit handlers (the last
+    of Prefect's logs sent) run for up to ``EXIT_HANDLERS_S``."""
+    left = sys.modules.get("noisebo.campaign.background")
+    if left is None or not left.still_running():
+        return
+    import atexit
+    import threading
+
+    handlers = threading.Thread(target=atexit._run_exitfuncs, name="noisebo-exit", daemon=True)
+    handlers.start()
+    handlers.join(EXIT_HANDLERS_S)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
+EXIT_HANDLERS_S = 2.0
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args, extra = parser.parse_known_args(argv)
     if extra and args.command == "tell":  # values after an option: `tell FILE --point 3 1.2 1.4`

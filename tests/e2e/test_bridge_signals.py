@@ -1,6 +1,7 @@
 """`noisebo run` of a bridged campaign, the real command against a real Prefect server: SIGTERM
-while the campaign waits for an instrument PC that never connected stops it within 2 s with status
-aborted; a short token with a host beyond loopback is refused in one line before anything is
+stops it within 2 s with status aborted, and the process exits within 5 s, whether the campaign
+waits for an instrument PC that never connected, for the answer to a shot the PC took, or runs
+with the PC measuring; a short token with a host beyond loopback is refused in one line before anything is
 bound or written. (Only loopback is ever reached.)"""
 
 import os
@@ -12,7 +13,7 @@ import time
 import pytest
 
 from tests.noisebo.bridge.conftest import call
-from tests.noisebo.bridge.kills import free_port, write_remote_config
+from tests.noisebo.bridge.kills import SOURCE, free_port, write_remote_config
 from tests.noisebo.bridge.test_signals import ABORT_WITHIN_S, journaled_status
 
 pytestmark = pytest.mark.e2e
@@ -20,7 +21,11 @@ CLI = [sys.executable, "-m", "noisebo.cli.main"]
 TOKEN = "e2e-signal-token-0123456789abcdef"
 
 
-def test_sigterm_while_noisebo_run_waits_for_the_instrument_pc_aborts_within_2_s(tmp_path, prefect_server):
+EXIT_WITHIN_S = 5.0
+
+
+@pytest.mark.parametrize("phase", ["no instrument PC yet", "a shot taken and no answer", "the PC measuring"])
+def test_sigterm_aborts_noisebo_run_within_2_s_and_it_exits_within_5_s(phase, tmp_path, prefect_server):
     port = free_port()
     config = write_remote_config(tmp_path / "killed.yaml", port)
     path = tmp_path / "runs" / "killed_reward_s0000.h5"
@@ -32,31 +37,55 @@ def test_sigterm_while_noisebo_run_waits_for_the_instrument_pc_aborts_within_2_s
         stderr=subprocess.PIPE,
         text=True,
     )
+    client = None
     try:
         deadline = time.monotonic() + 240
         while not path.with_suffix(".journal").exists() or _now(port) != "measuring":
             assert campaign.poll() is None, campaign.communicate()
             assert time.monotonic() < deadline, "the campaign never came to wait for its first shot"
             time.sleep(0.1)
-        time.sleep(1.0)  # waiting for the PC, well past starting
+        url = f"http://127.0.0.1:{port}"
+        if phase == "a shot taken and no answer":
+            code, shot = call(url, "GET", "/next?wait=30", token=TOKEN)
+            assert code == 200 and shot["kind"] == "shot", shot
+        elif phase == "the PC measuring":
+            client = subprocess.Popen(
+                [sys.executable, "-m", "noisebo.bridge.serve_simulator", url, SOURCE],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+            while _status(port).get("points", 0) < 4:  # into the BO steps: measuring and deciding in turn
+                assert campaign.poll() is None and time.monotonic() < deadline, "the campaign never got going"
+                time.sleep(0.05)
+        else:
+            time.sleep(1.0)  # well past starting: waiting
         campaign.send_signal(signal.SIGTERM)
         sent = time.monotonic()
         while journaled_status(path) != "aborted":
             assert time.monotonic() - sent < ABORT_WITHIN_S, f"not aborted {ABORT_WITHIN_S} s after SIGTERM"
             time.sleep(0.02)
         out, err = campaign.communicate(timeout=120)
+        exited_s = time.monotonic() - sent
     finally:
         campaign.kill()
+        if client is not None:
+            client.kill()
     assert campaign.returncode == 143, err
+    assert exited_s < EXIT_WITHIN_S, f"noisebo run exited {exited_s:.1f} s after SIGTERM"
     assert "SIGTERM received" in out and TOKEN not in out + err
     assert f"continue it with `noisebo resume {path}`" in err.strip().splitlines()[-1]
 
 
-def _now(port: int) -> str | None:
+def _status(port: int) -> dict:
     try:
-        return call(f"http://127.0.0.1:{port}", "GET", "/status", token=TOKEN)[1].get("now")
+        return call(f"http://127.0.0.1:{port}", "GET", "/status", token=TOKEN)[1]
     except OSError:  # not listening yet
-        return None
+        return {}
+
+
+def _now(port: int) -> str | None:
+    return _status(port).get("now")
 
 
 def test_a_short_token_off_loopback_stops_noisebo_run_in_one_line(tmp_path, prefect_server):

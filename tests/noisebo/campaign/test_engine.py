@@ -181,3 +181,39 @@ def test_a_journal_cut_between_a_points_last_shot_and_its_commit_reduces_that_po
     resumed = driver.drive(state, build(SMALL.instrument))
     assert resumed.data == run.final.data
     assert [len(p.shots) for p in resumed.points] == [len(p.shots) for p in run.final.points]
+
+
+def _shots(events) -> list[int]:
+    return [e.shot for e in events if isinstance(e, ShotTaken)]
+
+
+@pytest.mark.parametrize(
+    "stop_after",
+    [
+        lambda commits: len(commits) == 2,  # mid-point: after the first point's second shot
+        lambda commits: any(isinstance(e, Decided) for e in commits[-1]),  # after the first decision
+    ],
+    ids=["mid-point", "after a decision"],
+)
+def test_a_stop_request_aborts_at_the_next_commit_and_a_resume_gives_the_same_campaign(stop_after):
+    uninterrupted = driver.run_campaign(SMALL, build(SMALL.instrument), 4).final
+    commits: list = []
+
+    def counted(state, events):
+        commits.append(tuple(events))
+        return driver.in_memory(state, events)
+
+    def stop_requested():
+        return "SIGTERM received" if any(stop_after(commits[: i + 1]) for i in range(len(commits))) else None
+
+    stopped = driver.drive(fresh(), build(SMALL.instrument), counted, stop_requested=stop_requested)
+    assert (stopped.status, stopped.reason) == (Status.ABORTED, "SIGTERM received")
+    assert isinstance(engine.ask(stopped), Done)
+    first = next(i for i in range(len(commits)) if stop_after(commits[: i + 1]))
+    assert len(commits) == first + 2  # the stop is the very next commit
+    assert commits[-1] == (StatusChanged(Status.ABORTED, "SIGTERM received"),)
+    if first == 1:  # two shots of the first point kept, the point not committed
+        assert len(stopped.points) == 0 and _shots(commits[0] + commits[1]) == [0, 1]
+    state = driver.in_memory(stopped, engine.resumed(stopped))
+    resumed = driver.drive(state, build(SMALL.instrument))
+    assert resumed.data == uninterrupted.data and resumed.status is Status.COMPLETED

@@ -47,7 +47,7 @@ def wait_for_line(stream, prefix: str) -> str:
 @pytest.mark.e2e  # real processes (CI runs -m e2e)
 @pytest.mark.parametrize("signum, code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)], ids=["SIGTERM", "SIGINT"])
 def test_a_second_signal_stops_at_once_with_its_exit_code(signum, code, tiny_config, tmp_path, prefect_harness):
-    # every shot hangs for a minute: the first signal's "finish the point" would take that long
+    # every shot hangs for a minute: the first signal's "finish the shot" would take that long
     config = campaign_yaml(tmp_path, tiny_config, timeout_s=60.0, faults={"timeout": 1.0, "hang_s": 120.0})
     journal = tmp_path / "runs" / "tiny_reward_s0000.journal"
     run = start_run(config, tmp_path, cli_env(tmp_path, prefect_harness))
