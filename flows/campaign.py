@@ -21,10 +21,11 @@ from prefect import flow
 from prefect.utilities.annotations import quote
 
 from noisebo.flows import abort
+from noisebo.flows.drivers import driver_of
 from noisebo.flows.reporting import RunReport, campaign_run_name, resumed_run_name, run_name
 from noisebo.instruments import build, registry
 from noisebo.campaign.driver import drive, now_utc
-from noisebo.campaign.engine import KEEP_BUDGET, EngineState, advance, ask, new_campaign
+from noisebo.campaign.engine import KEEP_BUDGET, EngineState, advance, ask, new_campaign, stop
 from noisebo.campaign.progress import progress_lines
 from noisebo.config import CampaignConfig, load_config
 from noisebo.events import (
@@ -32,7 +33,8 @@ from noisebo.events import (
     Status,
 )
 from noisebo.failures import FailureBudgetExceeded, InstrumentUnavailable
-from noisebo.storage.recorder import Recorder, campaign_path, package_versions, read_started
+from noisebo.precision import float64
+from noisebo.storage.recorder import Recorder, campaign_path, package_versions
 from noisebo.tasks import campaign as ops
 
 Progress = Callable[[str], None]
@@ -61,7 +63,7 @@ def run(
     at the end ``summarise``. Every event is journaled (shot by shot) before it counts. ``observe``
     sees the campaign after every committed point and at the end (the live view). Past the
     failure budget the campaign records the status "failed" with the reason and raises
-    ``FailureBudgetExceeded``; on a signal it finishes the point, records "aborted" and raises
+    ``FailureBudgetExceeded``; on a signal it finishes the shot under way (a decision under way is dropped), records "aborted" and raises
     ``abort.CampaignAborted``. ``report``: the flow run's Prefect reports (flows/reporting.py),
     sent after each commit, never before it."""
     instrument = instrument if instrument is not None else build(recorder.state.config.instrument)
@@ -91,7 +93,10 @@ def run(
             if report is not None:
                 report.log([(logging.INFO, line)])
             _COMPILED.append(True)
-        return advance(state, ops.TASKS)
+        return abort.unless_stopped(
+            lambda: float64(advance)(state, ops.TASKS),  # float64 as in ``drive``'s thread
+            lambda name: stop(state, Status.ABORTED, f"{name} received"),
+        )
 
     def stop_requested() -> str | None:
         name = abort.requested()
@@ -138,19 +143,6 @@ def start_campaign(path: Path, config: CampaignConfig, seed: int) -> Recorder:
     settings) journaled and its file written."""
     started = new_campaign(config, seed, registry.driver_info(config.instrument), package_versions(), now_utc())
     return Recorder.create(path, started)
-
-
-def driver_of(path: Path):
-    """The driver a campaign file was made with, built from the settings its journal recorded;
-    ``DriverNotInstalled`` says which driver and version the file needs."""
-    started = read_started(path)
-    try:
-        return build(started.config.instrument)
-    except registry.DriverNotInstalled as error:
-        d = started.driver
-        raise registry.DriverNotInstalled(
-            f"{path} was made with the instrument driver {d.name!r} {d.version}, which is not installed here: {error}"
-        ) from None
 
 
 @contextmanager

@@ -13,17 +13,15 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
-import threading
 from pathlib import Path
 
 import prefect.settings as ps
 from prefect.server.api.server import SubprocessASGIServer
 
-from noisebo.flows import processes, runtime
+from noisebo.flows import processes, server_launch
 
 SERVER_APP = "prefect.server.api.server:create_app"
-GUARD = Path(__file__).resolve().with_name("server_guard.py")
+GUARD = server_launch.GUARD
 
 
 def temporary_server() -> SubprocessASGIServer:
@@ -44,14 +42,16 @@ class GuardedServer(SubprocessASGIServer):
     def start(self, timeout: int | None = None) -> None:
         if not self.running:
             stop_stale_servers(prefect_home())
+            early = server_launch.take()  # the process a command started before loading Prefect
+            if early is not None:
+                self.port, self._early = early
         super().start(timeout)
 
     def _run_uvicorn_command(self) -> subprocess.Popen:
         self._forget()  # a retry on another port: the process before it has exited
-        mode = "pdeathsig" if threading.current_thread() is threading.main_thread() else "watch"
-        process = subprocess.Popen(
-            [sys.executable, "-P", str(GUARD), str(os.getpid()), mode, str(self.port)], env=server_environment()
-        )
+        process, self._early = getattr(self, "_early", None), None
+        if process is None or process.poll() is not None:
+            process = server_launch.start(self.port, server_environment())
         self._record: Path | None = record_server(prefect_home(), process.pid)
         return process
 
@@ -67,19 +67,8 @@ class GuardedServer(SubprocessASGIServer):
 
 
 def server_environment() -> dict[str, str]:
-    """The server process's environment: Prefect's settings, and the warning filter of
-    ``runtime.quiet_pool_at_exit`` (the server holds Prefect's database pool, and it imports
-    nothing of noisebo that would set the filter; its stderr is the command's)."""
-    quiet = f"ignore:{runtime.POOL_AT_EXIT}"
-    warnings = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), quiet)))
-    return {
-        **os.environ,
-        "PREFECT_UI_ENABLED": "0",
-        "PREFECT__SERVER_EPHEMERAL": "1",
-        "PREFECT__SERVER_FINAL": "1",
-        "PYTHONWARNINGS": warnings,
-        **ps.get_current_settings().to_environment_variables(exclude_unset=True),
-    }
+    """The server process's environment (``server_launch.environment``) with Prefect's settings."""
+    return server_launch.environment(ps.get_current_settings().to_environment_variables(exclude_unset=True))
 
 
 def prefect_home() -> Path:

@@ -124,7 +124,10 @@ def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
     problem = profile_problem(config, settings.model_dump(mode="json"))
     if problem is not None:
         raise ConfigError(f"{source}: {problem}")
-    return config.with_overrides(instrument={"settings": settings.model_dump(mode="json")})
+    # the settings as the driver validated them, put in place without validating the whole config
+    # again: that would load the policy and noise law (JAX code) that the caller may not want yet
+    instrument = config.instrument.model_copy(update={"settings": settings.model_dump(mode="json")})
+    return config.model_copy(update={"instrument": instrument})
 
 
 def profile_problem(config: CampaignConfig, settings: dict) -> str | None:

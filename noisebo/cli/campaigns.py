@@ -32,8 +32,10 @@ from noisebo.cli.common import (
 def say_starting() -> None:
     """Say what the silent first seconds are for."""
     server = os.environ.get("PREFECT_API_URL")
-    where = f"the Prefect server at {server}" if server else "Prefect's temporary local server (about 10 s)"
-    print(f"starting: loading Prefect and JAX, then {where}", flush=True)
+    if server:
+        print(f"starting: loading Prefect and JAX, then the Prefect server at {server}", flush=True)
+    else:
+        print("starting: loading Prefect and JAX while Prefect's temporary local server starts", flush=True)
 
 
 def outcome_line(path: Path) -> str:
@@ -60,30 +62,35 @@ def _preflight(config, source) -> None:
 
 
 def _run(args) -> int:
-    config = validated_config(args.config)
+    config = validated_config(args.config, load_plugins=False)  # what needs no JAX is checked first
     if config.instrument.kind == "manual":  # refused here, before Prefect starts and logs the driver's refusal
         from noisebo.bridge.remote import MEASURED_BY_HAND
 
         raise UsageError(f"{args.config}: {MEASURED_BY_HAND.format(config=args.config)}")
-    if args.policy:
-        config = config.with_overrides(acquisition={"policy": args.policy})
     _preflight(config, args.config)
     from noisebo.storage.recorder import campaign_path
 
-    path = campaign_path(config, args.seed, args.out)
+    path = campaign_path(config, args.seed, args.out, args.policy)
     if path.exists() or path.with_suffix(".journal").exists():
         raise CampaignFileError(f"{path} already exists; continue it with `noisebo resume {path}`")
-    print(
-        f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}, instrument "
-        f"{config.instrument.kind}: {config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps -> {path}",
-        flush=True,
-    )
-    say_starting()
-    campaign_flows, _ = prefect_module()
-    with flow_settings(), abortable(path):
-        path = campaign_flows.campaign(
-            config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd, live=args.live
+    from noisebo.flows import server_launch
+
+    with server_launch.launched():  # Prefect's temporary server boots while the rest loads
+        config = validated_config(args.config)  # what the policy and noise law check (their JAX code)
+        if args.policy:
+            config = config.with_overrides(acquisition={"policy": args.policy})
+        print(
+            f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}, instrument "
+            f"{config.instrument.kind}: {config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps "
+            f"-> {path}",
+            flush=True,
         )
+        say_starting()
+        campaign_flows, _ = prefect_module()
+        with flow_settings(), abortable(path):
+            path = campaign_flows.campaign(
+                config, seed=args.seed, out_dir=str(args.out), record_rrd=not args.no_rrd, live=args.live
+            )
     print(outcome_line(Path(path)))
     print(path)
     return 0
@@ -118,12 +125,16 @@ def _resume(args) -> int:
         print(f"{path} is already complete: nothing to resume", file=sys.stderr)
         print(path)
         return 0
+    from noisebo.flows import server_launch
+    from noisebo.flows.drivers import driver_of
+
+    driver_of(path)  # the driver it was made with is installed, or one line says which is missing
     say_starting()
-    campaign_flows, _ = prefect_module()
-    campaign_flows.driver_of(path)  # the driver it was made with is installed, or one line says which is missing
-    print(f"resuming {path}", flush=True)
-    with flow_settings(), abortable(path):
-        done = campaign_flows.resume(str(path), record_rrd=not args.no_rrd, live=args.live, budget_s=args.budget_s)
+    with server_launch.launched():  # Prefect's temporary server boots while the rest loads
+        campaign_flows, _ = prefect_module()
+        print(f"resuming {path}", flush=True)
+        with flow_settings(), abortable(path):
+            done = campaign_flows.resume(str(path), record_rrd=not args.no_rrd, live=args.live, budget_s=args.budget_s)
     print(outcome_line(Path(done)))
     print(done)
     return 0

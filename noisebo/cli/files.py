@@ -11,23 +11,32 @@ from noisebo.cli.common import call_isolated, check_present, warn
 
 
 def _replay(args) -> int:
+    path = readable(Path(args.file))
     from noisebo.view.recording import replay
 
-    path = check_present(Path(args.file))
     out = call_isolated(replay, path, args.out, warn, what=str(path))
     print(f"{out}  (view it with: rerun {out})")
     return 0
 
 
 def _report(args) -> int:
-    from noisebo.view.report import report
-
     target = Path(args.target)
     if not target.is_dir():
-        check_present(target)
+        readable(target)
+    from noisebo.view.report import report
+
     for written in call_isolated(report, target, args.out, what=str(target)):
         print(written)
     return 0
+
+
+def readable(path: Path) -> Path:
+    """``path`` when its campaign file reads whole; a damaged or foreign one refused in one line
+    before the command loads its plotting or viewing stack (JAX, matplotlib, Rerun: seconds)."""
+    from noisebo.storage.record import check_readable
+
+    call_isolated(check_readable, check_present(path), what=str(path))
+    return path
 
 
 def _profile_summary(record) -> dict | None:

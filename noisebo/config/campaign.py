@@ -191,8 +191,10 @@ def parse_config(
         raise ConfigError(f"{source}: {describe_errors(error)}") from None
 
 
-def load_config(path: str | Path) -> CampaignConfig:
-    """Read and validate a YAML campaign configuration (a profile path in it relative to its folder)."""
+def load_config(path: str | Path, load_plugins: bool = True) -> CampaignConfig:
+    """Read and validate a YAML campaign configuration (a profile path in it relative to its
+    folder); with ``load_plugins`` false its policy and noise law are checked by name only
+    (``parse_config``)."""
     path = Path(path)
     data = _read_yaml(path, "config")
-    return parse_config(data, source=str(path), base=path.parent)
+    return parse_config(data, source=str(path), base=path.parent, load_plugins=load_plugins)

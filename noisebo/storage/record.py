@@ -170,6 +170,13 @@ def read_record(path: Path) -> CampaignRecord:
     return from_tables(Path(path), read_campaign(path), read_failures(path), read_shot_fits(path))
 
 
+def check_readable(path: Path) -> None:
+    """Nothing when the campaign file at ``path`` reads whole; else ``read_record``'s
+    ``CampaignFileError``. Light (h5py and numpy only), for a command to refuse a damaged file
+    before it loads its plotting or viewing stack."""
+    read_record(path)
+
+
 def from_state(state: EngineState, path: Path | str | None = None) -> CampaignRecord:
     """The record of a campaign's state, as a file written from it reads back: what a store
     that keeps no file (``storage.memory``) gives its readers. ``path`` names where it is kept."""

@@ -37,9 +37,10 @@ from noisebo.storage.store import CampaignStore, Hdf5Store
 PACKAGES = ("noisebo", "numpy", "scipy", "jax", "jaxlib", "numpyro", "h5py", "prefect", "pydantic", "rerun-sdk")
 
 
-def campaign_path(config, seed: int, out_dir: str | Path) -> Path:
-    """Where a campaign's HDF5 file goes: OUT/NAME_POLICY_sSEED.h5 (its journal beside it)."""
-    return Path(out_dir) / f"{config.name}_{config.acquisition.policy}_s{seed:04d}.h5"
+def campaign_path(config, seed: int, out_dir: str | Path, policy: str | None = None) -> Path:
+    """Where a campaign's HDF5 file goes: OUT/NAME_POLICY_sSEED.h5 (its journal beside it);
+    POLICY the config's unless ``policy`` names another."""
+    return Path(out_dir) / f"{config.name}_{policy or config.acquisition.policy}_s{seed:04d}.h5"
 
 
 def journal_path(h5_path: Path) -> Path:

@@ -133,3 +133,48 @@ def test_xla_is_quiet_before_a_command_loads_jax(tiny_yaml, tmp_path):
         check=False,
     )
     assert json.loads(out.stdout.strip().splitlines()[-1]) == {"code": 0, "level": ["3"]}, out.stderr[-2000:]
+
+
+def _write(folder: Path, name: str, text: str) -> str:
+    (folder / name).write_text(text)
+    return name
+
+
+def _damaged_copy(started_file: Path, folder: Path) -> str:
+    data = bytearray(started_file.read_bytes())
+    data[4000:4400] = bytes(b ^ 0xFF for b in data[4000:4400])  # inside the file's metadata and tables
+    (folder / "damaged.h5").write_bytes(bytes(data))
+    return "damaged.h5"
+
+
+REFUSALS = {  # what is refused: the command line, from files the case writes into the folder
+    "a config out of range": lambda f, s: ["run", _write(f, "bad.yaml", "name: bad\nschedule: {n_steps: -3}\n")],
+    "an unknown policy": lambda f, s: ["run", _write(f, "bad.yaml", "name: bad\nacquisition: {policy: nosuch}\n")],
+    "a missing config": lambda f, s: ["run", "missing.yaml"],
+    "a sweep of a bad config": lambda f, s: ["sweep", _write(f, "bad.yaml", "space: {n_x: -1}\n"), "--seeds", "2"],
+    "resume of a damaged file": lambda f, s: ["resume", _damaged_copy(s, f)],
+    "report of a damaged file": lambda f, s: ["report", _damaged_copy(s, f)],
+    "replay of a damaged file": lambda f, s: ["replay", _damaged_copy(s, f)],
+    "inspect of a damaged file": lambda f, s: ["inspect", _damaged_copy(s, f)],
+    "tell on a damaged file": lambda f, s: ["tell", _damaged_copy(s, f), "--point", "0", "1.0"],
+    "a bridge off loopback with a short token": lambda f, s: [
+        "run",
+        _write(
+            f,
+            "exposed.yaml",
+            "name: exposed\ninstrument: {kind: remote, settings: {host: 0.0.0.0, port: 8765, token_file: t.token}}\n",
+        ),
+    ],
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSALS))
+def test_a_refusal_needs_no_model_loads_none_and_writes_nothing(case, started_file, tmp_path, monkeypatch):
+    """Each refusal of bad input is answered before Prefect, JAX or the plotting stack loads (so at
+    once, in under 2 s on an idle machine: benchmarks/cli.py), exit 2, and leaves the folder as it was."""
+    monkeypatch.setenv("NOISEBO_BRIDGE_TOKEN", "too-short")
+    args = REFUSALS[case](tmp_path, started_file)
+    before = {p: p.stat().st_mtime_ns for p in tmp_path.rglob("*")}
+    found = loaded_after(args, tmp_path)
+    assert found == {"code": 2, "loaded": []}
+    assert {p: p.stat().st_mtime_ns for p in tmp_path.rglob("*")} == before
