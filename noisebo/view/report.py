@@ -235,16 +235,16 @@ def _trajectory(ax, data: CampaignRecord, config: CampaignConfig, colours) -> No
     if len(steps):
         acq = np.asarray(steps.arrays["acq_map"][-1], dtype=np.float64).T
         shown = np.where(np.isfinite(acq), acq, np.nan)
-        image = ax.imshow(
-            shown, origin="lower", aspect="auto", cmap="Greys", extent=(s.x_min, s.x_max, s.t_min, s.t_max), alpha=0.8
+        # the map as a background, its values relative (darker: more wanted): one colour bar, the steps'
+        ax.imshow(
+            shown, origin="lower", aspect="auto", cmap="Greys", extent=(s.x_min, s.x_max, s.t_min, s.t_max), alpha=0.6
         )
-        ax.figure.colorbar(image, ax=ax, label=f"acquisition at step {len(steps)}", fraction=0.05)
-    ax.plot(p.x, p.t, color="0.3", lw=0.7, zorder=2)
     ax.scatter(p.x, p.t, c=colours, s=36, edgecolor="k", linewidth=0.5, zorder=3)
+    where = f"over the acquisition map of step {len(steps)} (darker: higher)" if len(steps) else "(no decision yet)"
     ax.set(
         xlabel=x_label,
         ylabel="exposure / sweep time t (s)",
-        title="measured points over the acquisition map",
+        title=f"measured points {where}",
         xlim=(s.x_min, s.x_max),
         ylim=(s.t_min, s.t_max),
     )
@@ -263,8 +263,32 @@ def _t_opt(ax, data: CampaignRecord, config: CampaignConfig, law) -> None:
         ax.axvline(converged, color="tab:green", ls=":", label=f"noise model converged (step {converged})")
     if data.summary is not None:
         ax.plot([k[-1] + 1 if len(k) else 1], [data.summary.t_opt], "s", color="tab:red", label="final model")
-    ax.set(xlabel="BO step", ylabel="predicted optimal t (s)", title="evolution of the predicted optimal t")
+    shown = [*steps.t_opt, *([data.summary.t_opt] if data.summary is not None else [])]
+    if law is not None:
+        shown.append(t_star)
+    ax.set(
+        xlabel="BO step",
+        ylabel="predicted optimal t (s)",
+        title="evolution of the predicted optimal t",
+        ylim=t_range_shown(shown, s.t_min, s.t_max),
+    )
     ax.legend(fontsize=8)
+
+
+T_SPAN_SHOWN = 0.25  # the predicted optimal t's axis spans at least +-25 % of its middle value
+
+
+def t_range_shown(values, t_min: float, t_max: float, span: float = T_SPAN_SHOWN) -> tuple[float, float]:
+    """The y range (s) of the predicted optimal t: the values with a margin, widened to at least
+    +-``span`` of their middle, so that a wobble of a few per cent looks as small as it is;
+    never beyond [t_min, t_max]."""
+    finite = [float(v) for v in values if np.isfinite(v)]
+    if not finite:
+        return t_min, t_max
+    low, high = min(finite), max(finite)
+    middle = (low + high) / 2
+    margin = 0.05 * (high - low)
+    return max(t_min, min(low - margin, middle * (1 - span))), min(t_max, max(high + margin, middle * (1 + span)))
 
 
 def _f(ax, data: CampaignRecord, config: CampaignConfig, truth, colours) -> None:
