@@ -70,19 +70,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def run_campaign(env: dict, config: str, seed: int, folder: Path) -> None:
-    command = [
-        sys.executable,
-        "-m",
-        "noisebo.cli.main",
-        "run",
-        config,
-        "--seed",
-        str(seed),
-        "--out",
-        str(folder / "runs"),
-        "--no-rrd",
-    ]
+def run_campaign(env: dict, config: str, seed: int, folder: Path, rrd: bool = False) -> None:
+    """``noisebo run CONFIG --seed SEED`` into ``folder/runs`` (with its Rerun recording if ``rrd``);
+    exits with the campaign's output if it fails."""
+    command = [sys.executable, "-m", "noisebo.cli.main", "run", config, "--seed", str(seed)]
+    command += ["--out", str(folder / "runs")] + ([] if rrd else ["--no-rrd"])
     print("campaign:", "noisebo", *command[3:], flush=True)
     started = time.monotonic()
     process = subprocess.Popen(
@@ -94,7 +86,7 @@ def run_campaign(env: dict, config: str, seed: int, folder: Path) -> None:
         stop_group(process)
     if process.returncode != 0:
         raise SystemExit(
-            f"screenshot_flow_run: the campaign failed (exit code {process.returncode}):\n{output[-3000:]}"
+            f"{Path(sys.argv[0]).stem}: the campaign failed (exit code {process.returncode}):\n{output[-3000:]}"
         )
     last = [line for line in output.splitlines() if line.strip()][-2:]
     print(f"  done in {time.monotonic() - started:.1f} s: {' / '.join(last)}", flush=True)
@@ -159,13 +151,21 @@ def settled(api: Api, flow_run_id: str) -> tuple[dict, int]:
     return api.flow_run(flow_run_id), counts[-1]
 
 
-def chromium_run(chromium: str, profile: Path, args: list[str], timeout_s: float) -> str:
-    """Headless Chromium once at WINDOW; its stdout."""
-    return headless_chromium.run(chromium, profile, args, WINDOW, timeout_s)
+def chromium_run(
+    chromium: str, profile: Path, args: list[str], timeout_s: float, window: tuple[int, int] = WINDOW
+) -> str:
+    """Headless Chromium once at ``window`` (default WINDOW); its stdout."""
+    return headless_chromium.run(chromium, profile, args, window, timeout_s)
 
 
 def missing_from_page(
-    chromium: str, profile: Path, url: str, expected: list[str], any_of: list[str], budget_ms: int
+    chromium: str,
+    profile: Path,
+    url: str,
+    expected: list[str],
+    any_of: list[str],
+    budget_ms: int,
+    window: tuple[int, int] = WINDOW,
 ) -> list[str]:
     dom = html.unescape(
         chromium_run(
@@ -173,6 +173,7 @@ def missing_from_page(
             profile,
             [f"--virtual-time-budget={budget_ms}", "--dump-dom", url],
             timeout_s=budget_ms / 1000 + 90,
+            window=window,
         )
     )
     missing = [text for text in expected if text not in dom]
@@ -182,12 +183,19 @@ def missing_from_page(
 
 
 def screenshot(
-    chromium: str, profile: Path, url: str, expected: list[str], any_of: list[str], budget_ms: int, target: Path
+    chromium: str,
+    profile: Path,
+    url: str,
+    expected: list[str],
+    any_of: list[str],
+    budget_ms: int,
+    target: Path,
+    window: tuple[int, int] = WINDOW,
 ) -> Path:
-    """A PNG of ``url`` once its DOM holds every one of ``expected`` and one of ``any_of`` (if any);
-    written to ``target``."""
+    """A PNG of ``url`` at ``window`` (width, height) px once its DOM holds every one of ``expected``
+    and one of ``any_of`` (if any); written to ``target``."""
     for budget in (budget_ms, 2 * budget_ms, 4 * budget_ms):
-        missing = missing_from_page(chromium, profile, url, expected, any_of, budget)
+        missing = missing_from_page(chromium, profile, url, expected, any_of, budget, window)
         if missing:
             print(f"  not rendered after {budget} ms of virtual time (missing {missing}); waiting longer", flush=True)
             continue
@@ -198,6 +206,7 @@ def screenshot(
             profile,
             [f"--virtual-time-budget={budget}", f"--screenshot={raw}", url],
             timeout_s=budget / 1000 + 90,
+            window=window,
         )
         image = Image.open(raw).convert("RGB")
         colours = image.getcolors(maxcolors=1 << 16)
@@ -205,7 +214,7 @@ def screenshot(
             print(f"  the screenshot has {len(colours)} colours only (blank or loading?); waiting longer", flush=True)
             continue
         return save_small(image, target)
-    raise SystemExit(f"screenshot_flow_run: {url} did not render (missing {missing}) after {4 * budget_ms} ms")
+    raise SystemExit(f"{Path(sys.argv[0]).stem}: {url} did not render (missing {missing}) after {4 * budget_ms} ms")
 
 
 def save_small(image: Image.Image, target: Path) -> Path:
