@@ -1,9 +1,15 @@
-"""The operator's page, the bridge's ``/``: what is measured now, progress (points, shots,
-instrument time, budget), whether the instrument PC is connected, the model of f and the noise
-model so far as pictures, and the last points. Plain HTML with inline SVG, nothing loaded from
-elsewhere, so it works offline; it reloads itself every ``REFRESH_S`` seconds.
+"""The operator's page, the bridge's ``/``: what the campaign is doing now (waiting for the
+instrument PC, measuring a point's shot, deciding, or ended and why), progress (finished points
+and their shots, failed attempts, instrument time, budget), whether the instrument PC is
+connected, the model of f and the noise model so far as pictures, and the last points. Plain
+HTML with inline SVG, nothing loaded from elsewhere, so it works offline; it reloads itself every
+``REFRESH_S`` seconds while the campaign runs, and no longer once it has ended (the bridge stops
+soon after, and a browser keeps the final page it loaded rather than showing an error).
 
-Units: x in the config's x units, t in s, values and noise in f units.
+What the page says of the campaign comes from one committed state (its phase is ``engine.ask``
+of it, as the exchange's), so its parts never disagree; ``status`` gives only what the
+exchange knows of the instrument PC. Units: x in the config's x units, t in s, values and noise
+in f units.
 """
 
 from __future__ import annotations
@@ -14,6 +20,11 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
+from noisebo.bridge.wire import campaign_id
+from noisebo.campaign import engine
+from noisebo.events import DecisionDue, Done, Request, Status
+from noisebo.storage.steps import shown as shown_step
+
 if TYPE_CHECKING:
     from noisebo.campaign.engine import EngineState
 
@@ -23,10 +34,17 @@ WIDTH, HEIGHT, MARGIN = 440, 240, (46, 14, 34, 40)  # px; margin: left, right, t
 STYLE = (
     "body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}h1{font-size:1.3em;margin:0 0 .4em}"
     "h2{font-size:1.05em;margin:1.2em 0 .4em}.now{font-size:1.15em;background:#eef4fb;padding:.6em .8em;"
-    "border-radius:6px}.bad{color:#b00}.ok{color:#070}table{border-collapse:collapse}"
+    "border-radius:6px}.ended{background:#f3f3f3}.bad{color:#b00}.ok{color:#070}table{border-collapse:collapse}"
     "td,th{padding:.15em .7em;text-align:right}th{border-bottom:1px solid #999}"
     "svg{background:#fff;border:1px solid #ddd;margin-right:1em}.plots{display:flex;flex-wrap:wrap}"
 )
+ENDED = {
+    Status.COMPLETED: "completed",
+    Status.ABORTED: "aborted",
+    Status.FAILED: "failed",
+    Status.BUDGET_SPENT: "its instrument-time budget is spent",
+}
+NOT_CONNECTED = {"connected": False, "polling": False, "last_seen_s_ago": None}
 
 
 def number(value, digits: int = 4) -> str:
@@ -42,47 +60,76 @@ def number(value, digits: int = 4) -> str:
 
 
 def render(status: dict, state: EngineState | None) -> str:
-    """The whole page for the exchange's ``status()`` and the campaign's state (None: not started)."""
-    body = [f"<h1>noisebo campaign {html.escape(str(status.get('campaign') or ''))}</h1>"]
+    """The whole page for the campaign's committed ``state`` (None: not started) and the
+    exchange's ``status()`` (only its "instrument_pc" is read)."""
     if state is None:
-        body.append("<p class='now'>starting: the campaign has not begun yet</p>")
+        body = ["<h1>noisebo campaign</h1><p class='now'>starting: the campaign has not begun yet</p>"]
+        ended = False
     else:
-        body += [
-            _now(status, state),
-            _progress(status, state),
-            _connection(status["instrument_pc"]),
+        pc = status.get("instrument_pc") or NOT_CONNECTED
+        step = engine.ask(state)
+        ended = isinstance(step, Done)
+        body = [
+            f"<h1>noisebo campaign {html.escape(campaign_id(state))}</h1>",
+            _now(step, state, pc),
+            _progress(step, state),
+            _connection(pc, ended),
             "<h2>What the campaign has learned</h2><div class='plots'>",
             _f_plot(state),
             _noise_plot(state),
             "</div>",
             _last_points(state),
         ]
+    refresh = "" if ended else f"<meta http-equiv='refresh' content='{REFRESH_S}'>"
     return (
-        f"<!doctype html><html><head><meta charset='utf-8'><meta http-equiv='refresh' content='{REFRESH_S}'>"
+        f"<!doctype html><html><head><meta charset='utf-8'>{refresh}"
         f"<title>noisebo campaign</title><style>{STYLE}</style></head><body>{''.join(body)}</body></html>"
     )
 
 
-def _now(status: dict, state: EngineState) -> str:
-    current = status.get("current")
-    if current:
-        kind = "seed point" if current["step"] == 0 else f"BO step {current['step']}"
-        return (
-            f"<p class='now'>measuring point {current['point']} ({kind}) at x = {number(tuple(current['x']))}, "
-            f"t = {number(current['t'])} s: shot {current['shot'] + 1} of {current['shots_wanted']}</p>"
+def _now(step: Request | DecisionDue | Done, state: EngineState, pc: dict) -> str:
+    """The campaign's phase: the shot it wants (measured, or waiting for an instrument PC that has
+    not connected), the decision it is making, or its end and why."""
+    n_steps = state.config.schedule.n_steps
+    if isinstance(step, Request):
+        kind = "seed point" if step.step < 0 else f"BO step {shown_step(step.step)} of {n_steps}"
+        shot = (
+            f"point {step.point} ({kind}) at x = {number(step.x)}, t = {number(step.t)} s: "
+            f"shot {step.taken + 1} of {step.wanted}"
         )
-    if status["now"] == "deciding":
-        return "<p class='now'>deciding where and how long to measure next</p>"
-    reason = f": {html.escape(state.reason)}" if state.reason else ""
-    return f"<p class='now'>{html.escape(status['status'])}{reason}</p>"
+        if not pc["connected"]:
+            return f"<p class='now'>waiting for the instrument PC to connect, to measure {shot}</p>"
+        return f"<p class='now'>measuring {shot}</p>"
+    if isinstance(step, DecisionDue):
+        if step.reduce:
+            what = f"reducing point {len(state.points)}: its {len(state.taken)} shots are in"
+        elif step.final:
+            why = f" ({html.escape(step.budget)})" if step.budget else ""
+            what = f"finishing: no more points to measure{why}; summarising the campaign"
+        else:
+            what = f"deciding BO step {shown_step(step.step)} of {n_steps}: where and how long to measure next"
+        return f"<p class='now'>{what}</p>"
+    said = ENDED.get(step.status, step.status.value)
+    if step.reason and step.status is Status.BUDGET_SPENT:  # its reason says so: "budget spent: ..."
+        said = html.escape(step.reason)
+    elif step.reason:
+        said += f" ({html.escape(step.reason)})"
+    elif step.status is Status.COMPLETED:
+        said += f", all {len(state.points)} points measured"
+    return (
+        f"<p class='now ended'>the campaign has ended: {said}</p>"
+        "<p>This page no longer reloads itself: the bridge stops serving soon after the end.</p>"
+    )
 
 
-def _progress(status: dict, state: EngineState) -> str:
-    """Finished work only: the committed points and their shots (the point being measured is
-    counted apart), instrument time, budget, and the predicted optimal t once there is one."""
-    done, total = status["points"], status["points_total"]
+def _progress(step: Request | DecisionDue | Done, state: EngineState) -> str:
+    """Finished work only: the committed points and their shots (the shots of a point not yet
+    committed are counted apart), failed attempts, instrument time spent, budget, and the
+    predicted optimal t once there is one."""
+    sched = state.config.schedule
+    done, total = len(state.points), sched.n_seed + sched.n_steps
     finished_shots = sum(len(entry.shots) for entry in state.points)
-    under_way = len(state.taken)
+    failed = len(state.failures)
     budget = (
         ""
         if state.budget_s is None
@@ -90,22 +137,28 @@ def _progress(status: dict, state: EngineState) -> str:
     )
     t_opt = f"{number(state.decisions[-1].t_opt)} s" if state.decisions else "not yet (after the first decision)"
     converged = "yes" if state.data.is_converged else "not yet"
-    more = f" (and {under_way} of the point being measured)" if under_way else ""
+    more = ""
+    if state.taken:
+        doing = "being reduced" if isinstance(step, DecisionDue) and step.reduce else "being measured"
+        more = f" (and {len(state.taken)} of point {done}, {doing})"
     return (
         f"<h2>Progress</h2><p><progress value='{done}' max='{max(total, 1)}'></progress> {done} of {total} points "
-        f"finished, {finished_shots} shots{more}, {status['failed_attempts']} failed "
-        f"attempt{'s' * (status['failed_attempts'] != 1)}; instrument time "
-        f"{number(state.spent_s)} s{budget}</p><p>predicted optimal t: {t_opt}; noise model converged: "
+        f"finished, {finished_shots} shots{more}, {failed} failed attempt{'s' * (failed != 1)}; instrument time "
+        f"spent {number(state.spent_s)} s{budget}</p><p>predicted optimal t: {t_opt}; noise model converged: "
         f"{converged}</p>"
     )
 
 
-def _connection(pc: dict) -> str:
+def _connection(pc: dict, ended: bool) -> str:
+    """The instrument PC as the exchange knows it: never heard from, polling for the next shot, or
+    last heard from some seconds ago (measuring a shot it took, or gone)."""
     if not pc["connected"]:
-        return "<p class='bad'>instrument PC: not connected yet</p>"
-    seen = number(pc["last_seen_s_ago"], 3)
-    waiting = "waiting for the next shot" if pc["polling"] else f"last seen {seen} s ago"
-    return f"<p class='ok'>instrument PC: connected, {waiting}</p>"
+        return f"<p class='bad'>instrument PC: {'never connected' if ended else 'not connected yet'}</p>"
+    seen = "" if pc["last_seen_s_ago"] is None else f"last seen {number(pc['last_seen_s_ago'], 3)} s ago"
+    if ended:
+        return f"<p>instrument PC: {seen or 'connected'}</p>"
+    detail = ", waiting for the next shot" if pc["polling"] else (f", {seen}" if seen else "")
+    return f"<p class='ok'>instrument PC: connected{detail}</p>"
 
 
 def _last_points(state: EngineState) -> str:

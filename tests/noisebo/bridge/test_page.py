@@ -1,39 +1,46 @@
-"""The operator's page (noisebo/bridge/page.py): what a person at the instrument reads, from a campaign's
-state, with its two pictures; no Python reprs, nothing fetched from elsewhere."""
+"""The operator's page (noisebo/bridge/page.py): what a person at the instrument reads in each phase
+of a campaign (waiting for the instrument PC, measuring, reducing, deciding, finishing, ended), from
+the states a real campaign went through, with its two pictures; finished work counted apart from
+work under way, no Python reprs or placeholders, nothing fetched from elsewhere."""
 
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from noisebo.bridge.page import number, plot, render, ticks
+from noisebo.bridge.page import NOT_CONNECTED, number, plot, render, ticks
+from noisebo.campaign import engine
 from noisebo.campaign.driver import run_campaign
+from noisebo.events import DecisionDue, Done, Request, Status
 from noisebo.instruments import build
 
-RUNNING = {
-    "status": "running",
-    "reason": "",
-    "campaign": "tiny/reward/s3@2026",
-    "points": 7,
-    "points_total": 7,
-    "shots": 42,
-    "failed_attempts": 1,
-    "now": "measuring",
-    "current": {"point": 7, "step": 5, "shot": 1, "shots_wanted": 3, "x": [0.25], "t": 1.5},
-    "last_point": None,
-    "instrument_pc": {"connected": True, "polling": True, "last_seen_s_ago": 0.2},
-}
+POLLING = {"instrument_pc": {"connected": True, "polling": True, "last_seen_s_ago": 0.2}}
+MEASURING = {"instrument_pc": {"connected": True, "polling": False, "last_seen_s_ago": 3.4}}
+NEVER = {"instrument_pc": NOT_CONNECTED}
 
 
 @pytest.fixture(scope="module")
-def finished(tiny_config):
-    return run_campaign(tiny_config, build(tiny_config.instrument), 3).final
+def campaign(tiny_config):
+    """The tiny campaign (3 seeds, 4 BO steps): every state it was in before a commit, and its end."""
+    before: list = []
+    run = run_campaign(
+        tiny_config, build(tiny_config.instrument), 3, on_commit=lambda state, events: before.append(state)
+    )
+    return before, run.final
 
 
-@pytest.fixture(scope="module")
-def seeds_only(tiny_config):
-    config = tiny_config.with_overrides(schedule={"n_steps": 0})
-    return run_campaign(config, build(config.instrument), 3).final
+def first(states, wanted):
+    return next(state for state in states if wanted(engine.ask(state), state))
+
+
+def text_of(page: str) -> str:
+    """The page's text: no style, no tags, spaces collapsed."""
+    return " ".join(re.sub(r"<[^>]+>", " ", re.sub(r"<style>.*?</style>", "", page)).split())
+
+
+def shots_finished(state) -> int:
+    return sum(len(entry.shots) for entry in state.points)
 
 
 @pytest.mark.parametrize(
@@ -66,55 +73,123 @@ def test_ticks_are_round_and_within_the_range(lo, hi, expected):
     assert ticks(lo, hi) == pytest.approx(expected)
 
 
-def test_the_page_of_a_campaign_under_way(finished):
-    page = render(RUNNING, finished)
-    text = re.sub(r"<[^>]+>", " ", page)
-    assert "measuring point 7 (BO step 5) at x = 0.25, t = 1.5 s: shot 2 of 3" in text
-    shots = sum(len(e.shots) for e in finished.points)
-    assert f"7 of 7 points finished, {shots} shots, 1 failed attempt; instrument time" in text
-    assert f"instrument time {number(finished.spent_s)} s" in text
-    assert f"predicted optimal t: {number(finished.decisions[-1].t_opt)} s" in text
-    assert "instrument PC: connected, waiting for the next shot" in text
+def test_a_campaign_whose_instrument_pc_has_not_connected_waits_for_it(campaign):
+    start = campaign[0][0]
+    step = engine.ask(start)
+    assert isinstance(step, Request) and step.point == 0 and step.taken == 0
+    page = render(NEVER, start)
+    text = text_of(page)
+    assert (
+        f"waiting for the instrument PC to connect, to measure point 0 (seed point) at x = {number(step.x)}, "
+        f"t = {number(step.t)} s: shot 1 of {step.wanted}"
+    ) in text
+    assert "measuring" not in text
+    assert "0 of 7 points finished, 0 shots, 0 failed attempts; instrument time spent 0 s" in text
+    assert "instrument PC: not connected yet" in text and "Last points none yet" in text
+    assert page.count("nothing measured yet") == 2 and "http-equiv='refresh'" in page
+
+
+def test_the_page_of_a_point_being_measured(campaign):
+    state = first(campaign[0], lambda step, s: isinstance(step, Request) and step.step >= 1 and step.taken == 1)
+    step = engine.ask(state)
+    page = render(MEASURING, state)
+    text = text_of(page)
+    assert (
+        f"measuring point {step.point} (BO step {step.step + 1} of 4) at x = {number(step.x)}, "
+        f"t = {number(step.t)} s: shot 2 of {step.wanted}"
+    ) in text
+    done = len(state.points)
+    assert (
+        f"{done} of 7 points finished, {shots_finished(state)} shots (and 1 of point {done}, being measured), "
+        f"0 failed attempts; instrument time spent {number(state.spent_s)} s"
+    ) in text
+    assert f"predicted optimal t: {number(state.decisions[-1].t_opt)} s" in text
+    assert "instrument PC: connected, last seen 3.4 s ago" in text
     assert page.count("<svg") == 2 and page.count("<polyline") == 2 and page.count("<polygon") == 2
-    assert page.count("<circle") == len(finished.points) + sum(
-        e.committed.point.noise_measured for e in finished.points
-    )  # every point in f; measured sd in noise
-    last = finished.points[-1].committed.point
-    assert f"<td>{len(finished.points) - 1}</td><td>{number(last.x)}</td><td>{number(last.t)}</td>" in page
+    assert page.count("<circle") == done + sum(e.committed.point.noise_measured for e in state.points)
+    last = state.points[-1].committed.point
+    assert f"<td>{done - 1}</td><td>{number(last.x)}</td><td>{number(last.t)}</td>" in page
     assert "http-equiv='refresh'" in page
 
 
-def test_the_page_holds_no_python_reprs_and_loads_nothing(finished):
-    page = render(RUNNING | {"instrument_pc": {"connected": True, "polling": False, "last_seen_s_ago": None}}, finished)
-    text = re.sub(r"<[^>]+>", " ", page)
-    for repr_word in ("None", "True", "False", "nan", "array("):
-        assert repr_word not in text
-    assert not re.search(r"(src|href)\s*=|<script|<link|@import|url\(", page)
+def test_while_the_campaign_decides_the_page_says_which_step_and_counts_finished_points(campaign):
+    state = first(campaign[0], lambda step, s: isinstance(step, DecisionDue) and not step.final and s.decisions)
+    page = render(POLLING, state)
+    text = text_of(page)
+    step = len(state.decisions) + 1
+    assert f"deciding BO step {step} of 4: where and how long to measure next" in text
+    assert f"{len(state.points)} of 7 points finished, {shots_finished(state)} shots, 0 failed" in text
+    assert "measuring" not in text and "being measured" not in text
+    assert "instrument PC: connected, waiting for the next shot" in text
 
 
-def test_before_any_decision_the_pictures_show_the_points_only(seeds_only):
-    page = render(RUNNING | {"current": None, "now": "deciding"}, seeds_only)
-    assert "deciding where and how long to measure next" in page
+def test_a_point_whose_shots_are_all_in_is_being_reduced(campaign):
+    state = first(campaign[0], lambda step, s: isinstance(step, Request) and step.taken == step.wanted - 1)
+    request = engine.ask(state)
+    last = campaign[1].points[request.point].shots[request.taken].reading
+    reducing = engine.tell(state, request, {request.taken: last}, decide_next=False, reduce=False).state
+    assert isinstance(engine.ask(reducing), DecisionDue) and engine.ask(reducing).reduce
+    text = text_of(render(POLLING, reducing))
+    assert f"reducing point {request.point}: its {request.wanted} shots are in" in text
+    assert f"{request.point} of 7 points finished" in text
+    assert f"(and {request.wanted} of point {request.point}, being reduced)" in text
+
+
+def test_after_the_last_step_the_campaign_is_summarised(campaign):
+    state = first(campaign[0], lambda step, s: isinstance(step, DecisionDue) and step.final)
+    text = text_of(render(POLLING, state))
+    assert "finishing: no more points to measure; summarising the campaign" in text
+    assert "7 of 7 points finished" in text
+
+
+def test_an_ended_campaign_says_how_and_why_and_the_page_stops_reloading(campaign):
+    final = campaign[1]
+    assert isinstance(engine.ask(final), Done)
+    page = render(POLLING, final)
+    text = text_of(page)
+    assert "the campaign has ended: completed, all 7 points measured" in text
+    assert f"7 of 7 points finished, {shots_finished(final)} shots, 0 failed attempts" in text
+    assert "instrument PC: last seen 0.2 s ago" in text and "waiting for the next shot" not in text
+    assert "http-equiv='refresh'" not in page and "no longer reloads itself" in text
+    aborted = replace(final, status=Status.ABORTED, reason="SIGTERM received")
+    assert "the campaign has ended: aborted (SIGTERM received)" in text_of(render(POLLING, aborted))
+    failed = replace(final, status=Status.FAILED, reason="too many failed shots")
+    assert "the campaign has ended: failed (too many failed shots)" in text_of(render(NEVER, failed))
+    assert "instrument PC: never connected" in text_of(render(NEVER, failed))
+    spent = replace(final, status=Status.BUDGET_SPENT, reason="budget spent: 9.5 s of 10 s; point 7 needs 3 s more")
+    assert "the campaign has ended: budget spent: 9.5 s of 10 s; point 7 needs 3 s more" in text_of(
+        render(POLLING, spent)
+    )
+
+
+def test_no_phase_shows_python_reprs_or_placeholders_or_loads_anything(campaign):
+    before, final = campaign
+    pcs = (NEVER, POLLING, MEASURING, {"instrument_pc": {"connected": True, "polling": False, "last_seen_s_ago": None}})
+    for state in [*before[:: max(len(before) // 25, 1)], final]:
+        for pc in pcs:
+            page = render(pc, state)
+            text = text_of(page)
+            for repr_word in ("None", "True", "False", "nan", "array(", "inf"):
+                assert repr_word not in text, (repr_word, text)
+            assert not re.search(r"(^|[\s(=])-($|[\s),])", text), text  # a '-' standing for no number
+            assert not re.search(r"(src|href)\s*=|<script|<link|@import|url\(", page)
+
+
+def test_before_any_decision_the_pictures_show_the_points_only_on_the_configs_axes(campaign):
+    state = first(campaign[0], lambda step, s: isinstance(step, DecisionDue) and not s.decisions and s.points)
+    page = render(POLLING, state)
+    assert "deciding BO step 1 of 4" in page
     assert page.count("<polyline") == 0 and page.count("<circle") > 0
-    assert "predicted optimal t: not yet (after the first decision)" in re.sub(r"<[^>]+>", " ", page)
+    assert "predicted optimal t: not yet (after the first decision)" in text_of(page)
     f_plot = page[page.index("<svg") : page.index("</svg>")]
-    space = seeds_only.config.space
+    space = state.config.space
     labels = [float(v) for v in re.findall(r"text-anchor='middle'>([-0-9.e]+)</text>", f_plot)]
     assert min(labels) == space.x_min and max(labels) == space.x_max  # the config's x, not the points' spread
 
 
-def test_the_shots_of_the_point_being_measured_are_counted_apart(finished):
-    from dataclasses import replace
-
-    under_way = replace(finished, taken=finished.points[-1].shots[:2])
-    text = re.sub(r"<[^>]+>", " ", render(RUNNING, under_way))
-    shots = sum(len(e.shots) for e in finished.points)
-    assert f"{shots} shots (and 2 of the point being measured)" in text
-
-
-def test_a_campaign_not_started_and_a_disconnected_pc():
+def test_a_campaign_not_started():
     page = render({"status": "starting", "campaign": None}, None)
-    assert "the campaign has not begun yet" in page and "<svg" not in page
+    assert "the campaign has not begun yet" in page and "<svg" not in page and "http-equiv='refresh'" in page
 
 
 def test_an_empty_plot_says_so():
