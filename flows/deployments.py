@@ -13,10 +13,10 @@ PREFECT_API_URL names and runs what is triggered, e.g.
 
 from __future__ import annotations
 
+import asyncio
+import signal
 from datetime import timedelta
 from pathlib import Path
-
-from prefect import serve
 
 from noisebo.flows.campaign import campaign
 from noisebo.flows.sweep import sweep
@@ -60,5 +60,51 @@ def deployments_for(
 
 
 def serve_all(deployments: list, limit: int | None = None) -> None:
-    """Register ``deployments`` and run their flow runs in this process until interrupted."""
-    serve(*deployments, limit=limit)
+    """Register ``deployments`` and run their flow runs in this process until SIGINT or SIGTERM;
+    then stop at once: flow runs under way are cancelled (as Prefect's runner does), the
+    deployments' schedules paused, and the runs they had scheduled and not started deleted, so
+    that none is left "late" in the UI."""
+    asyncio.run(_serve(deployments, limit))
+
+
+async def _serve(deployments: list, limit: int | None) -> None:
+    from prefect.runner import Runner
+
+    runner = Runner(pause_on_shutdown=True, limit=limit)
+    ids = [await runner.aadd_deployment(d) for d in deployments]
+    stop = asyncio.Event()
+    serving = asyncio.create_task(runner.start())
+    while not runner.started and not serving.done():  # its start sets its own SIGTERM handler
+        await asyncio.sleep(0.05)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    await asyncio.wait([serving, asyncio.create_task(stop.wait())], return_when=asyncio.FIRST_COMPLETED)
+    if runner.started:
+        await runner.astop()
+    await serving  # pauses the schedules on its way out
+    await delete_scheduled_runs(ids)
+
+
+async def delete_scheduled_runs(deployment_ids: list) -> int:
+    """Delete the flow runs of these deployments that are scheduled and not started; how many."""
+    from prefect import get_client
+    from prefect.client.schemas.filters import (
+        DeploymentFilter,
+        DeploymentFilterId,
+        FlowRunFilter,
+        FlowRunFilterState,
+        FlowRunFilterStateType,
+    )
+    from prefect.client.schemas.objects import StateType
+
+    async with get_client() as client:
+        runs = await client.read_flow_runs(
+            deployment_filter=DeploymentFilter(id=DeploymentFilterId(any_=deployment_ids)),
+            flow_run_filter=FlowRunFilter(
+                state=FlowRunFilterState(type=FlowRunFilterStateType(any_=[StateType.SCHEDULED]))
+            ),
+        )
+        for run in runs:
+            await client.delete_flow_run(run.id)
+    return len(runs)
