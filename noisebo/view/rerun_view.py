@@ -76,6 +76,8 @@ class Box:
     """Maps data (u, v) into a BOX_W x BOX_H plot box, v upwards (2D views draw y downwards).
     ``floor``: the lowest v the box shows (0 for a standard deviation), padding or not."""
 
+    width, height, inset = BOX_W, BOX_H, 0.0
+
     def __init__(self, u_range: tuple[float, float], v_range: tuple[float, float], floor: float = -np.inf):
         self.u0, self.u1 = u_range
         lo, hi = v_range
@@ -83,9 +85,20 @@ class Box:
         self.v0, self.v1 = max(lo - pad, floor), hi + pad
 
     def __call__(self, u, v) -> np.ndarray:
-        u = (np.asarray(u, dtype=np.float64) - self.u0) / (self.u1 - self.u0 or 1.0) * BOX_W
-        v = (1.0 - (np.asarray(v, dtype=np.float64) - self.v0) / (self.v1 - self.v0 or 1.0)) * BOX_H
+        span_u, span_v = self.width - 2 * self.inset, self.height - 2 * self.inset
+        u = self.inset + (np.asarray(u, dtype=np.float64) - self.u0) / (self.u1 - self.u0 or 1.0) * span_u
+        v = self.inset + (1.0 - (np.asarray(v, dtype=np.float64) - self.v0) / (self.v1 - self.v0 or 1.0)) * span_v
         return np.stack(np.broadcast_arrays(u, v), axis=-1)
+
+
+class ImageBox(Box):
+    """Maps data (u, v) onto an image of ``n_u`` x ``n_v`` pixels whose first and last pixel
+    centres are the ranges' ends (the grid's first and last values), v upwards."""
+
+    def __init__(self, u_range: tuple[float, float], v_range: tuple[float, float], n_u: int, n_v: int):
+        self.u0, self.u1 = u_range
+        self.v0, self.v1 = v_range
+        self.width, self.height, self.inset = float(n_u), float(n_v), 0.5
 
 
 def ticks(low: float, high: float, count: int = 5) -> np.ndarray:
@@ -243,6 +256,9 @@ class RerunView:
             self._log_points_on_map(frame)
             if frame.acq_map is not None:
                 st.log("acquisition/map", rr.Image(acquisition_image(frame.acq_map)))
+                axis = self.config.space.axes[0]
+                x_label = self._described.axis_label(axis.name, axis.units)
+                self._log_axes("acquisition/axes", self._image_box(), x_label, "t (s)")
             self._log_f(frame, f_box)
         elif self.config.space.dimensions == 2:
             self._log_area(frame)
@@ -305,10 +321,14 @@ class RerunView:
                 ),
             )
 
+    def _image_box(self) -> ImageBox:
+        """(x, t) onto the acquisition image's pixels (one per grid point, t upwards)."""
+        s = self.config.space
+        return ImageBox((s.x_min, s.x_max), (s.t_min, s.t_max), s.n_x, s.n_t)
+
     def _log_points_on_map(self, frame: Frame) -> None:
-        s, p = self.config.space, frame.points
-        px = (p["x"] - s.x_min) / (s.x_max - s.x_min) * (s.n_x - 1) + 0.5
-        py = (s.t_max - p["t"]) / (s.t_max - s.t_min) * (s.n_t - 1) + 0.5
+        p = frame.points
+        on_image = self._image_box()(p["x"], p["t"])
         labels = [
             f"{'seed' if k == 0 else f'step {k}'}: x={x:.4g}, t={t:.3g} s"
             for k, x, t in zip(p["frame"], p["x"], p["t"])
@@ -317,7 +337,7 @@ class RerunView:
         self._recording.log(
             "acquisition/points",
             self.rr.Points2D(
-                np.stack([px, py], axis=-1),
+                on_image,
                 colors=colours,
                 radii=np.where(p["frame"] == frame.step, 2.5, 1.5),
                 labels=labels,
@@ -331,11 +351,11 @@ class RerunView:
         rr, st = self.rr, self._recording
         u_ticks = ticks(min(box.u0, box.u1), max(box.u0, box.u1))
         v_ticks = ticks(box.v0, box.v1)
-        tick = 4.0
-        lines = [np.array([[0.0, 0.0], [0.0, BOX_H], [BOX_W, BOX_H]])]
+        tick = 4.0 * box.width / BOX_W  # in the box's units: the same share of its width
+        lines = [np.array([[0.0, 0.0], [0.0, box.height], [box.width, box.height]])]
         lines += [box([u, u], [box.v0, box.v0]) + [[0.0, 0.0], [0.0, tick]] for u in u_ticks]
         lines += [box([box.u0, box.u0], [v, v]) + [[0.0, 0.0], [-tick, 0.0]] for v in v_ticks]
-        st.log(f"{path}/lines", rr.LineStrips2D(lines, colors=[(90, 90, 90)], radii=0.3))
+        st.log(f"{path}/lines", rr.LineStrips2D(lines, colors=[(90, 90, 90)], radii=0.3 * box.width / BOX_W))
         u_at = box(u_ticks, np.full(u_ticks.shape, box.v0)) + [0.0, 3 * tick]
         v_at = box(np.full(v_ticks.shape, box.u0), v_ticks) - [4 * tick, 0.0]
         st.log(
@@ -351,7 +371,7 @@ class RerunView:
         st.log(
             f"{path}/names",
             rr.Points2D(
-                [[BOX_W / 2, BOX_H + 9 * tick], [-14 * tick, BOX_H / 2]],
+                [[box.width / 2, box.height + 9 * tick], [-14 * tick, box.height / 2]],
                 radii=0.01,
                 show_labels=True,
                 labels=[u_label, v_label],

@@ -99,6 +99,12 @@ def test_each_plot_has_axes_with_names_units_and_round_ticks_and_no_negative_noi
     rrd = recorded.replace(".h5", ".rrd")
     assert labels(rrd, "/f/axes/names")[-1] == ["x", "f(x)"]
     assert labels(rrd, "/noise/axes/names")[-1] == ["t (s)", "single-shot noise sd"]
+    assert labels(rrd, "/acquisition/axes/names")[-1] == ["x", "t (s)"]
+    x_ticks, t_ticks = (
+        ["0", "0.2", "0.4", "0.6", "0.8", "1"],
+        ["2", "4", "6", "8", "10"],
+    )  # x in [0, 1], t in [0.2, 10] s
+    assert labels(rrd, "/acquisition/axes/ticks")[-1] == x_ticks + t_ticks
     for frame in labels(rrd, "/noise/axes/ticks"):
         assert all(float(label) >= 0 for label in frame)  # the t ticks, then the sd ticks: never below 0
     assert all(len(frame) >= 4 for frame in labels(rrd, "/f/axes/ticks"))

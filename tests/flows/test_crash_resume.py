@@ -173,8 +173,11 @@ def test_a_signal_aborts_cleanly_and_resume_finishes_the_same_campaign(
             break
         time.sleep(0.05)
     proc.send_signal(signum)
+    sent = time.monotonic()
     stdout, stderr = proc.communicate(timeout=120)
+    exited_s = time.monotonic() - sent
     assert proc.returncode == code, stderr[-2000:]
+    assert exited_s < 5, f"noisebo run exited {exited_s:.1f} s after the signal"
     assert "continue it with `noisebo resume" in stderr.strip().splitlines()[-1]
     assert f"{signal.Signals(signum).name} received" in stdout
     with h5py.File(path, "r") as f:
