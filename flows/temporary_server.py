@@ -39,6 +39,8 @@ class GuardedServer(SubprocessASGIServer):
     """Prefect's temporary server (its app, settings and environment as Prefect 3.8.8 runs it), run
     by ``flows/server_guard.py`` and recorded while it runs."""
 
+    _early: subprocess.Popen | None = None  # a process started before Prefect loaded, to adopt
+
     def start(self, timeout: int | None = None) -> None:
         if not self.running:
             stop_stale_servers(prefect_home())
@@ -49,8 +51,9 @@ class GuardedServer(SubprocessASGIServer):
 
     def _run_uvicorn_command(self) -> subprocess.Popen:
         self._forget()  # a retry on another port: the process before it has exited
-        process, self._early = getattr(self, "_early", None), None
+        process, self._early = self._early, None
         if process is None or process.poll() is not None:
+            assert self.port is not None  # start() chose it before it runs the command
             process = server_launch.start(self.port, server_environment())
         self._record: Path | None = record_server(prefect_home(), process.pid)
         return process

@@ -174,7 +174,7 @@ class CompileAhead:
         """Stop waiting for this compilation: the campaign has stopped. The interpreter still
         joins the thread as it exits; a command that must end at once asks
         ``background.still_running`` and ends the process without it once its files are closed."""
-        if self.busy:
+        if self._thread is not None and self._thread.is_alive():
             background.leave(self._thread)
 
 
