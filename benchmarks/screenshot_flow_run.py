@@ -73,20 +73,26 @@ def parse_args(argv=None) -> argparse.Namespace:
 def run_campaign(env: dict, config: str, seed: int, folder: Path, rrd: bool = False) -> None:
     """``noisebo run CONFIG --seed SEED`` into ``folder/runs`` (with its Rerun recording if ``rrd``);
     exits with the campaign's output if it fails."""
-    command = [sys.executable, "-m", "noisebo.cli.main", "run", config, "--seed", str(seed)]
-    command += ["--out", str(folder / "runs")] + ([] if rrd else ["--no-rrd"])
-    print("campaign:", "noisebo", *command[3:], flush=True)
+    args = ["run", config, "--seed", str(seed), "--out", str(folder / "runs")] + ([] if rrd else ["--no-rrd"])
+    run_noisebo(env, args, "campaign", timeout_s=600)
+
+
+def run_noisebo(env: dict, args: list[str], what: str, timeout_s: float) -> None:
+    """``noisebo ARGS`` in its own process group (stopped however this ends); exits naming ``what``
+    with its output if it fails, else says how long it took and its last lines."""
+    command = [sys.executable, "-m", "noisebo.cli.main", *args]
+    print(f"{what}:", "noisebo", *args, flush=True)
     started = time.monotonic()
     process = subprocess.Popen(
         command, env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True
     )
     try:
-        output, _ = process.communicate(timeout=600)
+        output, _ = process.communicate(timeout=timeout_s)
     finally:
         stop_group(process)
     if process.returncode != 0:
         raise SystemExit(
-            f"{Path(sys.argv[0]).stem}: the campaign failed (exit code {process.returncode}):\n{output[-3000:]}"
+            f"{Path(sys.argv[0]).stem}: the {what} failed (exit code {process.returncode}):\n{output[-3000:]}"
         )
     last = [line for line in output.splitlines() if line.strip()][-2:]
     print(f"  done in {time.monotonic() - started:.1f} s: {' / '.join(last)}", flush=True)

@@ -22,14 +22,13 @@ from __future__ import annotations
 import noisebo.cli  # noqa: F401 - first: one OpenBLAS thread for this process, before numpy loads (as the command line)
 import argparse
 import signal
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from headless_chromium import ChromiumMissing, find_chromium, stop_group
-from screenshot_flow_run import ROOT, Api, on_sigterm, screenshot
+from headless_chromium import ChromiumMissing, find_chromium
+from screenshot_flow_run import ROOT, Api, on_sigterm, run_noisebo, screenshot
 
 from noisebo.flows.processes import local_server, wait_for
 
@@ -54,20 +53,13 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def run_sweep(env: dict, args: argparse.Namespace, folder: Path) -> None:
-    command = [sys.executable, "-m", "noisebo.cli.main", "sweep", args.config, "--seeds", args.seeds]
-    command += ["--policy", args.policy, "--workers", "2", "--out", str(folder / "sweep")]
-    print("sweep:", "noisebo", *command[3:], flush=True)
-    started = time.monotonic()
-    process = subprocess.Popen(
-        command, env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True
+    run_noisebo(
+        env,
+        ["sweep", args.config, "--seeds", args.seeds, "--policy", args.policy, "--workers", "2"]
+        + ["--out", str(folder / "sweep")],
+        "sweep",
+        timeout_s=1200,
     )
-    try:
-        output, _ = process.communicate(timeout=1200)
-    finally:
-        stop_group(process)
-    if process.returncode != 0:
-        raise SystemExit(f"screenshot_sweep_runs: the sweep failed (exit code {process.returncode}):\n{output[-3000:]}")
-    print(f"  done in {time.monotonic() - started:.1f} s", flush=True)
 
 
 def sweep_runs(api: Api) -> tuple[dict, list[dict]]:

@@ -11,17 +11,14 @@ from __future__ import annotations
 
 import contextlib
 import os
-import random
-import socket
 import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from noisebo.flows import runtime
+from noisebo.flows import processes, runtime
 
 GUARD = Path(__file__).resolve().with_name("server_guard.py")
-PORTS = range(8000, 9000)  # where Prefect 3.8.8 looks for a temporary server's port
 
 _EARLY: list[tuple[int, subprocess.Popen]] = []
 
@@ -52,19 +49,6 @@ def start(port: int, env: dict[str, str]) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-P", str(GUARD), str(os.getpid()), mode, str(port)], env=env)
 
 
-def free_port() -> int:
-    """A free loopback port in Prefect's range for temporary servers."""
-    for _ in range(50):
-        port = random.choice(PORTS)
-        with contextlib.closing(socket.socket(socket.AF_INET, socket.SOCK_STREAM)) as sock:
-            try:
-                sock.bind(("127.0.0.1", port))
-            except OSError:
-                continue
-            return port
-    raise RuntimeError("no free port for Prefect's temporary server in 8000-8999")
-
-
 @contextlib.contextmanager
 def launched() -> Iterator[None]:
     """Inside, the temporary server's process is booting (unless a PREFECT_API_URL names a server
@@ -72,7 +56,7 @@ def launched() -> Iterator[None]:
     if os.environ.get("PREFECT_API_URL") or _EARLY:
         yield
         return
-    port = free_port()
+    port = processes.free_port()  # taken meanwhile: the server exits with 3 and Prefect retries
     _EARLY.append((port, start(port, environment())))
     try:
         yield
