@@ -121,7 +121,11 @@ class StatusAnswer(Answer):
     points_total: int | None = Field(None, description="points planned: seed points plus BO steps")
     shots: int | None = Field(None, description="shots taken")
     failed_attempts: int | None = Field(None, description="failed attempts at shots")
-    now: Literal["measuring", "deciding", "done"] | None = Field(None, description="what the campaign is doing")
-    current: CurrentShot | None = Field(None, description="the shot wanted now (null unless measuring)")
+    now: Literal["waiting", "measuring", "deciding", "done"] | None = Field(
+        None,
+        description="what the campaign is doing: waiting (a shot is wanted and no instrument PC has "
+        "connected yet), measuring (a shot is wanted from the connected instrument PC), deciding, done",
+    )
+    current: CurrentShot | None = Field(None, description="the shot wanted now (null unless waiting or measuring)")
     last_point: LastPoint | None = Field(None, description="the last committed point (null before the first)")
     instrument_pc: InstrumentPC | None = Field(None, description="what the bridge has heard from the instrument PC")

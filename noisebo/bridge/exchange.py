@@ -280,7 +280,7 @@ class Exchange:
             "points_total": sched.n_seed + sched.n_steps,
             "shots": state.n_shots,
             "failed_attempts": len(state.failures),
-            "now": "measuring" if current else ("deciding" if state.status.value == "running" else "done"),
+            "now": _phase(current, last is not None, state.status.value),
             "current": current,
             "last_point": last_point,
             "instrument_pc": {
@@ -293,6 +293,14 @@ class Exchange:
     def _wanted(self) -> Request | None:
         step = engine.ask(self._state) if self._state is not None else None
         return step if isinstance(step, Request) else None
+
+
+def _phase(current: dict | None, connected: bool, status: str) -> str:
+    """What the campaign is doing: a shot is wanted (measured, or waiting for an instrument PC
+    that has never connected), a decision is under way, or it has ended."""
+    if current is not None:
+        return "measuring" if connected else "waiting"
+    return "deciding" if status == "running" else "done"
 
 
 def _current(handed: _Handed, state: EngineState, key: tuple[int, int]) -> bool:

@@ -40,7 +40,7 @@ def test_sigterm_aborts_noisebo_run_within_2_s_and_it_exits_within_5_s(phase, tm
     client = None
     try:
         deadline = time.monotonic() + 240
-        while not path.with_suffix(".journal").exists() or _now(port) != "measuring":
+        while not path.with_suffix(".journal").exists() or _now(port) != "waiting":
             assert campaign.poll() is None, campaign.communicate()
             assert time.monotonic() < deadline, "the campaign never came to wait for its first shot"
             time.sleep(0.1)

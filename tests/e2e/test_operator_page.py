@@ -152,7 +152,7 @@ def assert_pictures_on_the_configs_axes(dom: str, points: int, models: bool = Tr
 def test_while_no_instrument_pc_has_connected_the_page_says_the_campaign_waits_for_it(phases):
     before, dom, after = phases.waiting.before, phases.waiting.dom, phases.waiting.after
     for status in (before, after):
-        assert status["status"] == "running" and status["now"] == "measuring", status
+        assert status["status"] == "running" and status["now"] == "waiting", status
         assert status["instrument_pc"]["connected"] is False and status["points"] == 0, status
     assert before["current"] == after["current"] and (before["current"]["point"], before["current"]["shot"]) == (0, 0)
     text = page_text(dom)

@@ -48,11 +48,16 @@ def test_every_answer_of_a_campaign_has_its_documented_shape():
     conforms(WaitAnswer, exchange.next_shot(0.0))
     state = engine.start(engine.new_campaign(CONFIG, 3, DriverInfo("remote", "t", {}), {}, "2026-11-23T00:00:00+00:00"))
     exchange.committed(state)
-    conforms(StatusAnswer, exchange.status())  # measuring, nothing committed yet
+    conforms(StatusAnswer, exchange.status())  # a shot wanted, nothing committed yet
+    assert (exchange.status()["now"], exchange.status()["current"]["shot"]) == ("measuring", 0)  # the PC polled
+    unheard = Exchange(ReadingShape(), silence_s=10.0, ack_s=5.0)
+    unheard.committed(state)
+    assert (unheard.status()["now"], unheard.status()["current"]["shot"]) == ("waiting", 0)  # no PC yet
     for value in (1.0, 1.5, 2.0, 2.5):
         answer, state = measured(exchange, state, value)
         conforms(Recorded, answer, every_field="next" in answer)
         conforms(StatusAnswer, exchange.status())
+        assert exchange.status()["now"] == ("measuring" if "next" in answer else "deciding")
     assert "next" not in answer  # the last shot: the summary is due, nothing is wanted at once
     duplicate = exchange.hand_in(1, 1, ReadingBody(value=2.5))
     conforms(Recorded, duplicate, every_field=False)
@@ -62,3 +67,4 @@ def test_every_answer_of_a_campaign_has_its_documented_shape():
     exchange.committed(state)
     conforms(DoneAnswer, exchange.next_shot(0.0))
     conforms(StatusAnswer, exchange.status())
+    assert (exchange.status()["now"], exchange.status()["current"]) == ("done", None)

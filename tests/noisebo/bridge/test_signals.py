@@ -62,7 +62,7 @@ def test_sigterm_while_waiting_for_an_instrument_pc_that_never_connected_aborts_
         url = re.search(r"serving (http://127\.0\.0\.1:\d+)", serving).group(1)
         token = token_file.read_text().strip()
         deadline = time.monotonic() + 120
-        while call(url, "GET", "/status", token=token)[1].get("now") != "measuring":  # waiting for shot 0
+        while call(url, "GET", "/status", token=token)[1].get("now") != "waiting":  # waiting for shot 0, no PC yet
             assert time.monotonic() < deadline, "the campaign never came to wait for its first shot"
             time.sleep(0.05)
         time.sleep(3 * 0.2)  # several of the waiting loop's slices: it is waiting, not starting
