@@ -1,5 +1,5 @@
-"""kill -9 deep into a long PFM campaign (200 points, a resonance sweep per shot), then
-`noisebo resume`: the file opens whatever the moment, and the finished one equals the
+"""kill -9 twice deep into a long PFM campaign (200 points, a resonance sweep per shot), each
+followed by `noisebo resume`: the file opens whatever the moment, and the finished one equals the
 uninterrupted campaign, spectra included. Real processes, real SIGKILL, the real server."""
 
 import os
@@ -58,19 +58,23 @@ def assert_equals_reference(path, final):
         np.testing.assert_array_equal(read_spectra(path, i), expected)
 
 
-# A kill inside the HDF5 append of about the 150th point (five crash points per append), and
-# one halfway through writing a journal record late in the campaign.
-@pytest.mark.parametrize("crash", ["append:753", "journal:700"])
-def test_kill_deep_into_a_long_campaign_then_resume(crash, long_yaml, tmp_path, prefect_server, reference):
+# Killed twice: inside the HDF5 append of about the 100th point (five crash points per append),
+# then, in the resumed process, halfway through writing a journal record further on.
+def test_killed_twice_deep_into_a_long_campaign_then_resumed(long_yaml, tmp_path, prefect_server, reference):
     out = tmp_path / "runs"
     path = out / f"long_double_s{SEED:04d}.h5"
-    env = {**prefect_server, "NOISEBO_CRASH_AT": crash}
-    killed = noisebo(["run", str(long_yaml), "--seed", str(SEED), "--out", str(out), "--no-rrd"], env)
+    killed = noisebo(
+        ["run", str(long_yaml), "--seed", str(SEED), "--out", str(out), "--no-rrd"],
+        {**prefect_server, "NOISEBO_CRASH_AT": "append:503"},
+    )
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
-    running = read_record(path)  # the killed file opens, with the rows committed before the kill
-    assert running.status == "running" and len(running.points) >= 100
-    env = {k: v for k, v in env.items() if k != "NOISEBO_CRASH_AT"}
-    done = noisebo(["resume", str(path), "--no-rrd"], env)
+    first = read_record(path)  # the killed file opens, with the rows committed before the kill
+    assert first.status == "running" and len(first.points) >= 90
+    again = noisebo(["resume", str(path), "--no-rrd"], {**prefect_server, "NOISEBO_CRASH_AT": "journal:250"})
+    assert again.returncode == -signal.SIGKILL, again.stderr[-2000:]
+    second = read_record(path)
+    assert second.status == "running" and len(first.points) < len(second.points) < POINTS
+    done = noisebo(["resume", str(path), "--no-rrd"], prefect_server)
     assert done.returncode == 0, done.stderr[-2000:]
     assert_equals_reference(path, reference)
     assert os.path.getsize(path) > 0

@@ -51,6 +51,7 @@ def stale(base):
     )
 
 
+@pytest.mark.slow  # six whole campaigns; the drop itself: test_the_drop_is_said_in_the_progress_and_the_file
 def test_a_stale_profile_is_caught_early_and_t_still_found(stale):
     dropped, errors = [], []
     for seed in range(6):

@@ -136,6 +136,7 @@ def test_field_campaigns_no_law_can_be_fitted_to_say_why(campaigns, message):
         distil_field(campaigns(field, field_measurements(positions=5)), INV_SQRT, jax_key(0, PROFILE))
 
 
+@pytest.mark.slow  # NUTS over a field's fit; one law's: test_an_instrument_without_a0_gets_an_honest_spread_not_a_pinned_0
 def test_a_field_campaign_without_a0_gets_an_honest_spread_not_a_pinned_0():
     # As for one law: A0 = 0 puts the MAP of the level a0 at its bound (Laplace: 0.00015 +- 0.00019);
     # NUTS, given the field's fitted hyperparameters, spreads a0 over what the data allow
