@@ -5,6 +5,8 @@
                                    # data/runs/<time>/ (extra ARGS go to `noisebo run`)
     python3 dev.py test [ARGS...]  # the test suite, on up to 4 cores (extra ARGS go to pytest; -n 0: one process)
     python3 dev.py bench [ARGS...] # the Forrester benchmark (extra ARGS go to benchmarks/forrester.py)
+    python3 dev.py peers           # adds the budget benchmark's peers (gpCAM, BoTorch on PyTorch
+                                   # 2.13.0) to .venv/, so that their tests run too (see docs/versions.md)
 
 The first call creates .venv/ beside this file and installs the package with its pinned
 dependencies; later calls reuse it, and reinstall only when pyproject.toml changes.
@@ -63,7 +65,7 @@ def parallel(pytest_args: list[str]) -> list[str]:
 
 
 def main(argv: list[str]) -> int:
-    if not argv or argv[0] not in {"run", "test", "bench"}:
+    if not argv or argv[0] not in {"run", "test", "bench", "peers"}:
         print(__doc__, file=sys.stderr)
         return 2
     command, rest = argv[0], argv[1:]
@@ -74,6 +76,9 @@ def main(argv: list[str]) -> int:
         if "--out" not in rest:  # a fresh folder per call, so the command can be repeated
             stamp = time.strftime("%Y%m%d-%H%M%S")
             args += ["--out", str(ROOT / "data" / "runs" / stamp)]
+    elif command == "peers":
+        _say("installing the peers: gpCAM, BoTorch and PyTorch (see docs/versions.md for its size)")
+        args = [python, "-m", "pip", "install", "--disable-pip-version-check", "-q", "-e", f"{ROOT}[peers]", *rest]
     elif command == "test":
         args = [python, "-m", "pytest", *parallel(rest), *rest]
     else:

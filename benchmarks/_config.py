@@ -18,6 +18,7 @@ refused too.
 from __future__ import annotations
 
 import argparse
+import textwrap
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
@@ -32,8 +33,20 @@ from noisebo.config import CampaignConfig, ConfigError, load_config  # noqa: E40
 EXIT_USAGE = 2  # as noisebo/cli/common.py
 
 
+class _WholeNames(argparse.HelpFormatter):
+    """Help wrapped at spaces only: a design's name ("botorch multi-fidelity") stays whole."""
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        return textwrap.TextWrapper(width, break_on_hyphens=False).wrap(self._whitespace_matcher.sub(" ", text).strip())
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse, but a usage mistake is one line (no usage block), exit 2, as the CLI's."""
+    """argparse, but a usage mistake is one line (no usage block), exit 2, as the CLI's; help
+    lines break at spaces only."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", _WholeNames)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")

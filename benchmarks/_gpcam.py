@@ -53,12 +53,8 @@ How gpCAM is set up (as its own documentation and source recommend; gpCAM 8.6.1 
   and its "fixed t" designs take ``shots_after`` from the first point; gpCAM has no noise model
   to converge, so it pays for no noise points.
 
-The measurements are noisebo's own: each shot is ``noisebo.campaign.driver.take_shot`` with the
-request noisebo's engine would make (key (seed, point, shot): gpCAM's point i draws the shots
-noisebo's point i would), a failed attempt costs its t and is tried again, and a point is
-reduced by ``noisebo.campaign.steps.make_point`` (the configured reduction, e.g. the SHO fit of
-a PFM sweep, and ``clip_sd``); a point with too few usable shots takes more, as noisebo's does.
-Every shot costs t and every point ``point_overhead_s`` (noisebo's ``engine._spend``).
+The measurements are noisebo's own (``benchmarks/_peer.py``: the same shots, reductions and
+instrument-time accounting as noisebo's designs).
 
 The record (``run_gpcam``) has budget.py's ``run_one`` layout: ``times_s`` the instrument time
 spent when each model was made (one model once the seed points are in, then one after every
@@ -91,12 +87,8 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from noisebo.campaign.driver import take_shot
-from noisebo.campaign.steps import make_point
-from noisebo.events import Request, ShotError
-from noisebo.metrics import relative_error
+from _peer import OverBudget, PeerCampaign, peer_record, snap
 from noisebo.models.grids import grids
-from noisebo.reduction import NoUsableShots
 
 NAME = "gpCAM"
 SEED_SHOTS = 3  # shots of each seed point (2 at least: each point's variance is measured)
@@ -105,8 +97,6 @@ RETRAIN_MAX_ITER = 20  # GPOptimizer.optimize's training_max_iter
 ASK_POP_SIZE = 20  # ask()'s defaults
 ASK_MAX_ITER = 20
 ACQUISITION = "variance"  # gpCAM's default acquisition (function approximation / mapping)
-MAX_ATTEMPTS = 20  # failed attempts at one shot before the run gives up
-VARIANCE_FLOOR = 1e-12  # a point whose shots agree exactly would tell gpCAM it is noiseless
 GPCAM_MODULES = r"(fvgp|gpcam|hgdl)(\.|$)"  # whose warnings a run silences (see the module docstring)
 INSTALL = "gpCAM is not installed: pip install 'noisebo[peers]'"
 
@@ -139,57 +129,6 @@ def _quiet_and_seeded(seed: int):
         np.random.set_state(saved)
 
 
-class _Budget(Exception):
-    """The next point does not fit the budget."""
-
-
-class _Campaign:
-    """The instrument side: noisebo's shots, reductions and instrument-time accounting."""
-
-    def __init__(self, config, instrument, seed: int):
-        self.config, self.instrument, self.seed = config, instrument, int(seed)
-        sched = config.schedule
-        self.overhead = float(sched.point_overhead_s)
-        self.budget = float("inf") if sched.budget_s is None else float(sched.budget_s)
-        self.spent = 0.0
-        self.n_points = 0
-
-    def left(self) -> float:
-        return self.budget - self.spent
-
-    def fits(self, t: float, shots: int) -> bool:
-        return self.overhead + t * shots <= self.left() + 1e-9
-
-    def measure(self, x: np.ndarray, t: float, shots: int):
-        """One point of ``shots`` shots at (x, t) (more where too few are usable): (value, variance
-        of its mean, shots taken). Raises ``_Budget`` if it does not fit (nothing is spent)."""
-        if not self.fits(t, shots):
-            raise _Budget()
-        point, readings, wanted = self.n_points, [], shots
-        self.spent += self.overhead
-        x = tuple(float(v) for v in np.atleast_1d(x))
-        while True:
-            while len(readings) < wanted:
-                for _ in range(MAX_ATTEMPTS):
-                    self.spent += t
-                    outcome = take_shot(
-                        self.instrument, self.seed, Request(point, -1, x, float(t), wanted, len(readings), None)
-                    )
-                    if not isinstance(outcome, ShotError):
-                        readings.append(outcome)
-                        break
-                else:
-                    raise RuntimeError(f"gpCAM peer: {MAX_ATTEMPTS} failed attempts at one shot of point {point}")
-            try:
-                made, _ = make_point(x, t, readings, None, self.config.reduction, self.config.schedule.clip_sd)
-            except NoUsableShots as short:
-                wanted = len(readings) + short.missing
-                continue
-            self.n_points += 1
-            variance = max(float(made.shot_std) ** 2 / made.n_shots, VARIANCE_FLOOR)
-            return float(made.value), variance, len(readings)
-
-
 def run_gpcam(config, instrument, seed: int, score, t_star: float) -> dict:
     """One gpCAM campaign spending ``config.schedule.budget_s`` on ``instrument``: the record
     of budget.py's ``run_one`` (see the module docstring for what each entry means)."""
@@ -209,11 +148,10 @@ def run_gpcam(config, instrument, seed: int, score, t_star: float) -> dict:
 
     def snapped(x: np.ndarray, t: float, t_cap: float) -> tuple[np.ndarray, float]:
         if d == 1:
-            x = np.array([g.x[int(np.argmin(np.abs(g.x - x[0])))]])
-        allowed = g.t[g.t <= t_cap + 1e-12]
-        return x, float(allowed[int(np.argmin(np.abs(allowed - t)))])
+            x = np.array([snap(g.x, x[0])])
+        return x, snap(g.t[g.t <= t_cap + 1e-12], t)
 
-    campaign = _Campaign(config, instrument, seed)
+    campaign = PeerCampaign(config, instrument, seed, NAME)
     times, errors, point_shots, point_t, latencies = [], [], [], [], []
     with _quiet_and_seeded(seed):
         from gpcam import GPOptimizer
@@ -225,7 +163,7 @@ def run_gpcam(config, instrument, seed: int, score, t_star: float) -> dict:
         for row in seeds:
             try:
                 y, v, _ = campaign.measure(row[:d], float(row[d]), SEED_SHOTS)
-            except _Budget:
+            except OverBudget:
                 break
             xs.append(np.r_[row[:d], np.log(row[d])])
             ys.append(y)
@@ -241,7 +179,7 @@ def run_gpcam(config, instrument, seed: int, score, t_star: float) -> dict:
         while gpo is not None:
             cheapest = float(g.t.min())
             full = not campaign.fits(cheapest, shots)
-            t_cap = s.t_max if full else min(s.t_max, (campaign.left() - overhead) / shots)
+            t_cap = s.t_max if full else campaign.t_cap(s.t_max, shots)
             bounds = np.column_stack([np.r_[lows, u_min], np.r_[highs, np.log(max(t_cap, cheapest))]])
             tick = time.perf_counter()
             asked = np.asarray(
@@ -270,17 +208,6 @@ def run_gpcam(config, instrument, seed: int, score, t_star: float) -> dict:
             point_t.append(float(t_new))
             times.append(campaign.spent)
             errors.append(float(score(np.asarray(gpo.posterior_mean(eval_at)["m(x)"]).reshape(-1))))
-    return {
-        "seed": seed,
-        "times_s": [float(v) for v in times],
-        "rmse": [float(v) for v in errors],
-        "points": campaign.n_points,
-        "status": "budget_spent",
-        "spent_s": float(campaign.spent),
-        "t_opt": t_opt,
-        "t_rel_error": relative_error(t_opt, t_star) if np.isfinite(t_opt) else float("nan"),
-        "shots": point_shots,
-        "t": point_t,
-        "latency_s": float(np.median(latencies)) if latencies else float("nan"),
-        "wall_s": time.perf_counter() - started,
-    }
+    return peer_record(
+        campaign, times, errors, point_shots, point_t, t_opt, t_star, latencies, time.perf_counter() - started
+    )

@@ -38,9 +38,12 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
 - "budget warm informative": the same profile with the posterior rule and informative noise points
   of "budget informative" (a profile that leaves t* wider than 5 % is narrowed by the campaign's own
   noise points);
-- "gpcam": the peer, gpCAM (``benchmarks/_gpcam.py``: how it is set up and why that is fair),
-  when the optional extra is installed (``pip install 'noisebo[peers]'``); the output says so when
-  it is not.
+- "gpcam": the peer gpCAM (``benchmarks/_gpcam.py``: how it is set up and why that is fair);
+- "botorch cost-aware", "botorch multi-fidelity": the peer BoTorch, its two documented ways of
+  making a measurement's cost part of the decision (``benchmarks/_botorch.py``: how each is set
+  up, why that is fair, and what each assumes that the instrument does not);
+  the peers run when the optional extra is installed (``pip install 'noisebo[peers]'``); the
+  output says so when one is not.
 
 A design's name is the same everywhere: in --designs, in the output and as the key of the JSON's
 ``records``; a fixed design's depends on the config (its t range and t*), so --help describes them
@@ -99,6 +102,13 @@ STAR_TAG = " (t*)"
 N_LOG_SPACED = 5
 INFO_RATE = "info_rate"
 COLD, WARM, GPCAM, BUDGET_RATE = "budget cold", "budget warm", "gpcam", "budget info_rate"
+BOTORCH_COST_AWARE, BOTORCH_MULTI_FIDELITY = "botorch cost-aware", "botorch multi-fidelity"
+# The peers: name -> (module in benchmarks/, its run function); each module has available().
+PEERS = {
+    GPCAM: ("_gpcam", "run_gpcam"),
+    BOTORCH_COST_AWARE: ("_botorch", "run_cost_aware"),
+    BOTORCH_MULTI_FIDELITY: ("_botorch", "run_multi_fidelity"),
+}
 VALUED, INFORMATIVE = "budget valued", "budget informative"
 RATE_INFORMATIVE = "budget info_rate informative"
 WARM_INFORMATIVE = "budget warm informative"
@@ -117,7 +127,7 @@ DESIGNS = (
     VALUED,
     WARM,
     WARM_INFORMATIVE,
-    GPCAM,
+    *PEERS,
 )
 RENAMED = {"info rate": INFO_RATE}  # a JSON written before the names were one spelling
 BEST_FIXED = "best fixed t (in hindsight)"
@@ -208,7 +218,7 @@ def design_config(base, name: str, fixed: dict[str, float], profile=None):
         )
     if name in paper_policies():
         return base.with_overrides(acquisition={"policy": name})
-    if name == GPCAM:
+    if name in PEERS:
         return base  # the peer reads the instrument, space, budget and shots_after from it
     if name == INFO_RATE:
         return base.with_overrides(acquisition={"policy": INFO_RATE})
@@ -404,7 +414,7 @@ def against_best(records: dict, at) -> list[str]:
 
 def target_lines(records: dict, at, target: float, t_star_name: str, t_star: float) -> list[str]:
     """The targets' verdicts (``benchmarks/_targets.py``) for the cold and warm designs present,
-    each against the fixed designs and gpCAM where those are present too."""
+    each against the fixed designs and the peers where those are present too."""
     present = {n: r for n, r in records.items() if r}
     learners = [n for n in (WARM, COLD) if n in present]
     if not learners:
@@ -430,10 +440,10 @@ def target_lines(records: dict, at, target: float, t_star_name: str, t_star: flo
                 f"- {n} at most 0.8 x the median of the {len(fixed_shown)} fixed designs ({shown}): "
                 + _targets.verdict(mine[n], bound, at)
             )
-    if COLD in mine and GPCAM in present:
-        peer = medians(present[GPCAM], at)
+    for name in [n for n in PEERS if n in present and COLD in mine]:
+        theirs = medians(present[name], at)
         lines.append(
-            f"- {COLD} below {GPCAM} at every checkpoint: {_targets.verdict(mine[COLD], peer, at, strict=True)}"
+            f"- {COLD} below {name} at every checkpoint: {_targets.verdict(mine[COLD], theirs, at, strict=True)}"
         )
     times = ", ".join(
         f"{n} {'never' if not np.isfinite(m) else f'{m:.0f} s'}"
@@ -542,25 +552,31 @@ def save(path: Path, base, stars: dict, fixed: dict, on_grid: dict, records: dic
     )
 
 
+def peer(name: str):
+    """The peer design ``name``'s (available, run) functions, from its module in benchmarks/."""
+    import importlib
+
+    module_name, run = PEERS[name]
+    module = importlib.import_module(module_name)
+    return module.available, getattr(module, run)
+
+
 def measure(name: str, config, instrument, wanted: list[int], done: dict, args, score, stars: dict, save_all) -> list:
     """``name``'s record of every seed in ``wanted``: those ``done`` holds, the others run here
     (each saved through ``save_all`` as soon as it is measured)."""
     kept = {r["seed"]: r for r in done.get("records", {}).get(name, []) if r["seed"] in wanted}
     if kept:
         print(f"{name}: {len(kept)} seeds kept from {args.json}", file=sys.stderr, flush=True)
-    if name == GPCAM:
-        from _gpcam import run_gpcam as run
-    else:
-        run = run_one
+    run = peer(name)[1] if name in PEERS else run_one
     for seed in wanted:
         if seed in kept:
             continue
         rec = run(config, instrument, seed, score, stars[LAW])
         kept[seed] = rec
+        final = f"{rec['rmse'][-1]:.3f}" if rec["rmse"] else "- (no model: the seed points took the budget)"
         print(
             f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
-            f"{rec['rmse'][-1]:.3f}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, "
-            f"wall {rec['wall_s']:.0f} s",
+            f"{final}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, wall {rec['wall_s']:.0f} s",
             file=sys.stderr,
             flush=True,
         )
@@ -666,7 +682,7 @@ def main(argv=None) -> int:
     score = scorer(base, instrument)
     s = base.space
     fixed = fixed_designs(s.t_min, s.t_max, t_star)
-    known = [*paper_policies(), *fixed, INFO_RATE, *BUDGET_DESIGNS, *WARM_DESIGNS, GPCAM]
+    known = [*paper_policies(), *fixed, INFO_RATE, *BUDGET_DESIGNS, *WARM_DESIGNS, *PEERS]
     names, unknown = resolve(args.designs or known, known)
     if unknown:
         parser.error(
@@ -690,13 +706,11 @@ def main(argv=None) -> int:
     ]
     wanted = list(range(args.first_seed, args.first_seed + args.seeds))
     notes = []
-    if GPCAM in names and not args.report:
-        from _gpcam import available
-
-        missing_peer = available()
+    for name in [n for n in names if n in PEERS and not args.report]:
+        missing_peer = peer(name)[0]()
         if missing_peer is not None:
-            names.remove(GPCAM)
-            notes.append(f"gpcam: not run: {missing_peer}")
+            names.remove(name)
+            notes.append(f"{name}: not run: {missing_peer}")
     profile = None
     warm = [name for name in names if name in WARM_DESIGNS]
     if warm and (not args.report or args.profile is not None):  # a report names a given profile too

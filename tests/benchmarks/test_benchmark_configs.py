@@ -107,7 +107,8 @@ def test_an_unknown_design_is_one_line_naming_the_known_ones(capsys):
     known = (
         "reward, double, fixed t=0.2, fixed t=0.5318, fixed t=1.414, fixed t=2.512 (t*), fixed t=3.761, "
         "fixed t=10, info_rate, budget cold, budget info_rate, budget informative, "
-        "budget info_rate informative, budget valued, budget warm, budget warm informative, gpcam, fixed"
+        "budget info_rate informative, budget valued, budget warm, budget warm informative, gpcam, "
+        "botorch cost-aware, botorch multi-fidelity, fixed"
     )  # Forrester: t in [0.2, 10] s, t*(law) = 2.512 s
     assert lines[0].split("known: ", 1)[1].startswith(known)
 
