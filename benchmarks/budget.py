@@ -4,7 +4,7 @@
                                 [--designs NAMES] [--json PATH] [--figure PATH] [--report]
 
 Every design runs the configuration with ``schedule.budget_s`` = --budget, ``point_overhead_s``
-= --overhead and no step limit, for each seed:
+= --overhead (default: the config's own) and no step limit, for each seed:
 
 - "reward", "double": the paper's two policies (and shot schedule);
 - six fixed designs, "fixed t=<t>": the reward-driven policy with every point at one t and
@@ -60,8 +60,9 @@ fixed designs every seed of which reaches it.
 After every decision it scores the model that decision was made with (the GP mean on the x grid,
 interpolated to 200 evenly spaced positions for one axis) against the simulator's truth, beside
 the instrument time spent when it was made, and at the end the final model. It prints, per
-design, the median RMSE [IQR] once a given time is spent (the last model made within it), the
-median time to first reach --target (when every seed reaches it), and the final predicted t
+design, the median RMSE [IQR] once a given time is spent (the last model made within it; each
+--at time once, those past --budget left out), the median time to first reach --target (default:
+2 % of the range of the true f over the x grid; the output says which) when every seed reaches it, and the final predicted t
 against t*(law) (and against t*(x-avg) too where the simulator's noise depends on x and the two
 differ; the output names both); then each design's median as a multiple of the best fixed t in
 hindsight's at each checkpoint, and the targets' verdicts for "budget cold" and "budget warm"
@@ -70,7 +71,10 @@ they are judged); and plots the median curves with their IQR (--figure). A seed 
 seed points has no model yet: it counts as the worst error, so a median needs half the seeds to
 have one ("-" where fewer do). Results are written to --json after every seed, and a run given
 the same --json measures only the seeds it lacks: a long run interrupted keeps what it has
-measured.
+measured. A --json measured with another instrument, space, budget or overhead is refused (its
+seeds would be mixed with these). A warm design's seeds say what became of the profile's prior
+(kept at every step, or dropped at which step) in the progress, the JSON (``profile``) and the
+report; the warm design's profile campaigns, when made here, print their progress.
 """
 
 from __future__ import annotations
@@ -88,7 +92,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
 
 import _targets  # noqa: E402
-from _config import Parser, benchmark_config  # noqa: E402
+from _config import Parser, benchmark_config, refuse  # noqa: E402
 from _tstar import LAW, X_AVG, describe, differ, t_stars  # noqa: E402
 
 from noisebo.campaign.driver import run_campaign  # noqa: E402
@@ -112,6 +116,7 @@ PEERS = {
 VALUED, INFORMATIVE = "budget valued", "budget informative"
 RATE_INFORMATIVE = "budget info_rate informative"
 WARM_INFORMATIVE = "budget warm informative"
+TARGET_OF_RANGE = 0.02  # the default --target: this fraction of the range of the true f on the x grid
 PROFILE_SEEDS = (1000, 1001, 1002)  # the warm design's profile campaigns: none of the benchmark's seeds
 # What --help lists: a fixed design's name depends on the config (its t range and t*).
 DESIGNS = (
@@ -250,12 +255,19 @@ def made_profile(base, folder: Path):
 
     paper = base.with_overrides(schedule={"mode": "paper", "budget_s": None, "n_steps": 15})
     files = []
-    for seed in PROFILE_SEEDS:
+    for i, seed in enumerate(PROFILE_SEEDS, 1):
         path = folder / f"profile_s{seed}.h5"
         if not path.exists():
+            tick = time.perf_counter()
+            print(
+                f"profile campaign {i} of {len(PROFILE_SEEDS)} (seed {seed}) into {path} ...",
+                file=sys.stderr,
+                flush=True,
+            )
             started = engine.new_campaign(paper, seed, driver_info(paper.instrument), {}, "2026-11-25T00:00:00+00:00")
             with Recorder.create(path, started) as recorder:
                 driver.drive(recorder.state, build(paper.instrument), recorder.commit)
+            print(f"profile campaign {i} done in {time.perf_counter() - tick:.0f} s", file=sys.stderr, flush=True)
         files.append(path)
     return make_profile(files)
 
@@ -304,6 +316,31 @@ def warm_profile(args, base):
     )
 
 
+def measured_otherwise(kept: dict | None, base) -> str | None:
+    """What of the instrument, the space, the budget and the per-point overhead differs between the
+    config a --json was measured with (``kept``) and ``base``: None where nothing does."""
+    if not kept:
+        return None
+    now = base.model_dump(mode="json")
+    differ = [k for k in ("instrument", "space") if kept.get(k) != now[k]]
+    differ += [k for k in ("budget_s", "point_overhead_s") if kept.get("schedule", {}).get(k) != now["schedule"][k]]
+    return ", ".join(differ) or None
+
+
+def default_target(config, instrument, given: float | None) -> tuple[float, str]:
+    """(the target RMSE, a line saying where it came from): --target, or ``TARGET_OF_RANGE`` of
+    the range of the simulator's f over the config's x grid."""
+    if given is not None:
+        return given, f"target RMSE {given:g} (--target)"
+    truth = np.asarray(instrument.truth(np.asarray(grids(config).x).reshape(-1, config.space.dimensions)))
+    span = float(truth.max() - truth.min())
+    target = float(f"{TARGET_OF_RANGE * span:.2g}")
+    return (
+        target,
+        f"target RMSE {target:g}: {TARGET_OF_RANGE * 100:g} % of the range of f over the x grid ({span:.4g}); --target sets another",
+    )
+
+
 def scorer(config, instrument):
     """f_mean on the x grid -> RMSE against the truth (200 positions for one axis)."""
     g = grids(config)
@@ -341,7 +378,46 @@ def run_one(config, instrument, seed: int, score, t_star: float) -> dict:
         "t": [float(d.t) for d in final.decisions],
         "latency_s": float(np.median(result.latencies_s[1:])) if len(result.latencies_s) > 1 else float("nan"),
         "wall_s": time.perf_counter() - started,
+        **({"profile": prior_fate(final)} if config.noise_model.profile is not None else {}),
     }
+
+
+def prior_fate(final) -> dict:
+    """What happened to a warm campaign's noise profile: at how many BO steps its prior was in use,
+    the step it was dropped at (None: kept throughout), and the smallest posterior predictive p of
+    the replicate scatter under it."""
+    decisions = final.decisions
+    return {
+        "steps_in_use": sum(bool(d.profile_in_use) for d in decisions),
+        "steps": len(decisions),
+        "dropped_at_step": final.data.profile_dropped_step,
+        "min_p": float(min((d.profile_p for d in decisions), default=float("nan"))),
+    }
+
+
+def prior_lines(records: dict) -> list[str]:
+    """For each design whose campaigns had a noise profile: in how many seeds it was kept, and
+    where it was dropped otherwise (records measured before this was kept say nothing)."""
+    lines = []
+    for name, recs in records.items():
+        fates = [r["profile"] for r in recs if "profile" in r]
+        if not fates:
+            continue
+        kept = sum(f["dropped_at_step"] is None for f in fates)
+        dropped = sorted(f["dropped_at_step"] for f in fates if f["dropped_at_step"] is not None)
+        where = f"; dropped at step {', '.join(str(k) for k in dropped)} in the others" if dropped else ""
+        lines.append(f"{name}: the noise profile's prior was kept throughout in {kept} of {len(fates)} seeds{where}")
+    if lines:
+        lines.insert(0, "")
+    return lines
+
+
+def prior_said(fate: dict) -> str:
+    if fate["dropped_at_step"] is None:
+        return f"profile kept at all {fate['steps']} steps (smallest p {fate['min_p']:.2g})"
+    return (
+        f"profile dropped at step {fate['dropped_at_step']} (in use at {fate['steps_in_use']} of {fate['steps']} steps)"
+    )
 
 
 def rmse_at(record: dict, budget: float) -> float:
@@ -500,7 +576,12 @@ def build_parser() -> Parser:
     parser = Parser(prog=Path(__file__).name, description=__doc__.split("\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
     parser.add_argument("--budget", type=float, default=900.0)
-    parser.add_argument("--overhead", type=float, default=0.0)
+    parser.add_argument(
+        "--overhead",
+        type=float,
+        default=None,
+        help="instrument time (s) per point beside its shots (default: the config's schedule.point_overhead_s)",
+    )
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument(
@@ -516,7 +597,13 @@ def build_parser() -> Parser:
         "naming the config's designs",
     )
     parser.add_argument("--at", default="100,200,300,500,860", help="times (s) to report the RMSE at")
-    parser.add_argument("--target", type=float, default=0.46)
+    parser.add_argument(
+        "--target",
+        type=float,
+        default=None,
+        help=f"the RMSE whose time to reach is reported (default: {TARGET_OF_RANGE * 100:g} %% of the range of the "
+        "simulator's f over the config's x grid; the output says which)",
+    )
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--figure", type=Path, default=None)
     parser.add_argument(
@@ -576,7 +663,8 @@ def measure(name: str, config, instrument, wanted: list[int], done: dict, args, 
         final = f"{rec['rmse'][-1]:.3f}" if rec["rmse"] else "- (no model: the seed points took the budget)"
         print(
             f"{name:>12} seed {seed:3d}: {rec['points']} points, {rec['spent_s']:.0f} s, final RMSE "
-            f"{final}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, wall {rec['wall_s']:.0f} s",
+            f"{final}, t {rec['t_opt']:.3f} s, decision {rec['latency_s']:.3f} s, wall {rec['wall_s']:.0f} s"
+            + (f"; {prior_said(rec['profile'])}" if "profile" in rec else ""),
             file=sys.stderr,
             flush=True,
         )
@@ -673,9 +761,15 @@ def main(argv=None) -> int:
         parser,
         args.config,
         lambda c: c.with_overrides(
-            schedule={"budget_s": args.budget, "point_overhead_s": args.overhead, "n_steps": NO_STEP_LIMIT}
+            schedule={
+                "budget_s": args.budget,
+                "point_overhead_s": c.schedule.point_overhead_s if args.overhead is None else args.overhead,
+                "n_steps": NO_STEP_LIMIT,
+            }
         ),
     )
+    overhead = base.schedule.point_overhead_s
+    target, target_said = default_target(base, instrument, args.target)
     stars = t_stars(base, instrument)
     t_star = stars[LAW]
     both = differ(stars)
@@ -689,15 +783,22 @@ def main(argv=None) -> int:
             f"argument --designs: unknown design {', '.join(repr(n) for n in unknown)}; "
             f"known: {', '.join([*known, FIXED])}"
         )
-    at = [float(v) for v in args.at.split(",") if v.strip()] + [args.budget]
+    at = sorted({float(v) for v in args.at.split(",") if v.strip() and float(v) < args.budget} | {args.budget})
     records: dict[str, list] = {}
     done = json.loads(args.json.read_text()) if args.json and args.json.exists() else {}
+    other = measured_otherwise(done.get("config"), base)
+    if other and not args.report:
+        refuse(
+            parser,
+            f"{args.json} holds campaigns measured with other settings ({other}): its seeds would be mixed with these; "
+            "give another --json (or the same settings)",
+        )
     if "records" in done:  # earlier names, from the t range and t* that JSON was measured with
         space = done.get("config", {}).get("space", {})
         renamed = old_names(space.get("t_min", s.t_min), space.get("t_max", s.t_max), done.get("t_star", t_star))
         done["records"] = {renamed.get(k, k): v for k, v in done["records"].items()}
-        if args.report and args.designs is None:  # everything it holds, under names of another config too
-            names += [k for k in done["records"] if k not in names]
+        if args.report and args.designs is None:  # what it holds, in the usual order, other configs' names last
+            names = [n for n in names if n in done["records"]] + [k for k in done["records"] if k not in names]
     on_grid = {name: grid_t(base, t) for name, t in fixed.items()}
     snapped = [
         f"{name} at t = {on_grid[name]:.4g} s"
@@ -728,7 +829,7 @@ def main(argv=None) -> int:
         records[name] = measure(name, config, instrument, wanted, done, args, score, stars, save_all)
     counts = sorted({len(r) for r in records.values() if r}) or [0]
     print(
-        f"{base.name}: budget {args.budget:g} s, {args.overhead:g} s per point, "
+        f"{base.name}: budget {args.budget:g} s, {overhead:g} s per point, "
         f"{'/'.join(str(c) for c in counts)} seeds per design; "
         f"{describe(stars, LAW + (f' and {X_AVG}' if both else ''))}"
     )
@@ -743,7 +844,10 @@ def main(argv=None) -> int:
             + "; ".join(snapped)
         )
     print()
-    print_table(records, at, args.target, stars, both)
+    print(target_said)
+    print_table(records, at, target, stars, both)
+    for line in prior_lines(records):
+        print(line)
     if args.figure:
         figure(
             {n: r for n, r in records.items() if r},

@@ -19,6 +19,7 @@ if str(BENCHMARKS) not in sys.path:
 
 import _tstar  # noqa: E402
 import budget  # noqa: E402
+from _config import validated_config  # noqa: E402
 
 from noisebo.instruments import build  # noqa: E402
 from noisebo.instruments.registry import validated  # noqa: E402
@@ -337,3 +338,49 @@ def test_the_former_cap_on_the_2d_area_changes_the_cap_alone():
     area = validated(load_config(ROOT / "data" / "configs" / "pfm2d.yaml"))
     assert former.inference.max_inputs_for(2) == 256 and area.inference.max_inputs_for(2) == 512
     assert former.with_overrides(name=area.name, inference={"max_inputs": None}) == area
+
+
+def test_a_report_without_designs_lists_only_what_the_json_holds_and_each_time_once(tmp_path, capsys):
+    path = tmp_path / "some.json"
+    record = {"seed": 0, "times_s": [10.0, 50.0], "rmse": [1.0, 0.4], "points": 12, "t_opt": 2.4, "t_rel_error": 0.0}
+    path.write_text(json.dumps({"records": {"info_rate": [record], "budget cold": [record]}}))
+    assert budget.main(["--report", "--json", str(path), "--budget", "60", "--at", "20,60,70"]) == 0
+    out = capsys.readouterr().out
+    assert "Not in " not in out and "| info_rate (1 seeds) |" in out and "| budget cold (1 seeds) |" in out
+    header = next(line for line in out.splitlines() if line.startswith("| design |"))
+    assert header.startswith("| design | 20 s | 60 s | time to RMSE")  # 60 s once; 70 s is past the budget
+
+
+def test_the_default_target_is_two_percent_of_the_range_of_f_and_the_output_says_so():
+    config = validated_config(ROOT / "data" / "configs" / "forrester.yaml")
+    instrument = build(config.instrument)
+    target, said = budget.default_target(config, instrument, None)
+    # Forrester on the 200-point x grid of [0, 1]: min -6.0207 near x = 0.7573, max 15.8297 at x = 1
+    assert target == pytest.approx(0.44) and "2 % of the range of f over the x grid (21.85)" in said
+    assert budget.default_target(config, instrument, 0.46) == (0.46, "target RMSE 0.46 (--target)")
+
+
+def test_a_json_of_other_settings_is_refused_before_anything_is_measured(tmp_path, capsys):
+    path = tmp_path / "other.json"
+    config = validated_config(ROOT / "data" / "configs" / "forrester.yaml")
+    kept = config.with_overrides(schedule={"budget_s": 20.0, "point_overhead_s": 1.0}).model_dump(mode="json")
+    path.write_text(json.dumps({"config": kept, "records": {}}))
+    with pytest.raises(SystemExit) as stop:
+        budget.main(["--json", str(path), "--budget", "60", "--designs", "info_rate", "--seeds", "1"])
+    assert stop.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "other settings (budget_s, point_overhead_s)" in lines[0], lines
+    assert json.loads(path.read_text())["records"] == {}  # nothing measured, nothing written
+
+
+def test_the_prior_lines_say_where_each_warm_seed_kept_or_dropped_its_profile():
+    def rec(dropped):
+        return {"profile": {"steps_in_use": 3, "steps": 9, "dropped_at_step": dropped, "min_p": 0.2}}
+
+    lines = budget.prior_lines({"budget warm": [rec(None), rec(4), rec(None), rec(2)], "budget cold": [{}]})
+    assert lines == [
+        "",
+        "budget warm: the noise profile's prior was kept throughout in 2 of 4 seeds; dropped at step 2, 4 in the others",
+    ]
+    assert budget.prior_said(rec(None)["profile"]) == "profile kept at all 9 steps (smallest p 0.2)"
+    assert budget.prior_said(rec(4)["profile"]) == "profile dropped at step 4 (in use at 3 of 9 steps)"
