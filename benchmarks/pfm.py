@@ -2,6 +2,9 @@
 
     python benchmarks/pfm.py [--config PATH] [--seeds N] [--baseline-seeds M] [--first-seed S] [--json PATH]
 
+With --json, every seed is written as soon as it is measured, and a run given the same --json
+measures only the seeds it lacks (a JSON of another config is refused).
+
 For each seed it runs the configured campaign (t optimised) and two baselines that keep every
 sweep at a fixed time (2 s and 0.1 s) with the same steps and shot schedule, then prints: the
 fraction of optimised campaigns whose final predicted optimal t lies within 10 % of t*(law) (t*
@@ -26,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the shared helpers (_config, _tstar)
 
-from _config import Parser, benchmark_config  # noqa: E402
+from _config import Parser, benchmark_config, refuse  # noqa: E402
 from _tstar import LAW, X_AVG, describe, differ, t_stars  # noqa: E402
 from forrester import run_one  # noqa: E402
 
@@ -71,6 +74,19 @@ def law_check(instrument, config, ts=(0.1, 0.5, 2.0), positions=16, repeats=20) 
     return rows
 
 
+def resumed(parser, path: Path | None, base) -> dict:
+    """The records an earlier run wrote to ``path``, by (variant, seed): a run given the same
+    --json measures only what it lacks. A JSON of another instrument or space is refused."""
+    if path is None or not path.exists():
+        return {}
+    done = json.loads(path.read_text())
+    now = base.model_dump(mode="json")
+    kept_config = done.get("config")
+    if kept_config is not None and any(kept_config.get(k) != now[k] for k in ("instrument", "space", "schedule")):
+        refuse(parser, f"{path} holds campaigns of another config: give another --json")
+    return {(r["variant"], r["seed"]): r for r in done.get("records", [])}
+
+
 def main(argv=None) -> int:
     parser = Parser(prog=Path(__file__).name, description=__doc__.split("\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "pfm.yaml"))
@@ -91,6 +107,7 @@ def main(argv=None) -> int:
     against = [LAW, X_AVG] if differ(stars) else [LAW]
     variants = {f"{base.acquisition.policy} (t optimised)": base}
     variants |= {name: base.with_overrides(acquisition={"fixed_t": t}) for name, t in BASELINES.items()}
+    kept = resumed(parser, args.json, base)
     records, rows, within = [], {}, {}
     for name, config in variants.items():
         mine = []
@@ -98,8 +115,16 @@ def main(argv=None) -> int:
         if n == 0:
             continue
         for seed in range(args.first_seed, args.first_seed + n):
+            if (name, seed) in kept:
+                mine.append(kept[(name, seed)])
+                continue
             rec = run_one(config, instrument, seed) | {"variant": name}
             mine.append(rec)
+            if args.json:  # every seed as soon as it is measured: an interrupted run keeps it
+                args.json.parent.mkdir(parents=True, exist_ok=True)
+                so_far = {**kept, **{(r["variant"], r["seed"]): r for r in [*records, *mine]}}
+                so_far = list(so_far.values())
+                args.json.write_text(json.dumps({"config": base.model_dump(mode="json"), "records": so_far}, indent=1))
             print(
                 f"{name:>20} seed {seed:3d}: converged step {rec['converged_step']}, t_opt {rec['t_opt_pred'][-1]:.3f} s "
                 f"({100 * rec['t_opt_rel_error']:.1f} %), RMSE {rec['rmse_f']:.2f} pm, time {rec['total_measurement_time']:.0f} s",
@@ -141,6 +166,7 @@ def main(argv=None) -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         out = {
+            "config": base.model_dump(mode="json"),
             "t_star": t_star,
             "t_star_definition": LAW,
             "t_stars": stars,
