@@ -208,12 +208,13 @@ def variance_removed(model, mc_points, candidates):
     units of f squared. (Formed directly: gpytorch's lazy joint posterior of 20 000 candidates
     took seconds per decision.)"""
     import torch
+    from linear_operator.utils.cholesky import psd_safe_cholesky
 
     kernel, train = model.covar_module, model.train_inputs[0]
     noise = model.likelihood.noise.reshape(-1)  # the outcome transform's units
     removed = []
     with torch.no_grad():
-        chol = torch.linalg.cholesky(kernel(train).to_dense() + torch.diag(noise))
+        chol = psd_safe_cholesky(kernel(train).to_dense() + torch.diag(noise))  # gpytorch's jitter, as qNIPV's
         a_z = torch.linalg.solve_triangular(chol, kernel(train, mc_points).to_dense(), upper=False)
         for chunk in torch.split(candidates, CHUNK):
             a_c = torch.linalg.solve_triangular(chol, kernel(train, chunk).to_dense(), upper=False)

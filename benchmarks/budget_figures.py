@@ -9,8 +9,9 @@ one panel per setting and a few curves per panel:
 
 - ``budget-learning-t.png``: does learning t beat a fixed t? (``budget cold``, ``budget warm``,
   the fixed design at t* and the best fixed t in hindsight);
-- ``budget-gpcam.png``: how do the budget designs compare with the peer, gpCAM? (``budget cold``,
-  ``budget info_rate``, ``gpcam`` and the best fixed t in hindsight);
+- ``budget-peers.png``: how do the budget designs compare with the peers, gpCAM and BoTorch?
+  (``budget cold``, ``budget info_rate``, ``gpcam``, ``botorch cost-aware``, ``botorch
+  multi-fidelity`` and the best fixed t in hindsight);
 - ``budget-variants.png``: which budget-mode variant? (``budget cold``, ``budget info_rate``,
   ``budget informative``, ``budget warm`` and the best fixed t in hindsight).
 
@@ -38,7 +39,18 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))  # the budget benchmark and its shared helpers
 
 import budget  # noqa: E402
-from budget import BEST_FIXED, BUDGET_RATE, COLD, GPCAM, INFORMATIVE, STAR_TAG, WARM, is_fixed  # noqa: E402
+from budget import (  # noqa: E402
+    BEST_FIXED,
+    BOTORCH_COST_AWARE,
+    BOTORCH_MULTI_FIDELITY,
+    BUDGET_RATE,
+    COLD,
+    GPCAM,
+    INFORMATIVE,
+    STAR_TAG,
+    WARM,
+    is_fixed,
+)
 
 AT_T_STAR = "fixed t at t*"  # the fixed design whose name ends in " (t*)": its t differs by setting
 
@@ -67,7 +79,11 @@ SETTINGS = (
 
 QUESTIONS = (
     Question("learning-t", "Does learning t beat a fixed t?", (COLD, WARM, AT_T_STAR, BEST_FIXED)),
-    Question("gpcam", "How do the budget designs compare with gpCAM?", (COLD, BUDGET_RATE, GPCAM, BEST_FIXED)),
+    Question(
+        "peers",
+        "How do the budget designs compare with the peers?",
+        (COLD, BUDGET_RATE, GPCAM, BOTORCH_COST_AWARE, BOTORCH_MULTI_FIDELITY, BEST_FIXED),
+    ),
     Question("variants", "Which budget-mode variant?", (COLD, BUDGET_RATE, INFORMATIVE, WARM, BEST_FIXED)),
 )
 
@@ -78,6 +94,8 @@ STYLE = {
     BUDGET_RATE: {"color": "tab:green", "ls": "-"},
     INFORMATIVE: {"color": "tab:purple", "ls": "-"},
     GPCAM: {"color": "tab:red", "ls": "-"},
+    BOTORCH_COST_AWARE: {"color": "tab:brown", "ls": "-"},
+    BOTORCH_MULTI_FIDELITY: {"color": "tab:pink", "ls": "-"},
     AT_T_STAR: {"color": "tab:gray", "ls": ":"},
     BEST_FIXED: {"color": "black", "ls": "--"},
 }
