@@ -57,7 +57,9 @@ and instrument-time accounting are noisebo's (``benchmarks/_peer.py``). Scored l
 design: the posterior mean on the config's x grid at the highest fidelity (t = t_max).
 
 Training: ``fit_gpytorch_mll`` after every point, as the tutorials do, each fit starting from the
-last one's hyperparameters (the same optimum, sooner).
+last one's hyperparameters (the same optimum, sooner). Where every attempt of a fit fails
+(``ModelFittingError``: seen on the PFM line), the model keeps the last fitted hyperparameters
+and the record lists the number of points at each such failure (``fit_failures``).
 
 Deterministic for a seed: nothing here draws random numbers but ``fit_gpytorch_mll``'s fallbacks,
 and PyTorch's global generator is seeded from the seed for the run and restored afterwards;
@@ -164,19 +166,32 @@ def _tensor(a):
     return torch.as_tensor(np.asarray(a, dtype=np.float64), dtype=torch.float64)
 
 
-def _fitted(model_of, X, Y, Yvar, last):
-    """The model of the data, its hyperparameters fitted from ``last``'s values (None: defaults)."""
+def _fitted(model_of, X, Y, Yvar, last, failures: list | None = None):
+    """The model of the data, its hyperparameters fitted from ``last``'s values (None: defaults).
+    Where every attempt of ``fit_gpytorch_mll`` fails (``ModelFittingError``), the model keeps
+    ``last``'s hyperparameters and the failure is appended to ``failures``."""
+    from botorch.exceptions.errors import ModelFittingError
     from botorch.fit import fit_gpytorch_mll
     from gpytorch.mlls import ExactMarginalLogLikelihood
 
     model = model_of(_tensor(X), _tensor(Y).reshape(-1, 1), _tensor(Yvar).reshape(-1, 1))
     if last is not None:
-        model.load_state_dict(
-            {k: v for k, v in last.state_dict().items() if not k.startswith(("outcome_transform", "likelihood"))},
-            strict=False,
-        )
-    fit_gpytorch_mll(ExactMarginalLogLikelihood(model.likelihood, model))
+        model.load_state_dict(_hyperparameters(last), strict=False)
+    try:
+        fit_gpytorch_mll(ExactMarginalLogLikelihood(model.likelihood, model))
+    except ModelFittingError:
+        if last is None or failures is None:
+            raise
+        failures.append(len(X))
+        model = model_of(_tensor(X), _tensor(Y).reshape(-1, 1), _tensor(Yvar).reshape(-1, 1))
+        model.load_state_dict(_hyperparameters(last), strict=False)
+    model.eval()
     return model
+
+
+def _hyperparameters(model) -> dict:
+    """The kernel's and mean's fitted values (not the data's outcome transform or noise)."""
+    return {k: v for k, v in model.state_dict().items() if not k.startswith(("outcome_transform", "likelihood"))}
 
 
 def _mean_at(model, inputs) -> np.ndarray:
@@ -278,7 +293,7 @@ def run_botorch(config, instrument, seed: int, score, t_star: float, design: str
 
     campaign = PeerCampaign(config, instrument, seed, NAME)
     times, errors, point_shots, point_t, latencies = [], [], [], [], []
-    X, Y, Yvar = [], [], []
+    X, Y, Yvar, failures = [], [], [], []
     with _quiet_and_seeded(seed):
         for row in seed_points(config, seed):
             try:
@@ -307,15 +322,16 @@ def run_botorch(config, instrument, seed: int, score, t_star: float, design: str
             X.append(enc.inputs(x_new, t_new)[0])
             Y.append(y)
             Yvar.append(v)
-            model = _fitted(model_of, X, Y, Yvar, model)
+            model = _fitted(model_of, X, Y, Yvar, model, failures)
             latencies.append(ask_s + time.perf_counter() - tick)
             point_shots.append(taken)
             point_t.append(t_new)
             times.append(campaign.spent)
             errors.append(float(score(_mean_at(model, scored_at))))
-    return peer_record(
+    record = peer_record(
         campaign, times, errors, point_shots, point_t, t_opt, t_star, latencies, time.perf_counter() - started
     )
+    return record | {"fit_failures": failures}
 
 
 run_cost_aware = partial(run_botorch, design=COST_AWARE)
