@@ -59,7 +59,11 @@ design: the posterior mean on the config's x grid at the highest fidelity (t = t
 Training: ``fit_gpytorch_mll`` after every point, as the tutorials do, each fit starting from the
 last one's hyperparameters (the same optimum, sooner). Where every attempt of a fit fails
 (``ModelFittingError``: seen on the PFM line), the model keeps the last fitted hyperparameters
-and the record lists the number of points at each such failure (``fit_failures``).
+and the record lists the number of points at each such failure (``fit_failures``). Where
+BoTorch can then no longer factorise the model's kernel matrix (``NotPSDError``, with gpytorch's
+jitter up to 1e-3: seen on the PFM line, where the multi-fidelity design repeats points at t_min
+on the x grid), the campaign stops: its status is ``model_failed``, ``model_failed_at_points``
+says when, and its last model stands for the rest of the budget.
 
 Deterministic for a seed: nothing here draws random numbers but ``fit_gpytorch_mll``'s fallbacks,
 and PyTorch's global generator is seeded from the seed for the run and restored afterwards;
@@ -295,6 +299,8 @@ def run_botorch(config, instrument, seed: int, score, t_star: float, design: str
     times, errors, point_shots, point_t, latencies = [], [], [], [], []
     X, Y, Yvar, failures = [], [], [], []
     with _quiet_and_seeded(seed):
+        from linear_operator.utils.errors import NotPSDError
+
         for row in seed_points(config, seed):
             try:
                 y, v, _ = campaign.measure(row[:d], float(row[d]), SEED_SHOTS)
@@ -308,7 +314,7 @@ def run_botorch(config, instrument, seed: int, score, t_star: float, design: str
             model = _fitted(model_of, X, Y, Yvar, None)
             times.append(campaign.spent)
             errors.append(float(score(_mean_at(model, scored_at))))
-        t_opt = float("nan")
+        t_opt, broken = float("nan"), None
         while model is not None:
             cheapest = float(g.t.min())
             if not campaign.fits(cheapest, shots):  # spent: this ask only says which t it would measure at next
@@ -322,15 +328,22 @@ def run_botorch(config, instrument, seed: int, score, t_star: float, design: str
             X.append(enc.inputs(x_new, t_new)[0])
             Y.append(y)
             Yvar.append(v)
-            model = _fitted(model_of, X, Y, Yvar, model, failures)
-            latencies.append(ask_s + time.perf_counter() - tick)
             point_shots.append(taken)
             point_t.append(t_new)
+            try:
+                model = _fitted(model_of, X, Y, Yvar, model, failures)
+                error = float(score(_mean_at(model, scored_at)))
+            except NotPSDError:  # BoTorch can no longer factorise the model's kernel matrix
+                broken = len(X)
+                break
+            latencies.append(ask_s + time.perf_counter() - tick)
             times.append(campaign.spent)
-            errors.append(float(score(_mean_at(model, scored_at))))
+            errors.append(error)
     record = peer_record(
         campaign, times, errors, point_shots, point_t, t_opt, t_star, latencies, time.perf_counter() - started
     )
+    if broken is not None:  # the last model stands for the rest of the budget
+        record |= {"status": "model_failed", "model_failed_at_points": broken}
     return record | {"fit_failures": failures}
 
 
