@@ -187,8 +187,7 @@ def _fitted(model_of, X, Y, Yvar, last, failures: list | None = None):
         if last is None or failures is None:
             raise
         failures.append(len(X))
-        model = model_of(_tensor(X), _tensor(Y).reshape(-1, 1), _tensor(Yvar).reshape(-1, 1))
-        model.load_state_dict(_hyperparameters(last), strict=False)
+        model.load_state_dict(_hyperparameters(last), strict=False)  # undo the failed attempts
     model.eval()
     return model
 
@@ -259,15 +258,21 @@ def instrument_time_model(enc: _Encoding, shots: int, overhead: float):
     )
 
 
+def grid_inputs(enc: _Encoding, x_grid, t_grid):
+    """(n_x n_t, d + 1) model inputs of every (x, t) of the (n_x, d) and (n_t,) grids, x-major."""
+    n_x, n_t = len(x_grid), len(t_grid)
+    units = enc.inputs(x_grid, enc.t_min)[:, :-1]
+    return _tensor(np.column_stack([np.repeat(units, n_t, axis=0), np.tile(enc.last(t_grid), n_x)]))
+
+
 def _ask(model, enc: _Encoding, x_grid, t_grid, mc_points, cost_model):
     """The (x, t) of the grids, (n_x, d) and (n_t,), whose integrated variance reduction per
     second is largest."""
     import torch
     from botorch.acquisition.cost_aware import InverseCostWeightedUtility
 
-    n_x, n_t = len(x_grid), len(t_grid)
-    units = enc.inputs(x_grid, enc.t_min)[:, :-1]
-    choices = _tensor(np.column_stack([np.repeat(units, n_t, axis=0), np.tile(enc.last(t_grid), n_x)]))
+    n_t = len(t_grid)
+    choices = grid_inputs(enc, x_grid, t_grid)
     per_second = InverseCostWeightedUtility(cost_model)
     with torch.no_grad():
         value = per_second(choices.unsqueeze(-2), deltas=variance_removed(model, mc_points, choices))

@@ -100,8 +100,7 @@ def one(config, n: int) -> list[str]:
         enc = _botorch._Encoding(config, fidelity=False)
         model = _botorch._fitted(_botorch._cost_aware_model, enc.inputs(xs, ts), values, variances, None)
         mc = _botorch._target_fidelity(enc, enc.inputs(np.asarray(integration_points(s)).reshape(-1, 1), s.t_min))
-        units = enc.inputs(g.x, s.t_min)[:, 0]
-        choices = _botorch._tensor(np.column_stack([np.repeat(units, len(g.t)), np.tile(enc.last(g.t), len(g.x))]))
+        choices = _botorch.grid_inputs(enc, np.asarray(g.x).reshape(-1, 1), g.t)
         per_second = InverseCostWeightedUtility(_botorch.instrument_time_model(enc, shots, overhead))
         nipv = qNegIntegratedPosteriorVariance(model, mc_points=mc)
         with torch.no_grad():
