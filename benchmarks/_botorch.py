@@ -29,14 +29,14 @@ How each is set up (as BoTorch's tutorials and API documentation recommend):
   the config's x grid (one axis; its integration points with more) and the t grid that fits the
   budget left. qNIPV's value is computed in closed form from the fitted model (one fantasy of a
   Gaussian model, q = 1: exactly qNIPV's own value, which tests/benchmarks/test_botorch_peer.py
-  checks): BoTorch's Monte Carlo form took 26 s per decision with 50 points and 159 s with 200
-  over the 20 000 candidates of one axis, the closed form 0.05 and 0.14 s
+  checks): BoTorch's Monte Carlo form took 27 s per decision with 50 points and 172 s with 200
+  over the 20 000 candidates of one axis, the closed form 0.05 and 0.13 s
   (``python benchmarks/botorch_kg.py``, ``benchmarks/results/botorch_kg.txt``).
 
 Why not ``qMultiFidelityKnowledgeGradient``, the acquisition of BoTorch's multi-fidelity
 tutorials: it values a point for what it tells about the *maximum* of f, where the benchmark
 scores the map of f, and at the tutorials' settings (64 fantasies, 5 restarts, 128 raw samples,
-200 iterations) one decision took 2.4 s with 50 points and 57 s with 200 (the same run); the
+200 iterations) one decision took 2.6 s with 50 points and 57 s with 200 (the same run); the
 budget benchmark's campaigns measure hundreds to a thousand points each.
 
 What each assumes that the instrument does not:
