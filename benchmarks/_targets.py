@@ -8,7 +8,11 @@ prints the verdicts the docs state from the JSON it reads. The targets:
 - ``budget cold`` within 10 % of it at every checkpoint;
 - both at most 0.8 x the median fixed design (the median over the fixed designs of their medians);
 - ``budget cold`` below gpCAM at every checkpoint;
-- the final t within 5 % of t* in at least 95 % of seeds.
+- the final t within 5 % of t* in at least 95 % of seeds;
+- the designs recommended for the best map of f within a budget, ``budget info_rate`` (cold) and
+  ``budget warm info_rate`` (from a noise profile): below every peer at every checkpoint; the
+  warm one at or below the best fixed t in hindsight and the cold one within 5 % of it at every
+  checkpoint; stretch: both at most 0.9 x it.
 
 A median of inf is a design with no model in half its seeds at that checkpoint (it misses any
 bound); a bound of inf or NaN (no fixed design has a median there) judges nothing there.
@@ -22,6 +26,8 @@ from collections.abc import Sequence
 
 WITHIN_BEST = 1.10  # budget cold: within 10 % of the best fixed t in hindsight
 OF_MEDIAN_FIXED = 0.8  # both: at most 0.8 x the median fixed design
+MAP_WITHIN_BEST = 1.05  # the cold mapping design: within 5 % of the best fixed t in hindsight
+MAP_STRETCH = 0.9  # both mapping designs, stretch: at most 0.9 x the best fixed t in hindsight
 T_WITHIN = 0.05  # final t within 5 % of t* ...
 SHARE_WITHIN = 0.95  # ... in at least 95 % of seeds
 

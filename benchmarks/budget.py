@@ -7,8 +7,9 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
 = --overhead (default: the config's own) and no step limit, for each seed:
 
 - "reward", "double": the paper's two policies (and shot schedule);
-- six fixed designs, "fixed t=<t>": the reward-driven policy with every point at one t and
-  ``shots_after`` shots (at least 2) from the first point on (with no t to learn, no point needs
+- six fixed designs (five where a log-spaced t and t* take the same grid t), "fixed t=<t>": the
+  reward-driven policy with every point at one t and ``shots_after`` shots (at least 2) from the
+  first point on (with no t to learn, no point needs
   the 30 shots), at five log-spaced t across [t_min, t_max] (``np.geomspace``) and at t*, whose
   name ends in " (t*)" (t*(law), from the simulator's own noise law and the configured reward:
   see ``benchmarks/_tstar.py``). <t> is the nominal t in s to 4 significant digits, trailing
@@ -38,6 +39,9 @@ Every design runs the configuration with ``schedule.budget_s`` = --budget, ``poi
 - "budget warm informative": the same profile with the posterior rule and informative noise points
   of "budget informative" (a profile that leaves t* wider than 5 % is narrowed by the campaign's own
   noise points);
+- "budget warm info_rate": the same profile with ``acquisition.policy: info_rate`` and every
+  seed point at t_min (``schedule.seed_t_scale: shortest``: the profile gives the noise law that
+  seeds spread over t would pay to learn);
 - "gpcam": the peer gpCAM (``benchmarks/_gpcam.py``: how it is set up and why that is fair);
 - "botorch cost-aware", "botorch multi-fidelity": the peer BoTorch, its two documented ways of
   making a measurement's cost part of the decision (``benchmarks/_botorch.py``: how each is set
@@ -116,6 +120,7 @@ PEERS = {
 VALUED, INFORMATIVE = "budget valued", "budget informative"
 RATE_INFORMATIVE = "budget info_rate informative"
 WARM_INFORMATIVE = "budget warm informative"
+WARM_RATE = "budget warm info_rate"
 TARGET_OF_RANGE = 0.02  # the default --target: this fraction of the range of the true f on the x grid
 PROFILE_SEEDS = (1000, 1001, 1002)  # the warm design's profile campaigns: none of the benchmark's seeds
 # What --help lists: a fixed design's name depends on the config (its t range and t*).
@@ -132,6 +137,7 @@ DESIGNS = (
     VALUED,
     WARM,
     WARM_INFORMATIVE,
+    WARM_RATE,
     *PEERS,
 )
 RENAMED = {"info rate": INFO_RATE}  # a JSON written before the names were one spelling
@@ -152,10 +158,13 @@ def is_fixed(name: str) -> bool:
     return name.startswith(FIXED_PREFIX)
 
 
-def fixed_designs(t_min: float, t_max: float, t_star: float) -> dict[str, float]:
+def fixed_designs(t_min: float, t_max: float, t_star: float, on_grid=lambda t: t) -> dict[str, float]:
     """{name: nominal t (s)} of the fixed designs, by t: five log-spaced t across [t_min, t_max]
-    and t* (its name tagged " (t*)")."""
-    ts = [(float(t), False) for t in np.geomspace(t_min, t_max, N_LOG_SPACED)] + [(float(t_star), True)]
+    and t* (its name tagged " (t*)"); a log-spaced t that ``on_grid`` (the t a campaign measures
+    at) puts where t*'s design measures is left out, as the same campaigns under another name."""
+    star_at = on_grid(float(t_star))
+    spaced = [float(t) for t in np.geomspace(t_min, t_max, N_LOG_SPACED) if on_grid(float(t)) != star_at]
+    ts = [(t, False) for t in spaced] + [(float(t_star), True)]
     return {fixed_name(t, star): t for t, star in sorted(ts)}
 
 
@@ -208,8 +217,15 @@ BUDGET_DESIGNS = {
     RATE_INFORMATIVE: (LEARNS_T, {"policy": INFO_RATE}),
     VALUED: ({**BUDGET_MODE, "noise_t": "valued"}, {}),
 }
-# The budget designs that start from a noise profile: name -> schedule overrides.
-WARM_DESIGNS = {WARM: BUDGET_MODE, WARM_INFORMATIVE: LEARNS_T}
+# The designs recommended for the best map of f within a budget, each with its target against the
+# best fixed t in hindsight (a multiple of it, at every checkpoint): cold, and from a noise profile.
+MAPPING = {BUDGET_RATE: _targets.MAP_WITHIN_BEST, WARM_RATE: 1.0}
+# The budget designs that start from a noise profile: name -> (schedule, acquisition overrides).
+WARM_DESIGNS = {
+    WARM: (BUDGET_MODE, {}),
+    WARM_INFORMATIVE: (LEARNS_T, {}),
+    WARM_RATE: ({**BUDGET_MODE, "seed_t_scale": "shortest"}, {"policy": INFO_RATE}),
+}
 
 
 def design_config(base, name: str, fixed: dict[str, float], profile=None):
@@ -217,8 +233,10 @@ def design_config(base, name: str, fixed: dict[str, float], profile=None):
         schedule, acquisition = BUDGET_DESIGNS[name]
         return base.with_overrides(schedule=schedule, acquisition=acquisition)
     if name in WARM_DESIGNS:
+        schedule, acquisition = WARM_DESIGNS[name]
         return base.with_overrides(
-            schedule=WARM_DESIGNS[name],
+            schedule=schedule,
+            acquisition=acquisition,
             noise_model={"profile": profile.model_dump(mode="json"), "profile_check": describes(profile, base)},
         )
     if name in paper_policies():
@@ -493,10 +511,10 @@ def target_lines(records: dict, at, target: float, t_star_name: str, t_star: flo
     each against the fixed designs and the peers where those are present too."""
     present = {n: r for n, r in records.items() if r}
     learners = [n for n in (WARM, COLD) if n in present]
-    if not learners:
-        return []
     fixed_shown, best = fixed_baseline(present, at)
-    lines = []
+    lines = mapping_lines(present, at, best if len(fixed_shown) > 1 else None)
+    if not learners:
+        return lines
     mine = {n: medians(present[n], at) for n in learners}
     if len(fixed_shown) > 1:
         typical = _targets.median_of_designs([medians(present[n], at) for n in fixed_shown])
@@ -537,6 +555,33 @@ def target_lines(records: dict, at, target: float, t_star_name: str, t_star: flo
     lines.append(
         f"- decision latency, the median over seeds of each seed's median (as loaded as the machine was): {latency}"
     )
+    return lines
+
+
+def mapping_lines(present: dict, at, best: list[float] | None) -> list[str]:
+    """The targets of the designs recommended for the best map of f (``MAPPING``): against the
+    peers present and, where ``best`` (the best fixed t in hindsight's medians) is given, against it."""
+    lines = []
+    for name, within in MAPPING.items():
+        if name not in present:
+            continue
+        mine = medians(present[name], at)
+        for peer_name in [n for n in PEERS if n in present]:
+            theirs = medians(present[peer_name], at)
+            lines.append(
+                f"- {name} below {peer_name} at every checkpoint: {_targets.verdict(mine, theirs, at, strict=True)}"
+            )
+        if best is None:
+            continue
+        said = "at or below" if within == 1 else f"within {100 * (within - 1):.0f} % of"
+        lines.append(
+            f"- {name} {said} the best fixed t in hindsight at every checkpoint: "
+            + _targets.verdict(mine, _targets.scaled(best, within), at)
+        )
+        lines.append(
+            f"- {name} at most {_targets.MAP_STRETCH:g} x the best fixed t in hindsight (stretch): "
+            + _targets.verdict(mine, _targets.scaled(best, _targets.MAP_STRETCH), at)
+        )
     return lines
 
 
@@ -775,7 +820,7 @@ def main(argv=None) -> int:
     both = differ(stars)
     score = scorer(base, instrument)
     s = base.space
-    fixed = fixed_designs(s.t_min, s.t_max, t_star)
+    fixed = fixed_designs(s.t_min, s.t_max, t_star, lambda t: grid_t(base, t))
     known = [*paper_policies(), *fixed, INFO_RATE, *BUDGET_DESIGNS, *WARM_DESIGNS, *PEERS]
     names, unknown = resolve(args.designs or known, known)
     if unknown:

@@ -3,7 +3,7 @@
     python benchmarks/budget_figures.py [--results DIR] [--out DIR]
 
 Reads ``budget_<setting>.json`` of each setting (Forrester; Forrester with A0 = 0.5, A1 = 1; the
-PFM scan line; a line across the second scan; the 2-D PFM area) from --results (default
+PFM scan line; a line across the second scan; the 2-D PFM area; hetGP's test function) from --results (default
 benchmarks/results) and writes one figure per question to --out (default docs/images), each with
 one panel per setting and a few curves per panel:
 
@@ -13,13 +13,16 @@ one panel per setting and a few curves per panel:
   (``budget cold``, ``budget info_rate``, ``gpcam``, ``botorch cost-aware``, ``botorch
   multi-fidelity`` and the best fixed t in hindsight);
 - ``budget-variants.png``: which budget-mode variant? (``budget cold``, ``budget info_rate``,
-  ``budget informative``, ``budget warm`` and the best fixed t in hindsight).
+  ``budget informative``, ``budget warm`` and the best fixed t in hindsight);
+- ``budget-mapping.png``: which design maps f best for the time spent? (the designs recommended
+  for it, ``budget info_rate`` and ``budget warm info_rate``, the peers that map best, ``gpcam``
+  and ``botorch multi-fidelity``, and the best fixed t in hindsight).
 
 Each curve is a design's median RMSE over its seeds against the instrument time spent, its
 interquartile range shaded, computed as ``budget.py --figure`` computes its curves (the same
 functions: the last model made within each time, a seed with no model yet counting as the worst
 error, no curve where half the seeds have none). The best fixed t in hindsight is, at each time,
-the lowest median of the six fixed designs (``budget.best_in_hindsight``), drawn dashed with no
+the lowest median of the fixed designs (``budget.best_in_hindsight``), drawn dashed with no
 band: it is a choice made after the fact, not a design. A design a setting did not run is named in
 its panel.
 """
@@ -49,6 +52,7 @@ from budget import (  # noqa: E402
     INFORMATIVE,
     STAR_TAG,
     WARM,
+    WARM_RATE,
     is_fixed,
 )
 
@@ -75,6 +79,7 @@ SETTINGS = (
     Setting("pfm", "PFM scan line", "RMSE of the profile (pm)"),
     Setting("pfm_funakubo0001", "PFM, second scan", "RMSE of the profile (pm)"),
     Setting("pfm2d", "PFM area (2-D)", "RMSE of the map (pm)"),
+    Setting("hetgp", "hetGP's test function", "RMSE of f"),
 )
 
 QUESTIONS = (
@@ -85,6 +90,11 @@ QUESTIONS = (
         (COLD, BUDGET_RATE, GPCAM, BOTORCH_COST_AWARE, BOTORCH_MULTI_FIDELITY, BEST_FIXED),
     ),
     Question("variants", "Which budget-mode variant?", (COLD, BUDGET_RATE, INFORMATIVE, WARM, BEST_FIXED)),
+    Question(
+        "mapping",
+        "Which design maps f best for the time spent?",
+        (BUDGET_RATE, WARM_RATE, GPCAM, BOTORCH_MULTI_FIDELITY, BEST_FIXED),
+    ),
 )
 
 # One look per curve in every figure, so a design reads the same from one question to the next.
@@ -92,6 +102,7 @@ STYLE = {
     COLD: {"color": "tab:blue", "ls": "-"},
     WARM: {"color": "tab:orange", "ls": "-"},
     BUDGET_RATE: {"color": "tab:green", "ls": "-"},
+    WARM_RATE: {"color": "tab:olive", "ls": "-"},
     INFORMATIVE: {"color": "tab:purple", "ls": "-"},
     GPCAM: {"color": "tab:red", "ls": "-"},
     BOTORCH_COST_AWARE: {"color": "tab:brown", "ls": "-"},

@@ -31,8 +31,10 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
     noise model from the start. "uniform" draws each coordinate uniformly. ``seed_t_scale``
     "log_span" replaces the random t by n values evenly spaced on a log scale from t_min to t_max
     inclusive (in random order): the ends of the range are where the two terms of the noise law
-    differ most, so they pin A0 and A1 best. With a noise field (``noise_model.field``) the
-    seeds come in pairs at one position (``paired_positions``)."""
+    differ most, so they pin A0 and A1 best; "shortest" puts every seed at t_min, the cheapest
+    point, for a campaign whose noise profile already gives the law (seeds spread over t would
+    pay for knowledge it has). With a noise field (``noise_model.field``) the seeds come in pairs
+    at one position (``paired_positions``)."""
     s, sched = config.space, config.schedule
     n, d = sched.n_seed, s.dimensions
     rng = numpy_rng(seed, SEED_POINTS)
@@ -47,6 +49,8 @@ def seed_points(config: CampaignConfig, seed: int) -> np.ndarray:
         t = s.t_min * (s.t_max / s.t_min) ** u[:, d]
     elif sched.seed_t_scale == "log_span":
         t = s.t_min * (s.t_max / s.t_min) ** (rng.permutation(n) / max(n - 1, 1))
+    elif sched.seed_t_scale == "shortest":
+        t = np.full(n, s.t_min)
     else:
         t = s.t_min + u[:, d] * (s.t_max - s.t_min)
     if config.acquisition.fixed_t is not None:

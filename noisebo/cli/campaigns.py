@@ -85,6 +85,10 @@ def _run(args) -> int:
             f"-> {path}",
             flush=True,
         )
+        from noisebo.cli.goals import goal_line
+
+        if goal := goal_line(config):
+            print(goal, flush=True)
         say_starting()
         campaign_flows, _ = prefect_module()
         with flow_settings(), abortable(path):

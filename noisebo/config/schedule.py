@@ -75,11 +75,12 @@ class ScheduleConfig(FrozenModel):
     seed_design: Literal["latin_hypercube", "uniform"] = Field(
         "latin_hypercube", description="how the seed points are drawn over x and t"
     )
-    seed_t_scale: Literal["log", "linear", "log_span"] = Field(
+    seed_t_scale: Literal["log", "linear", "log_span", "shortest"] = Field(
         "log",
         description="the scale of the seeds' t: log, "
-        "linear, or log_span (t_min, the geometric middle and "
-        "t_max exactly)",
+        "linear, log_span (t_min, the geometric middle and "
+        "t_max exactly), or shortest (every seed at t_min: for a noise profile that already "
+        "gives the law)",
     )
     n_steps: Count = Field(15, ge=0, description="BO steps after the seed points")
     adaptive_shots: Flag = Field(

@@ -108,8 +108,8 @@ def test_an_unknown_design_is_one_line_naming_the_known_ones(capsys):
     known = (
         "reward, double, fixed t=0.2, fixed t=0.5318, fixed t=1.414, fixed t=2.512 (t*), fixed t=3.761, "
         "fixed t=10, info_rate, budget cold, budget info_rate, budget informative, "
-        "budget info_rate informative, budget valued, budget warm, budget warm informative, gpcam, "
-        "botorch cost-aware, botorch multi-fidelity, fixed"
+        "budget info_rate informative, budget valued, budget warm, budget warm informative, "
+        "budget warm info_rate, gpcam, botorch cost-aware, botorch multi-fidelity, fixed"
     )  # Forrester: t in [0.2, 10] s, t*(law) = 2.512 s
     assert lines[0].split("known: ", 1)[1].startswith(known)
 
@@ -139,8 +139,11 @@ def test_the_five_log_spaced_fixed_times_and_their_names():
         rel=1e-5,
     )
     assert [budget.t_label(t) for t in (0.25, 1.0, 12345.6, 0.00012345)] == ["0.25", "1", "12350", "0.0001234"]
-    # t* on one of the five: still its own design, the name tells them apart
-    assert list(budget.fixed_designs(0.2, 10.0, 10.0))[-2:] == ["fixed t=10", "fixed t=10 (t*)"]
+    # t* on one of the five, or on the same grid t: one design, named for t*
+    assert list(budget.fixed_designs(0.2, 10.0, 10.0))[-2:] == ["fixed t=3.761", "fixed t=10 (t*)"]
+    on_grid = dict.fromkeys([1.414214, 1.348], 1.388)
+    near = budget.fixed_designs(0.2, 10.0, 1.348, lambda t: on_grid.get(round(t, 6), t))
+    assert list(near) == ["fixed t=0.2", "fixed t=0.5318", "fixed t=1.348 (t*)", "fixed t=3.761", "fixed t=10"]
 
 
 def test_fixed_selects_every_fixed_design_at_once():

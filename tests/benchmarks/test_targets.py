@@ -127,3 +127,44 @@ def test_the_report_judges_only_what_was_measured():
 def test_a_latency_not_recorded_is_said_so():
     assert budget._latency([{"seed": 0}, {"seed": 1, "latency_s": float("nan")}]) == "not recorded"
     assert budget._latency([{"seed": 0, "latency_s": 0.3}, {"seed": 1}]) == "0.300 s"
+
+
+def test_the_mapping_designs_are_judged_against_the_peers_and_the_best_fixed_t():
+    """The best fixed t is 1.0, 1.0, 0.5. The cold mapping design is 4 % above it at 100 s (within
+    5 %: met) and 0.9 x it or below nowhere else but 200 s; the warm one at or below it everywhere
+    and at 0.9 x at 100 and 300 s; each is below the peer except the warm one, level at 200 s."""
+    records = {
+        "fixed t=0.1": design([1.0, 1.0, 1.0]),
+        "fixed t=1 (t*)": design([2.0, 2.0, 0.5]),
+        "budget info_rate": design([1.04, 0.9, 0.48]),
+        "budget warm info_rate": design([0.9, 0.95, 0.45]),
+        "botorch multi-fidelity": design([1.5, 0.95, 0.6]),
+    }
+    lines = budget.target_lines(records, AT, target=0.5, t_star_name="t*(law)", t_star=1.0)
+    assert lines == [
+        "- budget info_rate below botorch multi-fidelity at every checkpoint: met",
+        "- budget info_rate within 5 % of the best fixed t in hindsight at every checkpoint: met",
+        "- budget info_rate at most 0.9 x the best fixed t in hindsight (stretch): "
+        "missed at 100 s (1.04 against 0.9, 15.6 % over); 300 s (0.48 against 0.45, 6.7 % over)",
+        "- budget warm info_rate below botorch multi-fidelity at every checkpoint: "
+        "missed at 200 s (0.95 against 0.95, 0.0 % over)",
+        "- budget warm info_rate at or below the best fixed t in hindsight at every checkpoint: met",
+        "- budget warm info_rate at most 0.9 x the best fixed t in hindsight (stretch): "
+        "missed at 200 s (0.95 against 0.9, 5.6 % over)",
+    ]
+
+
+def test_the_warm_mapping_design_is_info_rate_from_the_profile_with_its_seeds_at_t_min():
+    import yaml
+
+    from noisebo.config import CampaignConfig
+    from noisebo.config.profile_format import NoiseProfile
+
+    base = CampaignConfig()
+    shipped = BENCHMARKS / "results" / "budget_forrester_profile" / "profile.yaml"
+    profile = NoiseProfile.model_validate(yaml.safe_load(shipped.read_text()))
+    warm = budget.design_config(base, budget.WARM_RATE, {}, profile)
+    assert warm.acquisition.policy == "info_rate" and warm.schedule.mode == "budget"
+    assert warm.schedule.seed_t_scale == "shortest" and warm.noise_model.profile is not None
+    cold = budget.design_config(base, budget.BUDGET_RATE, {})
+    assert cold.schedule.seed_t_scale == base.schedule.seed_t_scale and cold.noise_model.profile is None

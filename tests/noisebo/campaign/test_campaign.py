@@ -33,6 +33,13 @@ def test_log_span_seeds_put_t_at_both_ends_and_the_geometric_middle():
     assert sorted(np.floor(pts[:, 0] * 3).astype(int)) == [0, 1, 2]
 
 
+def test_shortest_seeds_are_all_at_t_min_and_still_stratified_over_x():
+    cfg = CampaignConfig().with_overrides(schedule={"seed_t_scale": "shortest"})
+    pts = seed_points(cfg, 3)
+    np.testing.assert_array_equal(pts[:, 1], [0.2, 0.2, 0.2])
+    assert sorted(np.floor(pts[:, 0] * 3).astype(int)) == [0, 1, 2]
+
+
 def test_same_seed_same_campaign(short_run):
     again = run_campaign(SHORT, build(SHORT.instrument), seed=11)
     assert again.state == short_run.state
