@@ -3,9 +3,9 @@
     python benchmarks/budget_figures.py [--results DIR] [--out DIR]
 
 Reads ``budget_<setting>.json`` of each setting (Forrester; Forrester with A0 = 0.5, A1 = 1; the
-PFM scan line; a line across the second scan; the 2-D PFM area; hetGP's test function) from --results (default
-benchmarks/results) and writes one figure per question to --out (default docs/images), each with
-one panel per setting and a few curves per panel:
+PFM scan line; a line across the second scan; the 2-D PFM area; hetGP's test function; the second
+scan's diagonal) from --results (default benchmarks/results) and writes one figure per question to
+--out (default docs/images), each with one panel per setting and a few curves per panel:
 
 - ``budget-learning-t.png``: does learning t beat a fixed t? (``budget cold``, ``budget warm``,
   the fixed design at t* and the best fixed t in hindsight);
@@ -80,6 +80,7 @@ SETTINGS = (
     Setting("pfm_funakubo0001", "PFM, second scan", "RMSE of the profile (pm)"),
     Setting("pfm2d", "PFM area (2-D)", "RMSE of the map (pm)"),
     Setting("hetgp", "hetGP's test function", "RMSE of f"),
+    Setting("pfm_funakubo0001_diagonal", "PFM, second scan's diagonal", "RMSE of the profile (pm)"),
 )
 
 QUESTIONS = (

@@ -76,7 +76,7 @@ CASES = [
     (["run", "inverted.yaml"], "t_min (5.0) must be below t_max (1.0)"),
     (
         ["run", "laser.yaml"],
-        "instrument.kind: no installed instrument driver 'laser'; installed: bluesky, branin, forrester, manual, pfm, remote",
+        "instrument.kind: no installed instrument driver 'laser'; installed: bluesky, branin, forrester, hetgp, manual, pfm, remote",
     ),
     (["run", "bad_setting.yaml"], "instrument.settings.a0: Input should be greater than or equal to 0"),
     (["run", "unknown_setting.yaml"], "instrument.settings.colour: Extra inputs are not permitted"),
