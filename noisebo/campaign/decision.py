@@ -17,6 +17,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Sequence
 
 import jax
 
@@ -37,6 +38,7 @@ from noisebo.models.fitting import (
     fit_noise_model,
     warm_step,
 )
+from noisebo.models.pending import Pending, believed, pending_noise_sd
 from noisebo.models.prediction import predict
 from noisebo.state import CampaignState
 from noisebo.precision import float64
@@ -46,7 +48,8 @@ from noisebo.precision import float64
 class StepInputs:
     """What BO step ``step`` (0-based index) decides from: the config and its ``method`` (the
     objects it names, ``Method.of(config)``), the points so far, the campaign's seed (the keys are (seed, step)), the previous step's hyperparameters (None at
-    the first) and the instrument time the budget has left (s; None: no budget)."""
+    the first), the instrument time the budget has left (s; None: no budget) and the points
+    proposed and not yet measured (``noisebo.models.pending``)."""
 
     config: CampaignConfig
     method: Method
@@ -55,6 +58,7 @@ class StepInputs:
     step: int
     previous: dict | None
     budget_left: float | None
+    pending: tuple[Pending, ...] = ()
 
     @cached_property
     def warm(self) -> bool:
@@ -96,7 +100,14 @@ def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision
     stages' own time."""
     started = time.perf_counter()
     decision, _ = decide_on(
-        step.config, step.method, combined(gp, noise), step.points, step.step, step.propose_key, step.budget_left
+        step.config,
+        step.method,
+        combined(gp, noise),
+        step.points,
+        step.step,
+        step.propose_key,
+        step.budget_left,
+        step.pending,
     )
     return replace(decision, latency_s=noise.seconds + gp.seconds + time.perf_counter() - started)
 
@@ -110,11 +121,18 @@ def decide_on(
     step: int,
     key: jax.Array | None = None,
     budget_left: float | None = None,
+    pending: Sequence[Pending] = (),
 ) -> tuple[Decision, CampaignState]:
     """From fitted models: predict, assess convergence and acquire. Returns the decision and
-    ``state`` with this step's predicted optimal t recorded."""
+    ``state`` with this step's predicted optimal t recorded. Points ``pending`` (proposed, not
+    yet measured) condition f's GP at its mean there (``noisebo.models.pending``): the noise
+    model, the optimal t and convergence are the measured points' alone."""
     prediction = predict(config, method.noise_law, fitted, state, method.policy.uses_spread)
     convergence = assess(config.schedule, prediction, state)
+    if pending:
+        noise_sd = pending_noise_sd(config.space, prediction.posterior, pending)
+        fitted = believed(fitted, config.space, pending, noise_sd)
+        prediction = predict(config, method.noise_law, fitted, state, method.policy.uses_spread)
     decision = acquire(config, method, fitted, prediction, convergence, step, key, budget_left)
     return decision, convergence.recorded(state)
 
@@ -127,13 +145,17 @@ def decide(
     step: int,
     previous: dict | None = None,
     budget_left: float | None = None,
+    pending: Sequence[Pending] = (),
 ) -> tuple[Decision, CampaignState]:
     """One whole BO decision: fit both models (key (seed, step); from ``previous``, the previous
     step's ``hyperparameters``, alone on a warm step, see ``warm_step``), then predict, assess
-    convergence and acquire within ``budget_left`` seconds of instrument time (None: no budget).
-    Returns the decision and ``state`` with its predicted optimal t recorded."""
-    inputs = StepInputs(config, Method.of(config), state, seed, step, previous, budget_left)
+    convergence and acquire within ``budget_left`` seconds of instrument time (None: no budget),
+    with the points ``pending`` in flight (see ``decide_on``). Returns the decision and
+    ``state`` with its predicted optimal t recorded."""
+    inputs = StepInputs(config, Method.of(config), state, seed, step, previous, budget_left, tuple(pending))
     wait_for_compilation(config, state)
     noise = noise_stage(inputs)
     gp = gp_stage(inputs, noise)
-    return decide_on(config, inputs.method, combined(gp, noise), state, step, inputs.propose_key, budget_left)
+    return decide_on(
+        config, inputs.method, combined(gp, noise), state, step, inputs.propose_key, budget_left, inputs.pending
+    )
