@@ -177,7 +177,7 @@ def draw(ax, drawn: dict, grid, title: str, ylabel: str, wanted=()) -> None:
             ax.fill_between(grid[shaded], lo[shaded], upper[shaded], color=style.get("color"), alpha=0.15, lw=0)
     missing = [n for n in wanted if n not in drawn]
     if missing:
-        note = "not run here: " + ", ".join(missing)
+        note = "not run here:\n" + "\n".join(missing)  # one per line: a list of two overran a panel
         ax.text(0.97, 0.96, note, transform=ax.transAxes, ha="right", va="top", fontsize=9, color="0.3")
     ax.set_title(title, fontsize=11)
     ax.set(xlabel="instrument time spent (s)", ylabel=ylabel, yscale="log", xlim=(0, grid[-1]))

@@ -17,7 +17,11 @@ def goal_line(config: CampaignConfig) -> str:
     ("" for a plug-in policy that is neither kind)."""
     chosen = policy(config.acquisition.policy)
     if chosen.uses_spread:
-        mode = "" if config.schedule.rule.every_point_teaches_noise else " (schedule.mode: budget spends no shots on noise points)"
+        mode = (
+            ""
+            if config.schedule.rule.every_point_teaches_noise
+            else " (schedule.mode: budget spends no shots on noise points)"
+        )
         return (
             "goal: the best map of f for the instrument time spent: each point removes the most of f's "
             f"uncertainty per second{mode}; {WARM_MAP}; to learn the best sweep time t* instead: {T_DESIGN}"

@@ -65,7 +65,7 @@ def test_a_question_s_panel_draws_its_curves_and_names_a_design_not_run():
     x, y = (np.asarray(v) for v in lines[BEST_FIXED].get_data())
     np.testing.assert_allclose(y[np.isclose(x, 1.0) | np.isclose(x, 4.0) | np.isclose(x, 8.0)], [4.0, 2.0, 1.0])
     assert len(panel.collections) == 2  # bands: budget cold and the t* design, none for the best in hindsight
-    assert [t.get_text() for t in panel.texts] == ["not run here: budget warm"]
+    assert [t.get_text() for t in panel.texts] == ["not run here:\nbudget warm"]
     assert "t* = 2 s; 1/2/3 seeds" in panel.get_title()
     assert [t.get_text() for t in legend.get_legend().get_texts()] == [COLD, bf.AT_T_STAR, BEST_FIXED]
 
