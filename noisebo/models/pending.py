@@ -49,16 +49,13 @@ def pending_noise_sd(space: SpaceConfig, post: Posterior, pending: Sequence[Pend
     """The noise model's single-shot sd (k,) at each pending point's t: the noise curve
     interpolated on the t grid, or for a noise field the curve of the reference point nearest
     its x."""
-    g = space_grids(space)
+    t_grid = space_grids(space).t
     curves = np.asarray(post.noise_mean, dtype=np.float64)
-    out = []
-    for p in pending:
-        curve = curves
-        if curves.ndim == 2:
-            ref = np.asarray(reference_points(space), dtype=np.float64).reshape(curves.shape[0], -1)
-            curve = curves[int(np.argmin(np.sum((ref - np.asarray(p.x)) ** 2, axis=1)))]
-        out.append(float(np.interp(p.t, g.t, curve)))
-    return np.asarray(out)
+    if curves.ndim == 1:
+        return np.asarray([np.interp(p.t, t_grid, curves) for p in pending])
+    ref = np.asarray(reference_points(space), dtype=np.float64).reshape(curves.shape[0], -1)
+    nearest = [int(np.argmin(np.sum((ref - np.asarray(p.x)) ** 2, axis=1))) for p in pending]
+    return np.asarray([np.interp(p.t, t_grid, curves[i]) for p, i in zip(pending, nearest)])
 
 
 def believed(fitted: Fitted, space: SpaceConfig, pending: Sequence[Pending], noise_sd: np.ndarray) -> Fitted:
@@ -78,18 +75,16 @@ def believed(fitted: Fitted, space: SpaceConfig, pending: Sequence[Pending], noi
     mean, _ = inference.combine(means, variances, True)  # the first draw's mean: MAP's where there is one
     shots = np.asarray([p.shots for p in pending], dtype=np.float64)
     var = np.asarray(noise_sd, dtype=np.float64) ** 2 / shots / std.scale**2
-    mask = np.asarray(data.mask)
-    real = int(mask.sum())
+    real = int(np.sum(data.mask))  # ``primary.prepare`` puts the measured rows first, padding after
     rows = real + len(pending)
-    size = max(mask.size, capacity_for(rows))
-    pad = size - rows
-    order = np.argsort(~mask, kind="stable")[:real]  # the measured rows, in their order
-    x_rows = np.concatenate([np.asarray(data.x)[order], xs.reshape((len(pending),) + np.asarray(data.x).shape[1:])])
-    widths = ((0, pad),) + ((0, 0),) * (x_rows.ndim - 1)
+    size = max(int(data.mask.shape[0]), capacity_for(rows))
+    x_rows = np.concatenate([np.asarray(data.x)[:real], xs])
     grown = primary.PrimaryData(
-        x=jnp.asarray(np.pad(x_rows, widths)),
-        y=jnp.asarray(np.pad(np.concatenate([np.asarray(data.y)[order], np.asarray(mean)]), (0, pad))),
-        var=jnp.asarray(np.pad(np.concatenate([np.asarray(data.var)[order], var]), (0, pad), constant_values=1.0)),
+        x=jnp.asarray(np.pad(x_rows, ((0, size - rows),) + ((0, 0),) * (x_rows.ndim - 1))),
+        y=jnp.asarray(np.pad(np.concatenate([np.asarray(data.y)[:real], np.asarray(mean)]), (0, size - rows))),
+        var=jnp.asarray(
+            np.pad(np.concatenate([np.asarray(data.var)[:real], var]), (0, size - rows), constant_values=1.0)
+        ),
         mask=jnp.asarray(np.arange(size) < rows),
     )
     return fitted._replace(primary_data=grown)
