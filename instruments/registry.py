@@ -26,7 +26,14 @@ from pydantic import BaseModel, ValidationError
 from noisebo.instruments.base import Description, Instrument
 from noisebo.instruments.faults import FaultyInstrument
 from noisebo.instruments.guard import TimeoutGuard
-from noisebo.config import CampaignConfig, ConfigError, InstrumentConfig, describe_errors, loose_values
+from noisebo.config import (
+    CampaignConfig,
+    ConfigError,
+    InstrumentConfig,
+    NamedInstrument,
+    describe_errors,
+    loose_values,
+)
 from noisebo.events import DriverInfo
 from noisebo.reduction import register_reduction
 from noisebo.registry import Installed
@@ -108,26 +115,39 @@ def settings_of(config: InstrumentConfig, cls: Driver | None = None) -> BaseMode
 
 
 def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
-    """``config`` with its instrument settings checked by the driver and completed with the
-    driver's defaults; ``ConfigError`` naming the field (or the missing driver) otherwise."""
+    """``config`` with its instrument settings (every named instrument's, with several) checked by
+    the driver and completed with the driver's defaults; ``ConfigError`` naming the field (or
+    the missing driver) otherwise."""
+    if config.instruments is None:
+        return config.model_copy(update={"instrument": _checked(config, config.instrument, source, "instrument")})
+    named = tuple(
+        NamedInstrument(name=i.name, **_checked(config, i.section, source, f"instruments.{k}").model_dump())
+        for k, i in enumerate(config.instruments)
+    )
+    # put in place without validating the whole config again (see _checked)
+    return config.model_copy(update={"instruments": named, "instrument": named[0].section})
+
+
+def _checked(config: CampaignConfig, section: InstrumentConfig, source: str, where: str) -> InstrumentConfig:
+    """One instrument section with its settings as its driver validated them; ``where``: the
+    section's place in the config, for the errors."""
     try:
-        cls = driver_class(config.instrument.kind)
-        settings = settings_of(config.instrument, cls)
+        cls = driver_class(section.kind)
+        settings = settings_of(section, cls)
     except ConfigError as error:
-        raise type(error)(f"{source}: {error}") from None
+        raise type(error)(f"{source}: {str(error).replace('instrument.', where + '.', 1)}") from None
     problem = space_problem(config, cls, settings)
     if problem is not None:
         raise ConfigError(f"{source}: {problem}")
-    faults = config.instrument.faults
+    faults = section.faults
     if faults is not None and faults.corrupt_spectrum > 0 and not _describes(cls).spectra:
-        raise ConfigError(f"{source}: instrument.faults.corrupt_spectrum needs an instrument that returns spectra")
+        raise ConfigError(f"{source}: {where}.faults.corrupt_spectrum needs an instrument that returns spectra")
     problem = profile_problem(config, settings.model_dump(mode="json"))
     if problem is not None:
         raise ConfigError(f"{source}: {problem}")
     # the settings as the driver validated them, put in place without validating the whole config
     # again: that would load the policy and noise law (JAX code) that the caller may not want yet
-    instrument = config.instrument.model_copy(update={"settings": settings.model_dump(mode="json")})
-    return config.model_copy(update={"instrument": instrument})
+    return section.model_copy(update={"settings": settings.model_dump(mode="json")})
 
 
 def profile_problem(config: CampaignConfig, settings: dict) -> str | None:

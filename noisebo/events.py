@@ -5,6 +5,7 @@ A campaign is the fold of its events (``noisebo.campaign.engine.apply``), in the
 
     Started        config, seed, the driver, versions, start time (first, once)
     Decided        one BO step's proposal and model outputs (before the point's shots)
+    PointIssued    a point handed to one of several named instruments (or handed over again)
     ShotTaken      one shot's raw reading
     ShotFailed     a failed attempt at a shot (instrument error, timeout); the shot is tried again
     MoreShots      a point left with too few usable shots wants more
@@ -107,6 +108,19 @@ class Decided:
 
 
 @dataclass(frozen=True)
+class PointIssued:
+    """Point ``point`` is measured by the instrument named ``instrument`` from here on: a seed
+    point or the last decision's, handed out when that instrument asked for work, or a point
+    under way handed over to another instrument (``reason`` says why; empty when first issued).
+    Only a campaign with several named instruments (``instruments:``) issues points; with one
+    instrument the next point is the one under way."""
+
+    point: int
+    instrument: str
+    reason: str = ""
+
+
+@dataclass(frozen=True)
 class Summary:
     """Final models after the last measurement: f mean and variance on the x grid (n_x,), the
     noise sd on the fine t grid (N_FINE,), the final predicted optimal t (s) and the
@@ -144,7 +158,16 @@ class BudgetChanged:
 
 
 Event = Union[
-    Started, ShotTaken, ShotFailed, MoreShots, PointCommitted, Decided, Summarised, StatusChanged, BudgetChanged
+    Started,
+    ShotTaken,
+    ShotFailed,
+    MoreShots,
+    PointCommitted,
+    Decided,
+    PointIssued,
+    Summarised,
+    StatusChanged,
+    BudgetChanged,
 ]
 
 
@@ -163,7 +186,8 @@ Outcome = Union[Reading, ShotError]
 class Request:
     """Measure point ``point`` (BO step ``step``; -1: a seed point) at x (d,), t (s): shots
     ``taken`` .. ``wanted - 1`` are still wanted. ``model_noise``: the noise model's single-shot
-    sd that the point will use (None: its noise is measured from its shots)."""
+    sd that the point will use (None: its noise is measured from its shots). ``instrument``:
+    the name of the instrument measuring it (empty with a single instrument)."""
 
     point: int
     step: int
@@ -172,6 +196,7 @@ class Request:
     wanted: int
     taken: int
     model_noise: float | None
+    instrument: str = ""
 
     @property
     def shots(self) -> range:
@@ -183,12 +208,24 @@ class DecisionDue:
     """Nothing to measure until the engine decides BO step ``step`` (``final``: the summary;
     ``reduce``: first the point whose shots are all in, as a journal cut off between its last
     shot and its commit leaves it). ``budget``: why the instrument-time budget ends the campaign
-    here (then ``final``), empty otherwise."""
+    here (then ``final``), empty otherwise. ``instrument``: with several instruments, the one
+    that asked: the next point (a seed point, or step ``step``'s once decided) goes to it, and a
+    reduction is of its point."""
 
     step: int
     final: bool = False
     reduce: bool = False
     budget: str = ""
+    instrument: str = ""
+
+
+@dataclass(frozen=True)
+class Wait:
+    """Nothing for this instrument until another one commits: the seed points are still being
+    measured, the last steps' points are in flight, or the budget left is held by points in
+    flight. Only a campaign with several instruments waits."""
+
+    reason: str
 
 
 @dataclass(frozen=True)

@@ -111,6 +111,11 @@ def drive(
     aborted with that reason, mid-point if need be (``noisebo resume`` takes the point's remaining
     shots). An instrument with ``committed`` (``instruments.base.Follower``) sees the state at the
     start and after every commit."""
+    if state.config.instruments is not None:
+        raise engine.EngineError(
+            "the campaign names several instruments (`instruments:`): it runs through "
+            "noisebo.campaign.fleet.run_fleet, not one instrument's loop"
+        )
     follow = getattr(instrument, "committed", lambda state: None)
 
     def committed(state: EngineState, events: Sequence[Event]) -> EngineState:

@@ -30,6 +30,7 @@ from noisebo.events import (
     MoreShots,
     Outcome,
     PointCommitted,
+    PointIssued,
     Request,
     ShotError,
     ShotFailed,
@@ -39,7 +40,10 @@ from noisebo.events import (
     StatusChanged,
     Summarised,
     Summary,
+    Wait,
 )
+from noisebo.campaign import flights
+from noisebo.campaign.flights import Flight
 from noisebo.failures import budget_message
 from noisebo.reduction import NoUsableShots, Reading
 from noisebo.state import CampaignState
@@ -66,13 +70,13 @@ class EngineState:
     """A campaign as far as its events go.
 
     ``data``: what the models see (points, t_opt history, convergence); ``points``: committed
-    points with their shots; ``taken``: shots of the point under way; ``wanted``: that point's
-    shot count once raised by ``MoreShots``; ``decisions``: every BO decision; ``budget_base``:
-    (failed, attempts) when the campaign was started or last resumed (the failure budget counts
-    from there). ``budget_s``: the instrument-time budget (s; None: none), the config's until a
-    ``BudgetChanged``; ``spent_s``: instrument time spent, every shot taken and every failed
-    attempt at its t plus ``point_overhead_s`` for every point begun; ``point_begun``: whether
-    the point under way has had a shot or an attempt."""
+    points with their shots, in the order they were committed; ``flights``: the points under
+    way, each with its shots so far (``noisebo.campaign.flights``); ``decisions``: every BO
+    decision; ``budget_base``: (failed, attempts) when the campaign was started or last resumed
+    (the failure budget counts from there). ``budget_s``: the instrument-time budget (s; None:
+    none), the config's until a ``BudgetChanged``; ``spent_s``: instrument time spent, every
+    shot taken and every failed attempt at its t plus ``point_overhead_s`` for every point
+    begun, on all instruments together."""
 
     config: CampaignConfig
     seed: int
@@ -81,9 +85,7 @@ class EngineState:
     created_utc: str
     data: CampaignState = CampaignState()
     points: tuple[PointEntry, ...] = ()
-    taken: tuple[ShotTaken, ...] = ()
-    wanted: int | None = None
-    pending_rejected: int = 0
+    flights: tuple[Flight, ...] = ()
     decisions: tuple[Decision, ...] = ()
     failures: tuple[ShotFailed, ...] = ()
     summary: Summary | None = None
@@ -94,13 +96,17 @@ class EngineState:
     budget_base: tuple[int, int] = (0, 0)
     budget_s: float | None = None
     spent_s: float = 0.0
-    point_begun: bool = False
 
     def failure_counts(self) -> tuple[int, int]:
         """(failed, attempted) shots of the whole campaign: failed attempts plus rejected shots,
         of all attempts."""
-        rejected = self.n_rejected + self.pending_rejected
+        rejected = self.n_rejected + sum(f.rejected for f in self.flights)
         return len(self.failures) + rejected, len(self.failures) + self.n_shots
+
+    @property
+    def taken(self) -> tuple[ShotTaken, ...]:
+        """The shots of the points under way, point by point in shot order."""
+        return tuple(s for f in self.flights for s in f.taken)
 
     @property
     def step_of_points(self) -> tuple[int, ...]:
@@ -123,11 +129,19 @@ def start(started: Started) -> EngineState:
     )
 
 
-def _spend(state: EngineState, t: float) -> EngineState:
-    """``state`` after a shot or an attempt of t seconds at the point under way (its first also
-    pays the point's overhead)."""
-    overhead = 0.0 if state.point_begun else state.config.schedule.point_overhead_s
-    return replace(state, spent_s=state.spent_s + overhead + t, point_begun=True)
+def _spend(state: EngineState, flight: Flight, t: float) -> tuple[float, Flight]:
+    """The instrument time spent after a shot or an attempt of t seconds at ``flight``'s point
+    (its first also pays the point's overhead), and the point's entry marked begun."""
+    overhead = 0.0 if flight.begun else state.config.schedule.point_overhead_s
+    return state.spent_s + overhead + t, replace(flight, begun=True)
+
+
+def _flight_for(state: EngineState, point: int, out_of_order: str) -> Flight:
+    """The entry of point ``point``, which an event says is under way (``out_of_order``: the
+    error's words when it is not)."""
+    if point not in flights.under_way(state):
+        raise EngineError(f"{out_of_order}: the point is not under way")
+    return flights.flight_of(state, point) or Flight(point)
 
 
 def apply(state: EngineState | None, event: Event) -> EngineState:
@@ -138,42 +152,21 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
         return start(event)
     if state is None:
         raise EngineError("the events do not start with the campaign's start")
-    index = len(state.points)
-    if isinstance(event, ShotTaken):
-        if event.point != index or event.shot != len(state.taken):
-            raise EngineError(f"shot {event.shot} of point {event.point} out of order")
-        return replace(_spend(state, event.t), taken=state.taken + (event,), n_shots=state.n_shots + 1)
-    if isinstance(event, ShotFailed):
-        if event.point != index or event.shot != len(state.taken):
-            raise EngineError(f"failure at shot {event.shot} of point {event.point} out of order")
-        return replace(_spend(state, event.t), failures=state.failures + (event,))
-    if isinstance(event, MoreShots):
-        if event.point != index or event.wanted <= len(state.taken):
-            raise EngineError(f"more shots for point {event.point} out of order")
-        return replace(state, wanted=event.wanted, pending_rejected=event.rejected)
-    if isinstance(event, PointCommitted):
-        if event.index != index or len(event.values) != len(state.taken):
-            raise EngineError(f"point {event.index} out of order")
-        rejected = sum(1 for v in event.values if not v.ok)
-        return replace(
-            state,
-            data=state.data.with_point(event.point, rejected),
-            points=state.points + (PointEntry(event, state.taken),),
-            taken=(),
-            wanted=None,
-            pending_rejected=0,
-            n_rejected=state.n_rejected + rejected,
-            point_begun=False,
-        )
+    if isinstance(event, (ShotTaken, ShotFailed, MoreShots, PointCommitted)):
+        return _apply_to_point(state, event)
     if isinstance(event, Decided):
         d = event.decision
-        if d.step != len(state.decisions) or _pending_decision(state) is not None:
+        if d.step != len(state.decisions) or flights.n_issued(state) != flights.n_specified(state):
+            raise EngineError(f"decision for step {d.step} out of order")
+        if state.config.instruments is None and flights.under_way(state):
             raise EngineError(f"decision for step {d.step} out of order")
         t_map = d.t_opt_map if d.t_opt_map.size else None
         data = state.data.with_t_opt(d.t_opt, d.converged, t_map)
         if state.config.noise_model.profile is not None:
             data = data.with_profile(d.profile_in_use, d.step)
         return replace(state, decisions=state.decisions + (d,), data=data)
+    if isinstance(event, PointIssued):
+        return replace(state, flights=flights.with_flight(state, _issued(state, event)))
     if isinstance(event, Summarised):
         return replace(state, summary=event.summary)
     if isinstance(event, StatusChanged):
@@ -182,6 +175,64 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
     if isinstance(event, BudgetChanged):
         return replace(state, budget_s=event.budget_s)
     raise EngineError(f"unknown event {type(event).__name__}")
+
+
+def _apply_to_point(state: EngineState, event: ShotTaken | ShotFailed | MoreShots | PointCommitted) -> EngineState:
+    if isinstance(event, PointCommitted):
+        flight = _flight_for(state, event.index, f"point {event.index} out of order")
+        if len(event.values) != len(flight.taken):
+            raise EngineError(
+                f"point {event.index} out of order: {len(event.values)} values for {len(flight.taken)} shots"
+            )
+        rejected = sum(1 for v in event.values if not v.ok)
+        return replace(
+            state,
+            data=state.data.with_point(event.point, rejected),
+            points=state.points + (PointEntry(event, flight.taken),),
+            flights=flights.without(state, event.index),
+            n_rejected=state.n_rejected + rejected,
+        )
+    if isinstance(event, MoreShots):
+        flight = _flight_for(state, event.point, f"more shots for point {event.point} out of order")
+        if event.wanted <= len(flight.taken):
+            raise EngineError(f"more shots for point {event.point} out of order")
+        flight = replace(flight, wanted=event.wanted, rejected=event.rejected)
+        return replace(state, flights=flights.with_flight(state, flight))
+    what = "shot" if isinstance(event, ShotTaken) else "failure at shot"
+    flight = _flight_for(state, event.point, f"{what} {event.shot} of point {event.point} out of order")
+    if event.shot != len(flight.taken):
+        raise EngineError(f"{what} {event.shot} of point {event.point} out of order")
+    spent, flight = _spend(state, flight, event.t)
+    if isinstance(event, ShotFailed):
+        return replace(
+            state, spent_s=spent, flights=flights.with_flight(state, flight), failures=state.failures + (event,)
+        )
+    flight = replace(flight, taken=flight.taken + (event,))
+    return replace(state, spent_s=spent, flights=flights.with_flight(state, flight), n_shots=state.n_shots + 1)
+
+
+def _issued(state: EngineState, event: PointIssued) -> Flight:
+    """The entry of a point handed to an instrument: a point first issued (the next one known),
+    or one under way handed over (with a reason)."""
+    names = state.config.instrument_names
+    if not names:
+        raise EngineError(f"point {event.point} issued to {event.instrument!r}: this campaign has one instrument")
+    if event.instrument not in names:
+        raise EngineError(
+            f"point {event.point} issued to {event.instrument!r}, not one of the instruments {', '.join(names)}"
+        )
+    busy = [f.point for f in state.flights if f.instrument == event.instrument]
+    if busy:
+        raise EngineError(f"point {event.point} issued to {event.instrument!r}, which measures point {busy[0]}")
+    held = flights.flight_of(state, event.point)
+    if held is not None:
+        if not event.reason:
+            raise EngineError(f"point {event.point} issued twice without a reason")
+        return replace(held, instrument=event.instrument)
+    nxt = flights.n_issued(state)
+    if event.point != nxt or nxt >= flights.n_specified(state):
+        raise EngineError(f"point {event.point} issued out of order (the next point to issue is {nxt})")
+    return Flight(event.point, event.instrument)
 
 
 def apply_all(state: EngineState | None, events: Sequence[Event]) -> EngineState | None:
@@ -199,35 +250,98 @@ def replay(events: Sequence[Event]) -> EngineState:
     return state
 
 
-def _pending_decision(state: EngineState) -> Decision | None:
-    """The decision whose point is not committed yet, if any."""
-    n_bo = len(state.points) - state.config.schedule.n_seed
-    return state.decisions[n_bo] if 0 <= n_bo < len(state.decisions) else None
-
-
-def ask(state: EngineState) -> Request | DecisionDue | Done:
-    """What the campaign needs next: shots of a point, a decision, or nothing (it is done)."""
+def ask(state: EngineState, instrument: str | None = None) -> Request | DecisionDue | Wait | Done:
+    """What the campaign needs next: shots of a point, a decision, or nothing (it is done). With
+    several instruments, what the instrument named ``instrument`` needs: its point's shots, a
+    point of its own (a decision due for it), or to wait for the others (``Wait``)."""
     if state.status is not Status.RUNNING:
         return Done(state.status, state.reason)
-    request = _point_under_way(state)
-    if request is not None:
-        if request.taken >= request.wanted:
-            return DecisionDue(len(state.decisions), reduce=True)
-        cost = (0.0 if state.point_begun else state.config.schedule.point_overhead_s) + request.t * (
-            request.wanted - request.taken
-        )
-        short = _unaffordable(state, cost, f"point {request.point} needs {cost:.4g} s more")
-        return DecisionDue(len(state.decisions), final=True, budget=short) if short else request
-    sched = state.config.schedule
-    if len(state.decisions) < sched.n_steps:
-        from noisebo.acquisition.proposal import cheapest_point_s
+    if state.config.instruments is not None:
+        return _ask_fleet(state, instrument)
+    if instrument:
+        raise EngineError(f"no instrument named {instrument!r}: this campaign has one instrument")
+    points = flights.under_way(state)
+    if points:
+        return _measure_or_reduce(state, _request(state, points[0]), 0.0, waiting=False)
+    return _next_point(state, "", 0.0, waiting=False)
 
-        cheapest = cheapest_point_s(state.config)
-        short = _unaffordable(state, cheapest, f"the cheapest point costs {cheapest:.4g} s")
-        return (
-            DecisionDue(len(state.decisions), final=True, budget=short) if short else DecisionDue(len(state.decisions))
-        )
-    return DecisionDue(sched.n_steps, final=True)
+
+def _ask_fleet(state: EngineState, instrument: str | None) -> Request | DecisionDue | Wait | Done:
+    names = state.config.instrument_names
+    if instrument is None:  # a reader, not an instrument: the first point under way, or the end
+        if state.flights:
+            return _request(state, state.flights[0].point)
+        idle = _next_point(state, "", 0.0, waiting=False) if len(state.points) >= state.config.schedule.n_seed else None
+        return idle if isinstance(idle, DecisionDue) and idle.final else Wait("no point is under way")
+    if instrument not in names:
+        raise EngineError(f"no instrument named {instrument!r} in this campaign (its instruments: {', '.join(names)})")
+    own = next((f for f in state.flights if f.instrument == instrument), None)
+    if own is not None:
+        earlier = [f for f in state.flights if f.point < own.point]
+        held = sum(_held_s(state, f) for f in earlier)
+        return _measure_or_reduce(state, _request(state, own.point), held, waiting=bool(earlier))
+    held = sum(_held_s(state, f) for f in state.flights)
+    waiting = bool(state.flights)
+    nxt = flights.n_issued(state)
+    if nxt < flights.n_specified(state):  # a seed point, or a decision's point not handed out yet
+        request = _request(state, nxt)
+        cost = state.config.schedule.point_overhead_s + request.t * request.wanted
+        short = _unaffordable(state, cost + held, f"point {nxt} costs {cost:.4g} s")
+        return _budget_due(state, short, held, waiting) or DecisionDue(len(state.decisions), instrument=instrument)
+    if len(state.points) < state.config.schedule.n_seed:
+        return Wait("the seed points are being measured")
+    answer = _next_point(state, instrument, held, waiting)
+    if isinstance(answer, DecisionDue) and answer.final and waiting:
+        return Wait("the last points are being measured")
+    return answer
+
+
+def _next_point(state: EngineState, instrument: str, held: float, waiting: bool) -> DecisionDue | Wait:
+    """The next BO step, or the end: the steps are done or the budget cannot pay for another
+    point beside the ``held`` seconds that points in flight will spend."""
+    sched = state.config.schedule
+    if len(state.decisions) >= sched.n_steps:
+        return DecisionDue(sched.n_steps, final=True, instrument=instrument)
+    from noisebo.acquisition.proposal import cheapest_point_s
+
+    cheapest = cheapest_point_s(state.config)
+    short = _unaffordable(state, cheapest + held, f"the cheapest point costs {cheapest:.4g} s")
+    return _budget_due(state, short, held, waiting) or DecisionDue(len(state.decisions), instrument=instrument)
+
+
+def _budget_due(state: EngineState, short: str, held: float, waiting: bool) -> DecisionDue | Wait | None:
+    """The end of a budget that cannot pay (``short`` says why), or, ``waiting`` on points in
+    flight (they hold ``held`` seconds of it), a wait for them; None when it pays."""
+    if not short:
+        return None
+    if waiting:
+        return Wait(f"{short}, with {held:.4g} s held by points in flight")
+    return DecisionDue(len(state.decisions), final=True, budget=short)
+
+
+def _measure_or_reduce(
+    state: EngineState, request: Request, held: float, waiting: bool
+) -> Request | DecisionDue | Wait:
+    """The point's shots, or its reduction once they are all in, or the end when the budget left
+    beside ``held`` seconds of earlier points in flight cannot pay for its shots (a wait while
+    there are such points: they end first)."""
+    if request.taken >= request.wanted:
+        return DecisionDue(len(state.decisions), reduce=True, instrument=request.instrument)
+    cost = _held_s(state, _flight(state, request.point))
+    short = _unaffordable(state, cost + held, f"point {request.point} needs {cost:.4g} s more")
+    return _budget_due(state, short, held, waiting) or request
+
+
+def _flight(state: EngineState, point: int) -> Flight:
+    return flights.flight_of(state, point) or Flight(point)
+
+
+def _held_s(state: EngineState, flight: Flight) -> float:
+    """The instrument time (s) the point under way will still spend: its remaining wanted shots
+    at its t, and its overhead when it has not begun."""
+    request = _request(state, flight.point)
+    overhead = 0.0 if flight.begun else state.config.schedule.point_overhead_s
+    return overhead + request.t * max(request.wanted - request.taken, 0)
 
 
 BUDGET_SLACK_S = 1e-9  # sums of sweep times round
@@ -247,20 +361,19 @@ def _unaffordable(state: EngineState, cost: float, what: str) -> str:
     return f"budget spent: {state.spent_s:.4g} s of {state.budget_s:.4g} s; {what}"
 
 
-def _point_under_way(state: EngineState) -> Request | None:
-    """The point being measured (a seed point, or the one the last decision proposed), if any."""
+def _request(state: EngineState, point: int) -> Request:
+    """The request for point ``point`` (a seed point, or a decision's) with its shots so far."""
     sched = state.config.schedule
-    index = len(state.points)
-    if index < sched.n_seed:
-        *x, t = (float(v) for v in seed_points(state.config, state.seed)[index])
-        return Request(index, -1, tuple(x), t, state.wanted or sched.seed_shots, len(state.taken), None)
-    decision = _pending_decision(state)
-    if decision is None:
-        return None
+    flight = _flight(state, point)
+    if point < sched.n_seed:
+        *x, t = (float(v) for v in seed_points(state.config, state.seed)[point])
+        return Request(
+            point, -1, tuple(x), t, flight.wanted or sched.seed_shots, len(flight.taken), None, flight.instrument
+        )
+    decision = state.decisions[point - sched.n_seed]
     noise = None if decision.measure_noise else decision.noise_at_t
-    return Request(
-        index, decision.step, decision.x, decision.t, state.wanted or decision.shots, len(state.taken), noise
-    )
+    wanted = flight.wanted or decision.shots
+    return Request(point, decision.step, decision.x, decision.t, wanted, len(flight.taken), noise, flight.instrument)
 
 
 def tell(
@@ -274,7 +387,7 @@ def tell(
     ``EngineError`` for a stale request or a shot not wanted now."""
     events: list[Event] = []
     for shot in sorted(outcomes):
-        current = ask(state)
+        current = ask(state, request.instrument or None)
         if not isinstance(current, Request) or current.point != request.point:
             raise EngineError(
                 f"point {request.point} is not being measured now"
@@ -285,8 +398,8 @@ def tell(
         for event in _record(state, current, shot, outcomes[shot], reduce):
             state = apply(state, event)
             events.append(event)
-    if decide_next and isinstance(ask(state), DecisionDue):
-        for event in advance(state):
+    if decide_next and isinstance(ask(state, request.instrument or None), DecisionDue):
+        for event in advance(state, instrument=request.instrument or None):
             state = apply(state, event)
             events.append(event)
     return Transition(state, tuple(events))
@@ -301,14 +414,15 @@ def _record(state: EngineState, request: Request, shot: int, outcome: Outcome, r
         raise EngineError(f"a shot's outcome is a Reading or a ShotError, not {type(outcome).__name__}")
     taken = ShotTaken(request.point, shot, x, t, outcome)
     state = apply(state, taken)
-    return [taken] if len(state.taken) < request.wanted or not reduce else [taken, *_reduce(state, request)]
+    in_ = len(_flight(state, request.point).taken)
+    return [taken] if in_ < request.wanted or not reduce else [taken, *_reduce(state, request)]
 
 
 def _reduce(state: EngineState, request: Request, make=make_point) -> list[Event]:
     """The events of a point whose wanted shots are all in: committed from its shots, or more
     shots wanted when too few are usable; then the failure budget."""
     cfg = state.config
-    readings = [s.reading for s in state.taken]
+    readings = [s.reading for s in _flight(state, request.point).taken]
     try:
         point, values = make(request.x, request.t, readings, request.model_noise, cfg.reduction, cfg.schedule.clip_sd)
     except NoUsableShots as short:
@@ -327,38 +441,55 @@ def _budget(state: EngineState) -> list[Event]:
     return [] if message is None else [StatusChanged(Status.FAILED, message)]
 
 
-def advance(state: EngineState, stages: Stages | None = None) -> tuple[Event, ...]:
+def advance(state: EngineState, stages: Stages | None = None, instrument: str | None = None) -> tuple[Event, ...]:
     """The events of the decision that is due: the next BO step (fits, prediction, acquisition;
     key (seed, step)), or after the last step the final summary and the status "completed", or
     the reduction of a point whose shots are all in. Nothing when no decision is due. Each
-    stage runs through ``stages`` (``noisebo.campaign.stages``; default plain calls)."""
+    stage runs through ``stages`` (``noisebo.campaign.stages``; default plain calls). With
+    several instruments, the decision due for ``instrument``: its point's reduction, or the
+    next point issued to it (decided first when it is a BO step's)."""
     from noisebo.campaign.stages import PLAIN, run_decision
 
-    due = ask(state)
+    due = ask(state, instrument)
     if not isinstance(due, DecisionDue):
         return ()
     stages = PLAIN if stages is None else stages
     if due.reduce:
-        under_way = _point_under_way(state)
-        assert under_way is not None  # a reduction is due only for a point being measured
-        return tuple(_reduce(state, under_way, stages.reduce))
+        point = next(f.point for f in state.flights if f.instrument == due.instrument) if due.instrument else None
+        return tuple(
+            _reduce(state, _request(state, point if point is not None else flights.under_way(state)[0]), stages.reduce)
+        )
     if due.final:
         status = StatusChanged(Status.BUDGET_SPENT if due.budget else Status.COMPLETED, due.budget)
         if len(state.points) < MIN_POINTS_TO_SUMMARISE:  # a budget that paid for less has no models to give
             return (status,)
         return Summarised(stages.summarise(state.config, state.data, state.seed)), status
-    return (Decided(run_decision(step_inputs(state), stages)),)
+    if not due.instrument:
+        return (Decided(run_decision(step_inputs(state), stages)),)
+    nxt = flights.n_issued(state)
+    if nxt < flights.n_specified(state):
+        return (PointIssued(nxt, due.instrument),)
+    return Decided(run_decision(step_inputs(state), stages)), PointIssued(nxt, due.instrument)
 
 
 def step_inputs(state: EngineState) -> StepInputs:
     """What the due BO step decides from: the points, the keys' seed and step, the previous
-    step's hyperparameters and the budget left."""
+    step's hyperparameters, the budget left beside what the points in flight will spend, and
+    those points (pending: each with the shots it wants)."""
     from noisebo.acquisition.method import Method
     from noisebo.campaign.decision import StepInputs
 
+    from noisebo.models.pending import Pending
+
     previous = state.decisions[-1].hyperparameters if state.decisions else None
     method = Method.of(state.config)
-    return StepInputs(state.config, method, state.data, state.seed, len(state.decisions), previous, budget_left(state))
+    requests = [_request(state, f.point) for f in state.flights]
+    pending = tuple(Pending(r.x, r.t, r.wanted) for r in requests)
+    left = budget_left(state)
+    if left is not None:
+        left -= sum(_held_s(state, f) for f in state.flights)
+    step = len(state.decisions)
+    return StepInputs(state.config, method, state.data, state.seed, step, previous, left, pending)
 
 
 def stop(state: EngineState, status: Status, reason: str) -> tuple[Event, ...]:

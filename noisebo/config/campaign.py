@@ -8,6 +8,7 @@ from pydantic import (
     Field,
     ValidationInfo,
     field_validator,
+    model_serializer,
     model_validator,
 )
 from noisebo import registry
@@ -24,6 +25,7 @@ from noisebo.config.sections import (
     AcquisitionConfig,
     DEFAULT_POINTS_PER_AXIS,
     InstrumentConfig,
+    NamedInstrument,
     ONE_AXIS_KEYS,
     ReductionConfig,
     RewardConfig,
@@ -45,6 +47,11 @@ class CampaignConfig(FrozenModel):
     instrument: InstrumentConfig = Field(
         InstrumentConfig(kind="forrester"), description="the instrument driver and its settings"
     )
+    instruments: tuple[NamedInstrument, ...] | None = Field(
+        None,
+        description="several instruments measuring one campaign, each with a unique `name` "
+        "(instead of `instrument`); null: the one `instrument`",
+    )
     reduction: ReductionConfig = Field(ReductionConfig(), description="how a raw spectrum becomes a shot's value")
     space: SpaceConfig = Field(SpaceConfig(), description="where (x) and how long (t) the campaign may measure")
     reward: RewardConfig = Field(RewardConfig(), description="the cost/noise reward R(t) = -alpha t^2 - beta Noise")
@@ -57,6 +64,41 @@ class CampaignConfig(FrozenModel):
     schedule: ScheduleConfig = Field(
         ScheduleConfig(), description="seeds, steps, shots, convergence, failure and instrument-time budgets"
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _one_or_several_instruments(cls, data: Any) -> Any:
+        if not isinstance(data, dict) or data.get("instruments") is None:
+            return data
+        if "instrument" in data:
+            raise ValueError("give `instrument` (one) or `instruments` (several, each with a name), not both")
+        named = data["instruments"]
+        if isinstance(named, (list, tuple)) and named and isinstance(named[0], dict):
+            data = {**data, "instrument": {k: v for k, v in named[0].items() if k != "name"}}
+        return data
+
+    @field_validator("instruments")
+    @classmethod
+    def _names_unique(cls, named: tuple[NamedInstrument, ...] | None) -> tuple[NamedInstrument, ...] | None:
+        if named is not None and not named:
+            raise ValueError("an empty list; name at least one instrument, or give `instrument` instead")
+        names = [i.name for i in named or ()]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"two instruments named {twice[0]!r}; each instrument needs its own name")
+        return named
+
+    @model_serializer(mode="wrap")
+    def _one_instrument_key(self, handler: Any) -> Any:
+        data = handler(self)
+        if isinstance(data, dict):  # the key the config was given with: a dump reads back as it was written
+            data.pop("instruments" if self.instruments is None else "instrument", None)
+        return data
+
+    @property
+    def instrument_names(self) -> tuple[str, ...]:
+        """The names of the campaign's instruments; () for the one unnamed ``instrument``."""
+        return tuple(i.name for i in self.instruments or ())
 
     @model_validator(mode="after")
     def _fixed_t_in_range(self) -> CampaignConfig:

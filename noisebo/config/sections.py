@@ -112,6 +112,28 @@ class InstrumentConfig(FrozenModel):
         return self
 
 
+INSTRUMENT_NAME = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
+
+
+class NamedInstrument(InstrumentConfig):
+    """One of several instruments of a campaign (``instruments:``): an instrument section with a
+    ``name`` that its shots, its flow run and its bridge client are known by."""
+
+    name: str = Field(
+        pattern=INSTRUMENT_NAME,
+        max_length=64,
+        description="the instrument's name in the campaign: letters, digits, '_', '.', '-'; unique",
+    )
+
+    def __hash__(self) -> int:
+        return hash((self.name, super().__hash__()))
+
+    @property
+    def section(self) -> InstrumentConfig:
+        """The instrument section without its name."""
+        return InstrumentConfig(**{k: getattr(self, k) for k in InstrumentConfig.model_fields})
+
+
 class SHOReductionConfig(FrozenModel):
     """The "sho" reduction of a resonance sweep: the fitted signed amplitude of Eq. 8, Q within
     ``q_bounds``. ``nominal_resonance_hz`` and ``nominal_q`` (the instrument's tune), when both

@@ -1,8 +1,8 @@
 """Typed campaign events (``noisebo.events``) to journal records and back, losslessly.
 
 Record types, one per event: campaign (Started), decision (Decided), shot (ShotTaken), failure
-(ShotFailed), more_shots (MoreShots), point (PointCommitted), summary (Summarised), status
-(StatusChanged) and budget (BudgetChanged). Scalars travel in the record's JSON fields, arrays (spectra, model outputs) as
+(ShotFailed), more_shots (MoreShots), point (PointCommitted), issued (PointIssued), summary
+(Summarised), status (StatusChanged) and budget (BudgetChanged). Scalars travel in the record's JSON fields, arrays (spectra, model outputs) as
 raw arrays.
 """
 
@@ -22,6 +22,7 @@ from noisebo.events import (
     Event,
     MoreShots,
     PointCommitted,
+    PointIssued,
     ShotFailed,
     ShotTaken,
     Started,
@@ -80,6 +81,8 @@ def encode(event: Event) -> Record:
         )
     if isinstance(event, MoreShots):
         return Record("more_shots", asdict(event))
+    if isinstance(event, PointIssued):
+        return Record("issued", asdict(event))
     if isinstance(event, PointCommitted):
         return _encode_point(event)
     if isinstance(event, Decided):
@@ -163,6 +166,8 @@ def decode(record: Record) -> Event:
             return ShotFailed(f["point"], f["shot"], tuple(f["x"]), f["t"], f["kind"], f["reason"])
         if record.type == "more_shots":
             return MoreShots(**f)
+        if record.type == "issued":
+            return PointIssued(int(f["point"]), str(f["instrument"]), str(f["reason"]))
         if record.type == "point":
             return _decode_point(f, a)
         if record.type == "decision":
