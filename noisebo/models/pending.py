@@ -23,6 +23,7 @@ squared units of f.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import NamedTuple, Sequence
 
 import jax.numpy as jnp
@@ -34,6 +35,7 @@ from noisebo.models.fitting import Fitted
 from noisebo.models.grids import reference_points, scaled, space_grids
 from noisebo.models.inputs import capacity_for
 from noisebo.models.prediction import Posterior
+from noisebo.programs import persisted
 from noisebo.state import as_position
 
 
@@ -58,6 +60,17 @@ def pending_noise_sd(space: SpaceConfig, post: Posterior, pending: Sequence[Pend
     return np.asarray([np.interp(p.t, t_grid, curves[i]) for p, i in zip(pending, nearest)])
 
 
+@lru_cache(maxsize=None)
+def _believed_mean():
+    """f's posterior mean (k,) at scaled positions, the first draw's (MAP's where there is one),
+    as one traced program."""
+
+    def mean(params, data, xs):
+        return inference.combine(*primary.predict_samples(params, data, xs), True)[0]
+
+    return persisted("pending/believed_mean", mean)
+
+
 def believed(fitted: Fitted, space: SpaceConfig, pending: Sequence[Pending], noise_sd: np.ndarray) -> Fitted:
     """``fitted`` with each pending point added to f's training data at the posterior mean there
     (the MAP draw's, or the first draw's) with variance ``noise_sd``^2 / shots: the data the
@@ -71,8 +84,7 @@ def believed(fitted: Fitted, space: SpaceConfig, pending: Sequence[Pending], noi
     data, std = fitted.primary_data, fitted.standardisation
     x = np.asarray([as_position(p.x) for p in pending], dtype=np.float64)
     xs = scaled(space, x[:, 0] if space.dimensions == 1 else x)
-    means, variances = primary.predict_samples(fitted.primary.params, data, jnp.asarray(xs))
-    mean, _ = inference.combine(means, variances, True)  # the first draw's mean: MAP's where there is one
+    mean = _believed_mean()(fitted.primary.params, data, jnp.asarray(xs))
     shots = np.asarray([p.shots for p in pending], dtype=np.float64)
     var = np.asarray(noise_sd, dtype=np.float64) ** 2 / shots / std.scale**2
     real = int(np.sum(data.mask))  # ``primary.prepare`` puts the measured rows first, padding after
