@@ -25,8 +25,10 @@ against the simulator's truth, 200 positions for one axis) at the wall time it w
 instrument time spent by then, and at the end its final model; an independent design at 24
 evenly spaced wall times up to its end. The report gives per design the median wall time to first
 reach --target (default 2 % of the range of the true f over the x grid) and its ratio to k=1's
-("-" where a seed never reaches it), and the median RMSE once the whole budget is spent (equal
-total instrument time) and its ratio to k=1's. The clock is simulated, so every figure but the
+("-" where a seed never reaches it), the median RMSE once the whole budget is spent (equal
+total instrument time) and its ratio to k=1's, the median points and the median share of the wall
+time an instrument is at work ("busy": measuring, moving or deciding; the rest it waits for the
+decider, the seed points or the last points). The clock is simulated, so every figure but the
 decisions' own latency is independent of the machine and its load.
 
     python benchmarks/fleet.py --latency [--n 100,1000] [--repeats 7] [--config PATH]
@@ -147,9 +149,16 @@ def median_or_dash(values, fmt="{:.4g}") -> str:
     return fmt.format(float(np.median(np.nan_to_num(v, nan=np.inf))))
 
 
+def busy(recs: list) -> str:
+    """The median share of the wall time an instrument is at work (measuring or deciding), "-"
+    for independent campaigns (each instrument is always at work)."""
+    shares = [sum(r["busy_s"].values()) / len(r["busy_s"]) / r["wall_s"][-1] for r in recs if "busy_s" in r]
+    return f"{np.median(shares):.0%}" if shares else "-"
+
+
 def report(records: dict, target: float) -> list[str]:
     lines = [
-        f"{'design':<18} {'seeds':>5} {'wall to target (s)':>19} {'x k=1':>7} {'final RMSE':>11} {'x k=1':>7} {'points':>7}"
+        f"{'design':<18} {'seeds':>5} {'wall to target (s)':>19} {'x k=1':>7} {'final RMSE':>11} {'x k=1':>7} {'points':>7} {'busy':>5}"
     ]
     ref = records.get("fleet k=1", [])
     ref_by_seed = {r["seed"]: r for r in ref}
@@ -163,7 +172,7 @@ def report(records: dict, target: float) -> list[str]:
         lines.append(
             f"{name:<18} {len(recs):>5} {median_or_dash(times):>19} {median_or_dash(ratio_t, '{:.3f}'):>7} "
             f"{median_or_dash(finals):>11} {median_or_dash(ratio_e, '{:.3f}'):>7} "
-            f"{int(np.median([r['points'] for r in recs])):>7}"
+            f"{int(np.median([r['points'] for r in recs])):>7} {busy(recs):>5}"
         )
     return lines
 
