@@ -27,7 +27,7 @@ from noisebo.instruments import build, registry
 from noisebo.campaign.driver import drive, now_utc
 from noisebo.campaign.engine import KEEP_BUDGET, EngineState, advance, ask, new_campaign, stop
 from noisebo.campaign.progress import progress_lines
-from noisebo.config import CampaignConfig, ConfigError, load_config
+from noisebo.config import CampaignConfig, load_config
 from noisebo.events import (
     Event,
     Status,
@@ -46,13 +46,7 @@ def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> C
     """A validated config (its instrument settings checked by the driver) from a YAML path or a
     config object, with an optional policy override."""
     cfg = config if isinstance(config, CampaignConfig) else load_config(config)
-    source = str(config) if not isinstance(config, CampaignConfig) else "config"
-    if cfg.instruments is not None:
-        raise ConfigError(
-            f"{source}: instruments: a campaign of several instruments runs through "
-            "noisebo.campaign.fleet.run_fleet (simulated instruments); this command measures with one `instrument`"
-        )
-    cfg = registry.validated(cfg, source)
+    cfg = registry.validated(cfg, str(config) if not isinstance(config, CampaignConfig) else "config")
     return cfg.with_overrides(acquisition={"policy": policy}) if policy else cfg
 
 

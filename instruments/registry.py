@@ -114,10 +114,19 @@ def settings_of(config: InstrumentConfig, cls: Driver | None = None) -> BaseMode
     return settings
 
 
-def validated(config: CampaignConfig, source: str = "config") -> CampaignConfig:
+ONE_INSTRUMENT = (
+    "instruments: a campaign of several instruments runs through noisebo.campaign.fleet.run_fleet "
+    "(simulated instruments); this command measures with one `instrument`"
+)
+
+
+def validated(config: CampaignConfig, source: str = "config", several: bool = False) -> CampaignConfig:
     """``config`` with its instrument settings (every named instrument's, with several) checked by
     the driver and completed with the driver's defaults; ``ConfigError`` naming the field (or
-    the missing driver) otherwise."""
+    the missing driver) otherwise, and for a config of several instruments unless ``several``
+    (a caller that runs them)."""
+    if config.instruments is not None and not several:
+        raise ConfigError(f"{source}: {ONE_INSTRUMENT}")
     if config.instruments is None:
         return config.model_copy(update={"instrument": _checked(config, config.instrument, source, "instrument")})
     named = tuple(

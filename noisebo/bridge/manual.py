@@ -15,7 +15,7 @@ import numpy as np
 from noisebo.bridge.wire import ReadingShape, WireError, campaign_id, request_json, spectrum_of
 from noisebo.campaign import engine
 from noisebo.campaign.engine import EngineState
-from noisebo.events import DecisionDue, Done, Event, Request, ShotError
+from noisebo.events import DecisionDue, Done, Event, Request, ShotError, Wait
 from noisebo.reduction import Reading
 from noisebo.storage.recorder import Recorder
 
@@ -43,6 +43,7 @@ def next_step(recorder: Recorder, say: Say, commit: Callable | None = None) -> R
     commit = commit or recorder.commit
     while True:
         step = engine.ask(recorder.state)
+        assert not isinstance(step, Wait)  # one instrument: nothing waits
         if not isinstance(step, DecisionDue):
             return step
         if not step.reduce:

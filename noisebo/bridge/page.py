@@ -22,7 +22,7 @@ import numpy as np
 
 from noisebo.bridge.wire import campaign_id
 from noisebo.campaign import engine
-from noisebo.events import DecisionDue, Done, Request, Status
+from noisebo.events import DecisionDue, Done, Request, Status, Wait
 from noisebo.storage.steps import shown as shown_step
 
 if TYPE_CHECKING:
@@ -68,6 +68,7 @@ def render(status: dict, state: EngineState | None) -> str:
     else:
         pc = status.get("instrument_pc") or NOT_CONNECTED
         step = engine.ask(state)
+        assert not isinstance(step, Wait)  # one instrument: nothing waits
         ended = isinstance(step, Done)
         body = [
             f"<h1>noisebo campaign {html.escape(campaign_id(state))}</h1>",

@@ -24,7 +24,7 @@ def _start(args) -> int:
     from noisebo.instruments.registry import driver_info
     from noisebo.campaign import engine
     from noisebo.campaign.driver import now_utc
-    from noisebo.events import DecisionDue
+    from noisebo.events import DecisionDue, Wait
     from noisebo.storage.recorder import Recorder, campaign_path, package_versions
 
     config = validated_config(args.config)
@@ -36,7 +36,7 @@ def _start(args) -> int:
     started = engine.new_campaign(config, args.seed, driver_info(config.instrument), package_versions(), now_utc())
     with Recorder.create(path, started) as recorder:
         first = engine.ask(recorder.state)
-    assert not isinstance(first, DecisionDue)  # a new campaign asks for its first seed point
+    assert not isinstance(first, (DecisionDue, Wait))  # a new campaign asks for its first seed point
     print(f"created {path}")
     for line in manual.describe(recorder.state, first, path):
         print(line)

@@ -269,11 +269,14 @@ def test_a_finished_fleet_campaign_is_done_for_every_instrument():
 
 def test_one_instruments_loop_and_the_campaign_flow_refuse_a_fleet_config():
     from noisebo.flows.campaign import resolve_config
+    from noisebo.instruments.registry import validated
 
     with pytest.raises(EngineError, match="names several instruments"):
         driver.run_campaign(FLEET, SIM, 0)
     with pytest.raises(ConfigError, match="config: instruments: a campaign of several instruments runs through"):
         resolve_config(FLEET, None)
+    with pytest.raises(ConfigError, match="this command measures with one `instrument`"):
+        validated(FLEET)
 
 
 def test_each_named_instruments_settings_are_checked_by_its_driver():
@@ -282,8 +285,8 @@ def test_each_named_instruments_settings_are_checked_by_its_driver():
     bad = fleet_config().model_dump(mode="json")
     bad["instruments"][2]["settings"] = {"a1": -1.0}
     with pytest.raises(ConfigError, match=r"instruments\.2\.settings\.a1: Input should be greater than or equal to 0"):
-        validated(parse_config(bad))
-    good = validated(FLEET)
+        validated(parse_config(bad), several=True)
+    good = validated(FLEET, several=True)
     assert good.instruments[1].settings["a1"] == 2.0 and good.instrument.settings == good.instruments[0].settings
 
 
