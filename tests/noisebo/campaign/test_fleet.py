@@ -299,3 +299,22 @@ def test_a_fleet_of_one_is_the_one_instrument_campaign():
     one = driver.run_campaign(single, SIM, 4).final
     assert fleet.final.data == one.data and len(fleet.decided_at) == len(one.decisions) == 4
     assert fleet.decided_at == tuple(sorted(fleet.decided_at))
+
+
+def test_a_budget_shared_by_the_fleet_is_never_overspent_and_ends_once_the_points_in_flight_are_in(monkeypatch):
+    config = fleet_config(budget_s=40.0, n_steps=1000, point_overhead_s=0.5)
+    seen = []
+    original = engine.ask
+
+    def ask(state, name=None):
+        answer = original(state, name)
+        seen.append(answer)
+        return answer
+
+    monkeypatch.setattr(engine, "ask", ask)  # to see every answer the fleet gets
+    run = run_fleet(config, {n: SIM for n in NAMES}, 4)
+    final = run.final
+    assert final.status is Status.BUDGET_SPENT and not final.flights
+    cost = sum(s.t for p in final.points for s in p.shots) + 0.5 * len(final.points)
+    assert final.spent_s == pytest.approx(cost) and final.spent_s <= 40.0 + 1e-9
+    assert any(isinstance(a, Wait) and "held by points in flight" in a.reason for a in seen)
