@@ -87,7 +87,7 @@ def run_fleet(
     info = DriverInfo("fleet", "", {"instruments": list(names)})
     state = engine.start(engine.new_campaign(config, seed, info, {}, now_utc()))
     clock = _Clock(names, timing)
-    turns = [_Turn(0.0, clock.order(name), name) for name in names]
+    turns = [clock.turn(name, 0.0) for name in names]  # in the config's order at time 0
     heapq.heapify(turns)
     commits: list[Commit] = []
     decided_at: list[float] = []
@@ -131,7 +131,7 @@ def _decide(state, due: DecisionDue, turn: _Turn, turns: list[_Turn], clock: _Cl
     (the instrument waits for it)."""
     deciding = not (due.reduce or due.final) and flights.n_issued(state) == flights.n_specified(state)
     if deciding and clock.decider_free > turn.time:
-        heapq.heappush(turns, clock.later(turn.name, clock.decider_free))
+        heapq.heappush(turns, clock.turn(turn.name, clock.decider_free))
         return state
     state = commit(state, engine.advance(state, instrument=turn.name), turn)
     heapq.heappush(turns, clock.decided(turn.name, turn.time) if deciding else clock.turn(turn.name, turn.time))
@@ -143,24 +143,17 @@ class _Clock:
     each instrument's busy seconds."""
 
     def __init__(self, names: Sequence[str], timing: FleetTiming) -> None:
-        self._order = {name: k for k, name in enumerate(names)}
         self._timing = timing
-        self._seq = len(names)
+        self._seq = 0
         self.decider_free = 0.0
         self.wall_s = 0.0
         self.busy = {name: 0.0 for name in names}
-
-    def order(self, name: str) -> int:
-        return self._order[name]
 
     def _next(self, name: str, time: float, shot=None) -> _Turn:
         self._seq += 1  # turns at one time go in the order they were scheduled
         return _Turn(time, self._seq, name, shot)
 
     def turn(self, name: str, time: float) -> _Turn:
-        return self._next(name, time)
-
-    def later(self, name: str, time: float) -> _Turn:
         return self._next(name, time)
 
     def shot(self, turn: _Turn, request: Request, begun: bool, point_overhead_s: float, outcome: Outcome) -> _Turn:

@@ -21,18 +21,22 @@ import fleet_figure  # noqa: E402
 SMALL = ["--budget", "80", "--k", "1,2", "--seeds", "1", "--target", "3.0"]
 
 
-@pytest.fixture(scope="module")
-def measured(tmp_path_factory) -> tuple[Path, str]:
-    path = tmp_path_factory.mktemp("fleet") / "fleet.json"
-    out = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "fleet.py"), *SMALL, "--json", str(path)],
+def run_benchmark(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(BENCHMARKS / "fleet.py"), *SMALL, *args],
         cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=600,
-        check=True,
-    ).stdout
-    return path, out
+    )
+
+
+@pytest.fixture(scope="module")
+def measured(tmp_path_factory) -> tuple[Path, str]:
+    path = tmp_path_factory.mktemp("fleet") / "fleet.json"
+    done = run_benchmark("--json", str(path))
+    assert done.returncode == 0, done.stderr[-2000:]
+    return path, done.stdout
 
 
 def test_a_small_run_measures_each_design_and_reports_it(measured):
@@ -51,22 +55,9 @@ def test_a_small_run_measures_each_design_and_reports_it(measured):
 
 def test_a_resumed_run_measures_nothing_again_and_other_settings_are_refused(measured):
     path, _ = measured
-    again = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "fleet.py"), *SMALL, "--json", str(path)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=True,
-    ).stdout
-    assert "seed 0" not in again
-    other = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "fleet.py"), *SMALL, "--decision-s", "2", "--json", str(path)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    again = run_benchmark("--json", str(path))
+    assert again.returncode == 0 and "seed 0" not in again.stdout
+    other = run_benchmark("--decision-s", "2", "--json", str(path))
     assert other.returncode == 2 and other.stderr.strip().endswith(
         "was measured with other settings; give another --json"
     )
