@@ -60,19 +60,22 @@ class Started:
 
 @dataclass(frozen=True)
 class ShotTaken:
-    """Shot ``shot`` of point ``point`` at (x, t): x a coordinate vector (d,), t in s."""
+    """Shot ``shot`` of point ``point`` at (x, t): x a coordinate vector (d,), t in s, taken by
+    the instrument named ``instrument`` (empty with a single instrument)."""
 
     point: int
     shot: int
     x: tuple[float, ...]
     t: float
     reading: Reading
+    instrument: str = ""
 
 
 @dataclass(frozen=True)
 class ShotFailed:
     """A failed attempt at shot ``shot`` of point ``point``; ``kind`` is "timeout" or
-    "instrument error"."""
+    "instrument error"; ``instrument`` the named instrument that failed (empty with a single
+    instrument)."""
 
     point: int
     shot: int
@@ -80,6 +83,7 @@ class ShotFailed:
     t: float
     kind: str
     reason: str
+    instrument: str = ""
 
 
 @dataclass(frozen=True)

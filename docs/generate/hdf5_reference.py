@@ -136,6 +136,14 @@ def grid_stub():
     return SimpleNamespace(config=CampaignConfig())
 
 
+def _instrument_words(layout, table: str) -> str:
+    return f"{layout.INSTRUMENT_TEXT[table]} (a campaign of several named instruments only)"
+
+
+def _instrument_row(layout, table: str) -> tuple:
+    return (code("instrument"), "text", "text", _instrument_words(layout, table))
+
+
 def page() -> str:
     """The generated tables of the HDF5 layout page."""
     from noisebo.storage import layout
@@ -159,12 +167,17 @@ def page() -> str:
             f"{', '.join(map(str, layout.READABLE_VERSIONS))} are read; checksums from version {layout.CHECKSUMMED_FROM}.\n",
             "### Root attributes\n",
             root_table(layout),
-            f"### `/points`\n\nOne row per point, (n_points,); {X_SHAPE}.\n",
-            column_table(layout, layout.POINT_COLUMNS, [(code("step"), "int32", *layout.POINT_STEP)]),
+            f"### `/points`\n\nOne row per point, (n_points,), in the order the points were committed; {X_SHAPE}.\n",
+            column_table(
+                layout,
+                layout.POINT_COLUMNS,
+                [(code("step"), "int32", *layout.POINT_STEP), (code("index"), "int32", *layout.POINT_INDEX)]
+                + [_instrument_row(layout, "points")],
+            ),
             f"### `/steps`\n\nOne row per BO step, (n_steps,); {X_SHAPE}.\n",
             column_table(layout, layout.STEP_COLUMNS, hyper + step_arrays),
             f"### `/shots`\n\nOne row per shot, (n_shots,); {X_SHAPE}.\n",
-            typed_table(layout.SHOT_COLUMNS, layout.SHOT_TEXT),
+            typed_table(layout.SHOT_COLUMNS, layout.SHOT_TEXT | {"instrument": _instrument_words(layout, "shots")}),
             "### `/shots/fit`\n\nResonance sweeps only: each sweep's SHO fit, (n_shots,).\n",
             table(
                 ["column", "dtype", "units", "description"],
@@ -173,7 +186,9 @@ def page() -> str:
             ),
             f"### `/failures`\n\nOne row per failed attempt, (n_failed,); {X_SHAPE}. {layout.FAILURES_DESCRIPTION[:1].upper()}"
             f"{layout.FAILURES_DESCRIPTION[1:]}.\n",
-            typed_table(layout.FAILURE_COLUMNS, layout.FAILURE_TEXT),
+            typed_table(
+                layout.FAILURE_COLUMNS, layout.FAILURE_TEXT | {"instrument": _instrument_words(layout, "failures")}
+            ),
             f"### `/spectra`\n\n`/spectra/point_NNNN` (shots, rows, samples), float32: {layout.SPECTRA_DESCRIPTION} "
             f"({layout.SPECTRA_ROWS}).\n",
             "### `/grid`\n\nThe candidate grids: `x` (n_x,) for one axis; for d > 1 axes the m reference points, (m, d) "

@@ -59,10 +59,12 @@ class EngineError(ValueError):
 
 @dataclass(frozen=True)
 class PointEntry:
-    """A committed point with its shots, in shot order."""
+    """A committed point with its shots, in shot order, and the named instrument that finished
+    it (empty with a single instrument; each shot names the one that took it)."""
 
     committed: PointCommitted
     shots: tuple[ShotTaken, ...]
+    instrument: str = ""
 
 
 @dataclass(frozen=True)
@@ -188,7 +190,7 @@ def _apply_to_point(state: EngineState, event: ShotTaken | ShotFailed | MoreShot
         return replace(
             state,
             data=state.data.with_point(event.point, rejected),
-            points=state.points + (PointEntry(event, flight.taken),),
+            points=state.points + (PointEntry(event, flight.taken, flight.instrument),),
             flights=flights.without(state, event.index),
             n_rejected=state.n_rejected + rejected,
         )
@@ -202,6 +204,10 @@ def _apply_to_point(state: EngineState, event: ShotTaken | ShotFailed | MoreShot
     flight = _flight_for(state, event.point, f"{what} {event.shot} of point {event.point} out of order")
     if event.shot != len(flight.taken):
         raise EngineError(f"{what} {event.shot} of point {event.point} out of order")
+    if event.instrument != flight.instrument:
+        by = f"by {event.instrument!r}" if event.instrument else "by no named instrument"
+        held = f"measured by {flight.instrument!r}" if flight.instrument else "not issued to a named instrument"
+        raise EngineError(f"{what} {event.shot} of point {event.point} {by}: the point is {held}")
     spent, flight = _spend(state, flight, event.t)
     if isinstance(event, ShotFailed):
         return replace(
@@ -408,11 +414,12 @@ def tell(
 def _record(state: EngineState, request: Request, shot: int, outcome: Outcome, reduce: bool = True) -> list[Event]:
     x, t = request.x, request.t
     if isinstance(outcome, ShotError):
-        events: list[Event] = [ShotFailed(request.point, shot, x, t, outcome.kind, outcome.reason)]
+        failed = ShotFailed(request.point, shot, x, t, outcome.kind, outcome.reason, request.instrument)
+        events: list[Event] = [failed]
         return events + _budget(apply(state, events[0]))
     if not isinstance(outcome, Reading):
         raise EngineError(f"a shot's outcome is a Reading or a ShotError, not {type(outcome).__name__}")
-    taken = ShotTaken(request.point, shot, x, t, outcome)
+    taken = ShotTaken(request.point, shot, x, t, outcome, request.instrument)
     state = apply(state, taken)
     in_ = len(_flight(state, request.point).taken)
     return [taken] if in_ < request.wanted or not reduce else [taken, *_reduce(state, request)]

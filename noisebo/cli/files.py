@@ -67,11 +67,12 @@ def inspect_summary(path: Path) -> dict:
     points, summary = record.points, record.summary
     t_opt = {int(s): float(v) for s, v in zip(record.steps.step, record.steps.t_opt, strict=True)}
     rows = []
-    for i in range(len(points)):
+    several = any(points.instrument) or any(record.shots.instrument)
+    for i in range(len(points)):  # in the order committed
         step = int(points.step[i])  # 0: a seed point; BO steps from 1 (storage.steps)
         rows.append(
             {
-                "point": i,
+                "point": int(points.index[i]),
                 "step": step,
                 "x": list(as_position(points.x[i])) if np.ndim(points.x[i]) else float(points.x[i]),
                 "t": float(points.t[i]),
@@ -81,6 +82,7 @@ def inspect_summary(path: Path) -> dict:
                 "noise_measured": bool(points.noise_measured[i]),
                 "t_opt": t_opt.get(step),
             }
+            | ({"instrument": points.instrument[i]} if several else {})
         )
     field = None
     if summary is not None and summary.t_opt_map.size:
@@ -164,13 +166,21 @@ def _inspect(args) -> int:
             f"{field['t_opt_median']:.4g} s; single-shot noise there from {field['noise_at_t_opt_min']:.3g} to "
             f"{field['noise_at_t_opt_max']:.3g}"
         )
-    print(f"  {'step':>5} {'x':>{x_width}} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}")
+    names = [row["instrument"] for row in summary["points"] if "instrument" in row]
+    width = max(map(len, names), default=0)
+    fleet = f" {'point':>5} {'instrument':<{max(width, 10)}}" if names else ""
+    if names:
+        print("  points in the order they were committed, each with the instrument that measured it")
+    print(
+        f" {fleet} {'step':>5} {'x':>{x_width}} {'t (s)':>8} {'shots':>5} {'value':>10} {'noise':>8} {'t_opt (s)':>9}"
+    )
     for row in summary["points"]:
         step = "seed" if row["step"] == 0 else str(row["step"])
         t_opt = "" if row["t_opt"] is None else f"{row['t_opt']:.4f}"
+        who = f" {row['point']:>5} {row['instrument']:<{max(width, 10)}}" if names else ""
         print(
-            f"  {step:>5} {format_position(row['x']):>{x_width}} {row['t']:>8.4g} {row['n_shots']:>5} {row['value']:>10.4g} "
-            f"{row['noise']:>8.3g}{'' if row['noise_measured'] else '*'} {t_opt:>9}"
+            f" {who} {step:>5} {format_position(row['x']):>{x_width}} {row['t']:>8.4g} {row['n_shots']:>5} "
+            f"{row['value']:>10.4g} {row['noise']:>8.3g}{'' if row['noise_measured'] else '*'} {t_opt:>9}"
         )
     print("  * noise from the noise model")
     return 0

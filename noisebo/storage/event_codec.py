@@ -66,19 +66,12 @@ def encode(event: Event) -> Record:
         fields_ = {"point": event.point, "shot": event.shot, "x": list(event.x), "t": event.t, "value": value}
         if r.reduction is not None:
             fields_["reduction"] = r.reduction
+        if event.instrument:
+            fields_["instrument"] = event.instrument
         return Record("shot", fields_, {} if r.spectrum is None else {"spectrum": np.asarray(r.spectrum)})
     if isinstance(event, ShotFailed):
-        return Record(
-            "failure",
-            {
-                "point": event.point,
-                "shot": event.shot,
-                "x": list(event.x),
-                "t": event.t,
-                "kind": event.kind,
-                "reason": event.reason,
-            },
-        )
+        failed = {k: v for k, v in asdict(event).items() if k != "instrument" or v}
+        return Record("failure", failed | {"x": list(event.x)})
     if isinstance(event, MoreShots):
         return Record("more_shots", asdict(event))
     if isinstance(event, PointIssued):
@@ -161,9 +154,10 @@ def decode(record: Record) -> Event:
             )
         if record.type == "shot":
             reading = Reading(f["value"], a.get("spectrum"), f.get("reduction"))
-            return ShotTaken(f["point"], f["shot"], tuple(f["x"]), f["t"], reading)
+            return ShotTaken(f["point"], f["shot"], tuple(f["x"]), f["t"], reading, str(f.get("instrument", "")))
         if record.type == "failure":
-            return ShotFailed(f["point"], f["shot"], tuple(f["x"]), f["t"], f["kind"], f["reason"])
+            instrument = str(f.get("instrument", ""))
+            return ShotFailed(f["point"], f["shot"], tuple(f["x"]), f["t"], f["kind"], f["reason"], instrument)
         if record.type == "more_shots":
             return MoreShots(**f)
         if record.type == "issued":

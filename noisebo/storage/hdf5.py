@@ -40,7 +40,9 @@ from noisebo.storage.layout import (
     FIT_NOTE,
     FIT_UNITS,
     LIBVER,
+    INSTRUMENT_TEXT,
     POINT_COLUMNS,
+    POINT_INDEX,
     POINT_STEP,
     READABLE_VERSIONS,
     SCHEMA,
@@ -55,6 +57,7 @@ from noisebo.storage.layout import (
     fill_grid,
     fill_summary,
     root_attrs,
+    several,
     spectra_of,
     state_tables,
     temporary_path,
@@ -81,6 +84,8 @@ def _fill(f: h5py.File, state: EngineState) -> None:
     for name, (units, description) in POINT_COLUMNS.items():
         put_dataset(points, name, tables["points"][name], units, description)
     put_dataset(points, "step", tables["points"]["step"], *POINT_STEP)
+    put_dataset(points, "index", tables["points"]["index"], *POINT_INDEX)
+    _fill_instrument(state, points, tables["points"]["instrument"])
 
     steps = f.create_group("steps")
     for name, (units, description) in STEP_COLUMNS.items():
@@ -103,6 +108,13 @@ def _fill_failures(f: h5py.File, state: EngineState) -> None:
         put_dataset(group, name, rows[name], units, description)
     for name, description in FAILURE_TEXT.items():
         put_text(group, name, rows[name], description)
+    _fill_instrument(state, group, rows["instrument"])
+
+
+def _fill_instrument(state: EngineState, table: h5py.Group, values: list[str]) -> None:
+    """A table's "instrument" text column, in a campaign of several instruments."""
+    if several(state):
+        put_text(table, "instrument", values, INSTRUMENT_TEXT[table.name.lstrip("/")])
 
 
 def _fill_shots(f: h5py.File, state: EngineState, columns: dict) -> None:
@@ -110,6 +122,7 @@ def _fill_shots(f: h5py.File, state: EngineState, columns: dict) -> None:
     for name, _, units, description in SHOT_COLUMNS:
         put_dataset(shots, name, columns[name], units, description)
     put_text(shots, "reason", columns["reason"], SHOT_TEXT["reason"])
+    _fill_instrument(state, shots, columns["instrument"])
     if np.any(np.isfinite(columns["fit"]["amplitude"])):
         fit = shots.create_group("fit")
         for name, (units, description) in FIT_UNITS.items():

@@ -25,10 +25,11 @@ if TYPE_CHECKING:
 
 
 SCHEMA = "noisebo.campaign"
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 # version 1: no driver record (its config is migrated when parsed); 1 and 2: no checksums;
-# 1-3: steps 0-based (seed points -1), converted when read (storage.steps.from_schema)
-READABLE_VERSIONS = (1, 2, 3, 4)
+# 1-3: steps 0-based (seed points -1), converted when read (storage.steps.from_schema);
+# 1-4: no /points/index (row k is point k) and no instrument columns
+READABLE_VERSIONS = (1, 2, 3, 4, 5)
 CHECKSUMMED_FROM = 3
 LIBVER = ("v110", "v114")
 STEP_COLUMNS = {
@@ -71,6 +72,18 @@ POINT_COLUMNS = {
     "noise_measured": ("bool", "True: noise = shot_std; False: noise-model prediction"),
 }
 POINT_STEP = ("1", "BO step that proposed it, counted from 1 (0: a seed point)")
+POINT_INDEX = (
+    "1",
+    "the point's index, the order it was handed out in (shots/point and failures/point refer to it); "
+    "rows are in the order points were committed, which with several instruments need not be index order",
+)
+# A campaign of several named instruments (config ``instruments:``) has an "instrument" text column
+# in /points, /shots and /failures; a campaign of one has none.
+INSTRUMENT_TEXT = {
+    "points": "the named instrument that finished the point",
+    "shots": "the named instrument that took the shot",
+    "failures": "the named instrument whose attempt failed",
+}
 # Root attributes that change with every committed point; a running file keeps them in /committed.
 MUTABLE_ATTRS = ("converged_step", "n_points", "n_steps", "n_shots", "n_failed_attempts")
 
@@ -152,17 +165,24 @@ def array_dtype(name: str) -> np.dtype:
     return np.dtype(np.float32 if name == "acq_map" else np.float64)
 
 
-def point_rows(entries: Sequence[PointEntry], dimensions: int) -> dict[str, np.ndarray]:
-    """/points columns (POINT_COLUMNS and "step") of these committed points, (len(entries),)
-    each; x (len(entries), d) for d > 1 axes."""
+def several(state: EngineState) -> bool:
+    """Whether the campaign has several named instruments (its tables then have instrument columns)."""
+    return state.config.instruments is not None
+
+
+def point_rows(entries: Sequence[PointEntry], dimensions: int) -> dict:
+    """/points columns (POINT_COLUMNS, "step" and "index") of these committed points,
+    (len(entries),) each; x (len(entries), d) for d > 1 axes; "instrument" a list of str."""
     points = [e.committed.point for e in entries]
-    rows = {
+    rows: dict[str, np.ndarray | list[str]] = {
         name: np.asarray([getattr(p, name) for p in points], dtype=column_dtype(name, units))
         for name, (units, _) in POINT_COLUMNS.items()
         if name != "x"
     }
     rows["x"] = positions([p.x for p in points], dimensions)
     rows["step"] = np.asarray([numbering.shown(e.committed.step) for e in entries], dtype=np.int32)
+    rows["index"] = np.asarray([e.committed.index for e in entries], dtype=np.int32)
+    rows["instrument"] = [e.instrument for e in entries]
     return rows
 
 
@@ -327,7 +347,7 @@ def shot_rows(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = (), di
     columns: SHOT_COLUMNS (n,) (x (n, d) for d > 1 axes), "reason" and "note" (lists of str) and
     "fit" {FIT_UNITS name: (n,)}."""
     cols: dict[str, list] = {name: [] for name, *_ in SHOT_COLUMNS}
-    cols |= {"reason": [], "note": []} | {name: [] for name in FIT_UNITS}
+    cols |= {"reason": [], "note": [], "instrument": []} | {name: [] for name in FIT_UNITS}
     for entry in entries:
         for shot, value in zip(entry.shots, entry.committed.values):
             _add_shot(cols, shot, value)
@@ -337,7 +357,7 @@ def shot_rows(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = (), di
         name: np.asarray(cols[name], dtype=dtype) for name, dtype, _, _ in SHOT_COLUMNS if name != "x"
     }
     out["x"] = positions(cols["x"], dimensions)
-    out["reason"], out["note"] = cols["reason"], cols["note"]
+    out["reason"], out["note"], out["instrument"] = cols["reason"], cols["note"], cols["instrument"]
     out["fit"] = {name: np.asarray(cols[name], dtype=np.float64) for name in FIT_UNITS}
     return out
 
@@ -352,18 +372,21 @@ def _add_shot(cols: dict, shot, value) -> None:
     cols["committed"].append(value is not None)
     cols["ok"].append(value is not None and value.ok)
     cols["reason"].append(value.reason if value is not None else "")
+    cols["instrument"].append(shot.instrument)
     fit = value.fit if value is not None else None
     cols["note"].append(fit.reason if fit is not None else "")
     for name in FIT_UNITS:
         cols[name].append(getattr(fit, name) if fit is not None else np.nan)
 
 
-def spectra_of(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = (), first: int = 0) -> dict[int, tuple]:
+def spectra_of(entries: Sequence[PointEntry], taken: Sequence[ShotTaken] = ()) -> dict[int, tuple]:
     """{point index: its shots} for the points whose shots carry raw spectra: the committed
-    ``entries`` (numbered from ``first``), then the point under way (``taken``)."""
-    spectra = {first + i: e.shots for i, e in enumerate(entries) if e.shots and e.shots[0].reading.spectrum is not None}
-    if taken and taken[0].reading.spectrum is not None:
-        spectra[first + len(entries)] = tuple(taken)
+    ``entries`` in their order, then the points under way (``taken``: their shots, point by
+    point) in point order."""
+    spectra = {e.committed.index: e.shots for e in entries if e.shots and e.shots[0].reading.spectrum is not None}
+    for shot in taken:
+        if shot.reading.spectrum is not None:
+            spectra[shot.point] = spectra.get(shot.point, ()) + (shot,)
     return spectra
 
 
@@ -386,7 +409,7 @@ def failure_rows(rows: Sequence[ShotFailed], dimensions: int) -> dict:
         if name != "x"
     }
     out["x"] = positions([r.x for r in rows], dimensions)
-    return out | {name: [getattr(r, name) for r in rows] for name in FAILURE_TEXT}
+    return out | {name: [getattr(r, name) for r in rows] for name in (*FAILURE_TEXT, "instrument")}
 
 
 def temporary_path(path: Path) -> Path:

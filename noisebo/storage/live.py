@@ -55,7 +55,9 @@ from noisebo.storage.layout import (
     FIT_UNITS,
     LIBVER,
     MUTABLE_ATTRS,
+    INSTRUMENT_TEXT,
     POINT_COLUMNS,
+    POINT_INDEX,
     POINT_STEP,
     SHOT_COLUMNS,
     SHOT_TEXT,
@@ -71,6 +73,7 @@ from noisebo.storage.layout import (
     hyperparameter_names,
     point_rows,
     root_attrs,
+    several,
     shot_rows,
     spectra_of,
     step_rows,
@@ -220,6 +223,7 @@ class LiveFile:
         self._names = tuple(hyperparameter_names(state.decisions))
         self._shapes = array_shapes(state)
         self._dimensions = state.config.space.dimensions
+        self._several = several(state)  # the tables have instrument columns
         # rows of committed things written: points, steps, failures, shots and spectra of committed points
         self._rows = dict.fromkeys(("points", "steps", "failures", "shots", "spectra"), 0)
         self._columns: dict[str, _Column] = {}  # by path: "points/x"
@@ -298,6 +302,8 @@ class LiveFile:
         points = self._f.create_group("points")
         for name, (units, description) in (POINT_COLUMNS | {"step": POINT_STEP}).items():
             self._add(_column(points, name, column_dtype(name, units), units, description, self._tail(name)))
+        self._add(_column(points, "index", np.int32, *POINT_INDEX))
+        self._layout_instrument(points)
         steps = self._f.create_group("steps")
         for name, (units, description) in STEP_COLUMNS.items():
             self._add(_column(steps, name, column_dtype(name, units), units, description, self._tail(name)))
@@ -315,6 +321,7 @@ class LiveFile:
         for name, dtype, units, description in SHOT_COLUMNS:
             self._add(_column(shots, name, dtype, units, description, self._tail(name)))
         self._texts["shots/reason"] = _Blobs.text(shots, "reason", SHOT_TEXT["reason"])
+        self._layout_instrument(shots)
         fit = shots.create_group("fit")
         for name, (units, description) in FIT_UNITS.items():
             self._add(_column(fit, name, np.float64, units, description))
@@ -325,6 +332,13 @@ class LiveFile:
             self._add(_column(failures, name, dtype, units, description, self._tail(name)))
         for name, description in FAILURE_TEXT.items():
             self._texts[f"failures/{name}"] = _Blobs.text(failures, name, description)
+        self._layout_instrument(failures)
+
+    def _layout_instrument(self, table: h5py.Group) -> None:
+        """A table's "instrument" text column, in a campaign of several instruments."""
+        if self._several:
+            name = table.name.lstrip("/")
+            self._texts[f"{name}/instrument"] = _Blobs.text(table, "instrument", INSTRUMENT_TEXT[name])
 
     def _layout_spectra(self) -> None:
         spectra = self._f.create_group("spectra")
@@ -346,7 +360,9 @@ class LiveFile:
         last, to be written again), a flush, then the counters that make them count, a flush."""
         rows, f = self._rows, self._f
         new_points = state.points[rows["points"] :]
-        self._write_table("points", rows["points"], point_rows(new_points, self._dimensions))
+        points = point_rows(new_points, self._dimensions)
+        self._write_table("points", rows["points"], points)
+        self._write_instrument("points", rows["points"], points["instrument"])
         crash()
         steps = step_rows(state.decisions[rows["steps"] :], self._names, self._shapes, self._dimensions)
         self._write_table("steps", rows["steps"], steps)
@@ -357,7 +373,7 @@ class LiveFile:
         shots = shot_rows(new_points, state.taken, self._dimensions)
         self._write_shots(shots)
         crash()
-        spectra = self._write_spectra(new_points, state.taken, len(state.points) - len(new_points))
+        spectra = self._write_spectra(new_points, state.taken)
         f.flush()
         crash()  # the rows are in the file, the counters do not count them yet
         counts = {
@@ -371,7 +387,8 @@ class LiveFile:
         }
         self._columns["committed"].write(0, [counts[k] for k in COUNTERS])
         f.flush()
-        committed_spectra = sum(len(v) for k, v in spectra.items() if k < len(state.points))
+        committed = {e.committed.index for e in new_points}
+        committed_spectra = sum(len(v) for k, v in spectra.items() if k in committed)
         rows.update(
             points=len(state.points),
             steps=len(state.decisions),
@@ -399,6 +416,11 @@ class LiveFile:
         self._write_table("failures", start, columns)
         for name in FAILURE_TEXT:
             self._texts[f"failures/{name}"].write(start, [s.encode() for s in columns[name]])
+        self._write_instrument("failures", start, columns["instrument"])
+
+    def _write_instrument(self, table: str, start: int, names: list[str]) -> None:
+        if self._several:
+            self._texts[f"{table}/instrument"].write(start, [name.encode() for name in names])
 
     def _write_shots(self, shots: dict) -> None:
         """Shot rows from the first shot of the new points on: theirs, then the point under way's
@@ -408,13 +430,13 @@ class LiveFile:
         self._write_table("shots/fit", start, shots["fit"])
         self._texts["shots/reason"].write(start, [s.encode() for s in shots["reason"]])
         self._texts["shots/fit/note"].write(start, [s.encode() for s in shots["note"]])
+        self._write_instrument("shots", start, shots["instrument"])
 
-    def _write_spectra(self, entries, taken, first: int) -> dict:
-        """The raw arrays of the new points' shots and the point under way's, one row per shot."""
-        spectra = spectra_of(entries, taken, first)
-        arrays = [
-            (point, np.ascontiguousarray(s.reading.spectrum)) for point, shots in sorted(spectra.items()) for s in shots
-        ]
+    def _write_spectra(self, entries, taken) -> dict:
+        """The raw arrays of the new points' shots, then those of the points under way (written
+        again at the next append), one row per shot, each point's rows together."""
+        spectra = spectra_of(entries, taken)
+        arrays = [(point, np.ascontiguousarray(s.reading.spectrum)) for point, shots in spectra.items() for s in shots]
         for _, a in arrays:
             if a.ndim > MAX_DIMS:
                 raise CampaignFileError(

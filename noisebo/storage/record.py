@@ -32,10 +32,12 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Points:
-    """The measured points, one row each: x (n,) for one axis or (n, d); t (n,) s; value,
-    shot_std (NaN below 2 shots) and noise (the single-shot sd the GP used) (n,) f units; n_shots
-    (n,); noise_measured (n,): True when noise is the shots' sd; step (n,): 0 a seed point, BO
-    steps from 1."""
+    """The measured points, one row each in the order they were committed: x (n,) for one axis
+    or (n, d); t (n,) s; value, shot_std (NaN below 2 shots) and noise (the single-shot sd the
+    GP used) (n,) f units; n_shots (n,); noise_measured (n,): True when noise is the shots' sd;
+    step (n,): 0 a seed point, BO steps from 1; index (n,): the point's index, which ``Shots.point``
+    refers to (the row number, unless several instruments committed points out of order);
+    instrument: the named instrument that finished each (empty names with one instrument)."""
 
     x: np.ndarray
     t: np.ndarray
@@ -45,6 +47,8 @@ class Points:
     noise: np.ndarray
     noise_measured: np.ndarray
     step: np.ndarray
+    index: np.ndarray
+    instrument: tuple[str, ...]
 
     def __len__(self) -> int:
         return len(self.t)
@@ -81,27 +85,31 @@ class Steps:
 
 @dataclass(frozen=True)
 class Shots:
-    """Every shot (s,): its point and index in it, t (s), value (f units; NaN when rejected) and
-    whether it was usable; ``fits``: a sweep's SHO fit columns (``storage.layout.FIT_UNITS``,
-    (s,) each; empty for scalar readings)."""
+    """Every shot (s,): its point and index in it, t (s), value (f units; NaN when rejected),
+    whether it was usable and the named instrument that took it (empty names with one
+    instrument); ``fits``: a sweep's SHO fit columns (``storage.layout.FIT_UNITS``, (s,) each;
+    empty for scalar readings)."""
 
     point: np.ndarray
     shot: np.ndarray
     t: np.ndarray
     value: np.ndarray
     ok: np.ndarray
+    instrument: tuple[str, ...] = ()
     fits: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class Failures:
-    """Every failed attempt at a shot (a,): its point, shot, t (s), kind and reason (text)."""
+    """Every failed attempt at a shot (a,): its point, shot, t (s), kind and reason (text), and
+    the named instrument whose attempt it was (empty names with one instrument)."""
 
     point: np.ndarray
     shot: np.ndarray
     t: np.ndarray
     kind: tuple[str, ...]
     reason: tuple[str, ...]
+    instrument: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -234,7 +242,8 @@ def _column(table: dict, name: str, units: str, n: int) -> np.ndarray:
 def _points(table: dict) -> Points:
     n = len(table["t"])
     columns = {name: _column(table, name, units, n) for name, (units, _) in POINT_COLUMNS.items()}
-    return Points(**columns, step=np.asarray(table["step"]))
+    index = np.asarray(table["index"]) if "index" in table else np.arange(n, dtype=np.int32)
+    return Points(**columns, step=np.asarray(table["step"]), index=index, instrument=_names(table, n))
 
 
 def _steps(table: dict) -> Steps:
@@ -253,12 +262,18 @@ def _shots(table: dict, fits: dict | None) -> Shots:
         t=np.asarray(table["t"]),
         value=np.asarray(table["value"]),
         ok=_column(table, "ok", "bool", n),
+        instrument=_names(table, n),
         fits={name: np.asarray(v) for name, v in (fits or {}).items()},
     )
 
 
 def _text(values) -> tuple[str, ...]:
     return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in values)
+
+
+def _names(table: dict, n: int) -> tuple[str, ...]:
+    """A table's "instrument" column; empty names where the campaign had one instrument."""
+    return _text(table["instrument"]) if "instrument" in table else ("",) * n
 
 
 def _failures(table: dict) -> Failures:
@@ -269,6 +284,7 @@ def _failures(table: dict) -> Failures:
         t=_column(table, "t", "s", n),
         kind=_text(table.get("kind", ())),
         reason=_text(table.get("reason", ())),
+        instrument=_names(table, n),
     )
 
 

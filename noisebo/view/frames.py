@@ -27,7 +27,7 @@ from noisebo.models.reward import normalise, reward
 from noisebo.state import format_position
 from noisebo.precision import float64
 
-POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured")
+POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured", "index")
 
 
 class CampaignTables(Protocol):
@@ -65,7 +65,8 @@ class Frame:
     """The campaign at one frame. ``points``: columns of POINT_FIELDS plus "frame" (the frame
     that measured each point) for every point committed by then; ``f``, ``noise`` (single-shot
     sd) and ``reward`` (normalised to [0, 1] on the noise grid, sd 0) are None where no model
-    exists yet (frame 0); ``acq_map`` (n_x, n_t) only for BO steps ((m,), its best over t at
+    exists yet (frame 0); ``latest_point`` the index of the last point committed by then (None
+    for none; with several instruments not always the highest); ``acq_map`` (n_x, n_t) only for BO steps ((m,), its best over t at
     each reference point, for d > 1 axes); ``proposal`` (x, t), x a float for one axis, a tuple
     for more; ``scalars`` the traces."""
 
@@ -105,7 +106,7 @@ def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
     if bo < 0:
         n = len(points["x"])
         return Frame(
-            0, points, None, None, None, None, None, None, scalars, f"{n} seed points measured", n - 1 if n else None
+            0, points, None, None, None, None, None, None, scalars, f"{n} seed points measured", _latest(points)
         )
     arrays, grid = steps.arrays, tables.grid
     f = Curve(grid["x"], arrays["f_mean"][bo], np.sqrt(np.maximum(arrays["f_var"][bo], 0.0)))
@@ -132,7 +133,7 @@ def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
         (x, t),
         scalars,
         text,
-        len(points["x"]) - 1,
+        _latest(points),
     )
 
 
@@ -148,9 +149,14 @@ def _points_until(points: Points, k: int) -> dict:
     return out
 
 
+def _latest(points: dict) -> int | None:
+    """The index of the last point committed of those shown."""
+    return int(points["index"][-1]) if len(points["index"]) else None
+
+
 def _measurement_time(shots: Shots, points: dict) -> float:
     """Total sweep/exposure time (s) of the shots of the points shown."""
-    return float(np.sum(shots.t[shots.point < len(points["x"])]))
+    return float(np.sum(shots.t[np.isin(shots.point, points["index"])]))
 
 
 def _reward(noise: Curve, config: CampaignConfig) -> Curve:

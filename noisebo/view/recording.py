@@ -147,7 +147,9 @@ class CampaignRecording:
         shots = Shots(
             point=point, shot=np.zeros_like(point), t=t, value=np.full(len(t), np.nan), ok=np.ones(len(t), dtype=bool)
         )  # frames read a shot's point and t only
-        return _Running({"x": g.x, "t": g.t, "t_fine": g.t_fine}, Points(**point_rows(state.points, d)), steps, shots)
+        rows = point_rows(state.points, d)
+        points = Points(**rows | {"instrument": tuple(rows["instrument"])})
+        return _Running({"x": g.x, "t": g.t, "t_fine": g.t_fine}, points, steps, shots)
 
     def update(self, state) -> None:
         """Log the frames ``state`` (an ``EngineState``) has reached and not logged yet."""
@@ -167,10 +169,8 @@ class CampaignRecording:
 
 def _latest_sweep(frame: Frame, state) -> tuple[np.ndarray | None, dict | None]:
     """The last sweep of the frame's latest (committed) point and its fit, from a running campaign."""
-    if frame.latest_point is None or frame.latest_point >= len(state.points):
-        return None, None
-    entry = state.points[frame.latest_point]
-    if not entry.shots or entry.shots[-1].reading.spectrum is None:
+    entry = next((e for e in reversed(state.points) if e.committed.index == frame.latest_point), None)
+    if entry is None or not entry.shots or entry.shots[-1].reading.spectrum is None:
         return None, None
     fit = entry.committed.values[-1].fit
     return np.asarray(entry.shots[-1].reading.spectrum), None if fit is None else {

@@ -346,7 +346,7 @@ def _noise(ax, data: CampaignRecord, config: CampaignConfig, law, colours) -> No
 def _sweep_figure(path: Path, data: CampaignRecord, fits: dict, out_dir: Path) -> Path:
     from noisebo.sho import sho_amplitude
 
-    last = len(data.points) - 1
+    last = int(data.points.index[-1])  # the last point committed
     spectrum, fit = last_sweep(lambda point: read_spectra(path, point), data.shots.point, fits, last)
     freq, amp = spectrum[0].astype(np.float64), spectrum[1].astype(np.float64)
     fig = Figure(figsize=(7, 4.2), layout="constrained")

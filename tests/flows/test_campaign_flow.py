@@ -51,7 +51,7 @@ def test_each_step_records_the_inputs_its_models_saw(finished):
 
 def test_file_layout_is_readable_with_plain_h5py(finished):
     with h5py.File(finished, "r") as f:
-        assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 4
+        assert f.attrs["schema"] == "noisebo.campaign" and f.attrs["schema_version"] == 5
         assert json.loads(f.attrs["driver_json"]) == {
             "name": "forrester",
             "version": "0.1.0",

@@ -181,12 +181,19 @@ def test_a_resume_with_three_points_in_flight_makes_the_same_decisions_for_the_s
     assert state.data == run.final.data and state.status is Status.COMPLETED
 
 
-def test_the_journal_codec_carries_issued_points():
+def test_the_journal_codec_carries_issued_points_and_each_shots_instrument():
     from noisebo.storage.event_codec import decode, encode, rebuild
 
     _, events = _events_of_a_fleet_run()
     issued = [e for e in events if isinstance(e, PointIssued)]
     assert [decode(encode(e)) for e in issued] == issued and len(issued) == 7
+    shots = [e for e in events if isinstance(e, ShotTaken)]
+    assert {e.instrument for e in shots} == set(NAMES)
+    assert [decode(encode(e)).instrument for e in shots] == [e.instrument for e in shots]
+    failed = ShotFailed(0, 0, (0.5,), 1.0, "timeout", "no answer", "b")
+    assert decode(encode(failed)) == failed
+    one = ShotFailed(0, 0, (0.5,), 1.0, "timeout", "no answer")
+    assert "instrument" not in encode(one).fields and decode(encode(one)) == one
     assert rebuild([encode(e) for e in events]).data == engine.replay(events).data
 
 
@@ -209,6 +216,14 @@ def test_a_point_handed_over_keeps_its_shots_and_goes_on_on_the_new_instrument()
         ([PointIssued(0, "a"), PointIssued(0, "b")], "point 0 issued twice without a reason"),
         ([PointIssued(0, "a"), PointIssued(1, "b"), PointIssued(2, "c"), PointIssued(3, "a", "x")], "which measures"),
         ([ShotTaken(0, 0, (0.1,), 1.0, Reading(1.0))], "shot 0 of point 0 out of order: the point is not under way"),
+        (
+            [PointIssued(0, "a"), ShotTaken(0, 0, (0.1,), 1.0, Reading(1.0), "b")],
+            "shot 0 of point 0 by 'b': the point is measured by 'a'",
+        ),
+        (
+            [PointIssued(0, "a"), ShotFailed(0, 0, (0.1,), 1.0, "timeout", "late")],
+            "failure at shot 0 of point 0 by no named instrument: the point is measured by 'a'",
+        ),
     ],
 )
 def test_events_that_do_not_fit_the_fleet_are_refused(events, message):
@@ -224,6 +239,8 @@ def test_asking_for_an_unknown_instrument_or_issuing_in_a_one_instrument_campaig
         engine.ask(one, "a")
     with pytest.raises(EngineError, match="issued to 'a': this campaign has one instrument"):
         engine.apply(one, PointIssued(0, "a"))
+    with pytest.raises(EngineError, match="shot 0 of point 0 by 'a': the point is not issued to a named instrument"):
+        engine.apply(one, ShotTaken(0, 0, (0.5,), 1.0, Reading(1.0), "a"))
 
 
 def test_a_tell_for_an_instrument_the_point_is_not_on_is_refused():

@@ -240,7 +240,7 @@ def test_a_schema_3_file_and_its_campaign_written_anew_inspect_the_same(tmp_path
         lines = text.splitlines()
         table = lines[[line.split()[0] for line in lines].index("step") + 1 :][:7]
         assert [line.split()[0] for line in table] == ["seed"] * 3 + ["1", "2", "3", "4"]
-    assert (seen[old]["schema_version"], seen[new]["schema_version"]) == (3, 4)
+    assert (seen[old]["schema_version"], seen[new]["schema_version"]) == (3, 5)
     for summary in seen.values():
         assert [p["step"] for p in summary["points"]] == [0, 0, 0, 1, 2, 3, 4]
         assert summary["first_converged_step"] == 3

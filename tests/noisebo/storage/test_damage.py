@@ -21,6 +21,7 @@ from benchmarks.storage import point_commits, started
 from noisebo.events import Status, StatusChanged
 from noisebo.storage.hdf5 import CampaignFileError, read_campaign, read_failures, read_shot_fits, spectra_reader
 from noisebo.storage.isolated import call_isolated
+from noisebo.storage.layout import SCHEMA_VERSION
 from noisebo.storage.recorder import Recorder, rebuild_file
 from tests.noisebo.storage.test_hdf5 import SMALL, assert_same
 
@@ -219,7 +220,7 @@ def test_a_file_a_live_writer_holds_reads_within_5_s(tmp_path):
 def test_checksums_are_in_the_file_for_every_table_and_text_column(sources):
     for name in ("finished scalar", "killed scalar"):
         with h5py.File(sources[name], "r", swmr=name.startswith("killed")) as f:
-            assert f.attrs["schema_version"] == 4 and "integrity" in f
+            assert f.attrs["schema_version"] == SCHEMA_VERSION and "integrity" in f
             datasets = []
             f.visititems(lambda n, o, found=datasets: found.append((n, o)) if isinstance(o, h5py.Dataset) else None)
             for path, ds in datasets:

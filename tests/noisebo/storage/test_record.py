@@ -29,7 +29,7 @@ def test_the_record_holds_what_the_campaign_held(campaign):
     assert isinstance(record, CampaignRecord) and record.path == path
     assert (record.status, record.seed, record.policy) == (final.status.value, 5, final.config.acquisition.policy)
     assert record.config == final.config.model_dump(mode="json")
-    assert record.driver["name"] == final.driver.name and record.schema_version == 4
+    assert record.driver["name"] == final.driver.name and record.schema_version == 5
     points = [e.committed.point for e in final.points]
     assert len(record.points) == len(points)
     np.testing.assert_array_equal(record.points.t, [p.t for p in points])
@@ -67,7 +67,7 @@ def test_a_column_an_older_schema_lacks_reads_empty(campaign):
 def test_the_typed_tables_are_the_layouts_columns():
     from noisebo.storage.layout import POINT_COLUMNS, STEP_COLUMNS
 
-    assert {f.name for f in dataclasses.fields(Points)} == set(POINT_COLUMNS) | {"step"}
+    assert {f.name for f in dataclasses.fields(Points)} == set(POINT_COLUMNS) | {"step", "index", "instrument"}
     assert {f.name for f in dataclasses.fields(Steps)} == set(STEP_COLUMNS) | {"hyperparameters", "arrays"}
 
 

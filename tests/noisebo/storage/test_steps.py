@@ -85,7 +85,7 @@ def test_files_store_their_own_numbering(old_and_new):
             3,
         ]
     with h5py.File(new, "r") as f:
-        assert f.attrs["schema_version"] == SCHEMA_VERSION == 4 and f.attrs["converged_step"] == CONVERGED
+        assert f.attrs["schema_version"] == SCHEMA_VERSION == 5 and f.attrs["converged_step"] == CONVERGED
         assert f["points/step"][()].tolist() == POINT_STEPS and f["steps/step"][()].tolist() == STEP_STEPS
 
 

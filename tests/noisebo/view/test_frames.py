@@ -35,6 +35,8 @@ def tables(with_summary: bool) -> Tables:
         "n_shots": np.array([2, 2, 1]),
         "noise_measured": np.array([True, True, False]),
         "step": np.array([0, 0, 1]),
+        "index": np.array([0, 1, 2]),
+        "instrument": ("", "", ""),
     }  # two seed points (step 0), then BO step 1's point
     steps = {
         "step": np.array([1, 2]),
@@ -91,6 +93,18 @@ def test_bo_frame_shows_its_decision_and_point():
     assert frame.scalars == {"measurement_time_s": 7.5, "t_opt_s": 1.2, "latency_s": 0.5, "a0": 0.1, "a1": 1.0}
     assert frame.text.startswith("step 1: measure x=0.5 at t=1.5 s with 1 shots")
     assert frame.text.endswith("decision 0.500 s (the first: it compiles or loads the models)")
+
+
+def test_points_committed_out_of_order_are_found_by_their_index():
+    # several instruments: seed point 1 (2 shots of 2 s) was committed before seed point 0 (2 of 1 s)
+    base = tables(False)
+    points = dataclasses.replace(base.points, index=np.array([1, 0, 2]), x=np.array([0.9, 0.1, 0.5]))
+    frame = frame_at(dataclasses.replace(base, points=points), CONFIG, 0)
+    assert frame.latest_point == 0  # the last committed, not the highest index
+    assert frame.scalars == {"measurement_time_s": 6.0}
+    ahead = dataclasses.replace(points, index=np.array([0, 1, 3]))  # BO point 3 committed, point 2 in flight
+    frame = frame_at(dataclasses.replace(base, points=ahead), CONFIG, 1)
+    assert frame.latest_point == 3 and frame.scalars["measurement_time_s"] == 6.0  # point 2's shot not counted
 
 
 @pytest.mark.parametrize("with_summary, expected", [(False, 2), (True, 3)])

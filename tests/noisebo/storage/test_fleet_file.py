@@ -1,0 +1,157 @@
+"""The file of a campaign of several instruments: points in the order they were committed, each
+with its index, every shot and point with the instrument that took it, spectra found by point
+index; the running file, the finished one and the record of the state say the same."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from noisebo.campaign.fleet import FleetTiming, run_fleet
+from noisebo.config import load_config, parse_config
+from noisebo.events import PointCommitted
+from noisebo.instruments import build
+from noisebo.storage.hdf5 import read_campaign, spectra_reader
+from noisebo.storage.record import from_state, read_record
+from noisebo.storage.recorder import Recorder
+from tests.noisebo.campaign.test_fleet import NAMES, fleet_config
+from tests.noisebo.storage.test_hdf5 import assert_reads_as_whole, assert_same
+
+
+def recorded_fleet(config, path, seed, check=None):
+    """A simulated fleet campaign committed through a recorder into ``path``; ``check(recorder)``
+    after every point committed (the recorder brings the file up to date then). Returns the
+    recorder's final state and the fleet run."""
+    sims = {name: build(config.instruments[0].section) for name in config.instrument_names}
+    recorder = None
+
+    def on_commit(state, events):
+        nonlocal recorder
+        if recorder is None:
+            recorder = Recorder.create(path, _started(state))
+        recorder.commit(recorder.state, events)
+        if check is not None and any(isinstance(e, PointCommitted) for e in events):
+            check(recorder)
+
+    run = run_fleet(config, sims, seed, FleetTiming(0.05, 0.2), on_commit)
+    recorder.close()
+    return recorder.state, run
+
+
+def _started(state):
+    from noisebo.events import Started
+
+    return Started(state.config, state.seed, state.driver, state.versions, state.created_utc)
+
+
+@pytest.fixture(scope="module")
+def forrester_fleet(tmp_path_factory):
+    """Three instruments on a Forrester campaign of 9 points, recorded; the running file checked
+    against the state at every commit. Returns the final state, the run, the file and what the
+    checks saw."""
+    folder = tmp_path_factory.mktemp("forrester_fleet")
+    path = folder / "fleet.h5"
+    seen = {"out_of_order": False, "in_flight": 0}
+
+    def check(recorder):
+        state = recorder.state
+        record = read_record(path)  # the running file, appended in place
+        assert record.points.index.tolist() == [e.committed.index for e in state.points]
+        assert record.points.instrument == tuple(e.instrument for e in state.points)
+        expected = from_state(state)
+        assert record.shots.point.tolist() == expected.shots.point.tolist()
+        assert record.shots.instrument == expected.shots.instrument
+        seen["out_of_order"] |= record.points.index.tolist() != sorted(record.points.index.tolist())
+        if len(state.flights) >= 2:
+            seen["in_flight"] += 1
+            assert_reads_as_whole(path, state, folder)
+
+    final, run = recorded_fleet(fleet_config(n_steps=6), path, seed=3, check=check)
+    return final, run, path, seen
+
+
+def test_a_fleet_file_keeps_commit_order_indices_and_instruments(forrester_fleet, tmp_path):
+    final, run, path, seen = forrester_fleet
+    assert seen["out_of_order"] and seen["in_flight"] >= 3
+    record = read_record(path)  # the finished file
+    assert record.status == "completed" and len(record.points) == 9
+    assert sorted(record.points.index.tolist()) == list(range(9))
+    by_commit = [(c.point, c.instrument) for c in run.commits]
+    assert list(zip(record.points.index.tolist(), record.points.instrument)) == by_commit
+    for point, instrument in by_commit:  # every shot of a point by the instrument that finished it (no hand-over)
+        mine = record.shots.point == point
+        assert mine.sum() >= 1 and {record.shots.instrument[k] for k in np.flatnonzero(mine)} == {instrument}
+    assert set(record.shots.instrument) == set(NAMES)
+    assert_same(read_campaign(path)["points"], read_campaign(_rewritten(final, tmp_path))["points"])
+
+
+def _rewritten(state, folder):
+    from noisebo.storage.hdf5 import write_snapshot
+
+    write_snapshot(folder / "again.h5", state)
+    return folder / "again.h5"
+
+
+def test_inspect_lists_a_fleets_points_with_their_index_and_instrument(forrester_fleet, capsys):
+    from noisebo.cli.main import main
+
+    _, run, path, _ = forrester_fleet
+    assert main(["inspect", str(path), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["points"]
+    assert [(r["point"], r["instrument"]) for r in rows] == [(c.point, c.instrument) for c in run.commits]
+    assert main(["inspect", str(path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    header = next(k for k, line in enumerate(lines) if line.split()[:2] == ["point", "instrument"])
+    table = [line.split()[:2] for line in lines[header + 1 : header + 10]]
+    assert table == [[str(c.point), c.instrument] for c in run.commits]
+
+
+def test_a_one_instrument_file_has_no_instrument_columns_and_rows_are_indices(tmp_path):
+    from tests.noisebo.storage.test_hdf5 import SMALL, commit_points
+    from benchmarks.storage import started
+
+    path = tmp_path / "one.h5"
+    with Recorder.create(path, started(SMALL)) as recorder:
+        commit_points(recorder, SMALL, range(4), spectra=False)
+    with h5py.File(path, "r", swmr=True) as f:
+        assert "index" in f["points"] and all("instrument" not in f[t] for t in ("points", "shots", "failures"))
+    record = read_record(path)
+    assert record.points.index.tolist() == [0, 1, 2, 3]
+    assert record.points.instrument == ("",) * 4 and set(record.shots.instrument) == {""}
+
+
+@pytest.fixture(scope="module")
+def pfm_fleet(tmp_path_factory):
+    """A short PFM-line campaign on two instruments (sweeps as shots), recorded; the state and a
+    copy of the running file at the first commit with another point's sweeps in flight, and the
+    final state and file."""
+    base = load_config("data/configs/pfm.yaml").with_overrides(
+        space={"n_x": 60, "n_t": 40}, schedule={"n_seed": 2, "n_steps": 3}
+    )
+    dumped = base.model_dump(mode="json")
+    one = dumped.pop("instrument")
+    config = parse_config({**dumped, "instruments": [{**one, "name": n} for n in ("left", "right")]})
+    folder = tmp_path_factory.mktemp("pfm_fleet")
+    path = folder / "pfm.h5"
+    kept = {}
+
+    def check(recorder):
+        if any(f.taken for f in recorder.state.flights) and "running" not in kept:
+            kept["running"] = (recorder.state, folder / "running.h5")
+            with open(path, "rb") as f, open(folder / "running.h5", "wb") as copy:
+                copy.write(f.read())
+
+    final, _ = recorded_fleet(config, path, seed=1, check=check)
+    return kept["running"], (final, path), folder
+
+
+def test_spectra_of_a_fleet_are_found_by_point_index(pfm_fleet):
+    (running, running_path), (final, path), folder = pfm_fleet
+    for state, file in ((running, running_path), (final, path)):
+        with spectra_reader(file) as spectra:
+            for entry in state.points:
+                stacked = spectra(entry.committed.index)
+                want = np.stack([s.reading.spectrum for s in entry.shots])
+                np.testing.assert_array_equal(stacked, want)
+    assert_reads_as_whole(running_path, running, folder)  # points in flight, their sweeps included
