@@ -13,7 +13,8 @@ a report that cannot be sent never stops the campaign.
 """
 
 import logging
-from contextlib import contextmanager
+from collections.abc import Mapping
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -25,6 +26,7 @@ from noisebo.flows.drivers import driver_of
 from noisebo.flows.reporting import RunReport, campaign_run_name, resumed_run_name, run_name
 from noisebo.instruments import build, registry
 from noisebo.campaign.driver import drive, now_utc
+from noisebo.campaign.fleet_drive import drive_fleet
 from noisebo.campaign.engine import KEEP_BUDGET, EngineState, advance, ask, new_campaign, stop
 from noisebo.campaign.progress import progress_lines
 from noisebo.config import CampaignConfig, load_config
@@ -46,7 +48,7 @@ def resolve_config(config: str | Path | CampaignConfig, policy: str | None) -> C
     """A validated config (its instrument settings checked by the driver) from a YAML path or a
     config object, with an optional policy override."""
     cfg = config if isinstance(config, CampaignConfig) else load_config(config)
-    cfg = registry.validated(cfg, str(config) if not isinstance(config, CampaignConfig) else "config")
+    cfg = registry.validated(cfg, str(config) if not isinstance(config, CampaignConfig) else "config", several=True)
     return cfg.with_overrides(acquisition={"policy": policy}) if policy else cfg
 
 
@@ -65,8 +67,11 @@ def run(
     failure budget the campaign records the status "failed" with the reason and raises
     ``FailureBudgetExceeded``; on a signal it finishes the shot under way (a decision under way is dropped), records "aborted" and raises
     ``abort.CampaignAborted``. ``report``: the flow run's Prefect reports (flows/reporting.py),
-    sent after each commit, never before it."""
-    instrument = instrument if instrument is not None else build(recorder.state.config.instrument)
+    sent after each commit, never before it. A campaign of several instruments (``instrument``
+    then their drivers by name) runs each instrument's loop on a thread of its own
+    (``noisebo.campaign.fleet_drive``): shots and reductions committed as they come, one BO
+    decision at a time."""
+    instrument = instrument if instrument is not None else instruments_of(recorder.state.config)
 
     def commit(state: EngineState, events: Sequence[Event]) -> EngineState:
         new = recorder.commit(state, events)
@@ -82,8 +87,8 @@ def run(
     def measure(instrument, state, committed):
         return ops.measure(quote(instrument), quote(state), quote(committed), reduce=False)
 
-    def decide(state):
-        if not _COMPILED and not ask(state).reduce:  # a point's reduction compiles nothing
+    def decide(state, name=None):
+        if not _COMPILED and not ask(state, name).reduce:  # a point's reduction compiles nothing
             line = (
                 f"deciding step {len(state.decisions) + 1}: the first decision in a process compiles the models "
                 "(about 10 s the first time on an idle 2-core machine, longer on a busy one; 1-2 s once an "
@@ -94,8 +99,8 @@ def run(
                 report.log([(logging.INFO, line)])
             _COMPILED.append(True)
         return abort.unless_stopped(
-            lambda: float64(advance)(state, ops.TASKS),  # float64 as in ``drive``'s thread
-            lambda name: stop(state, Status.ABORTED, f"{name} received"),
+            lambda: float64(advance)(state, ops.TASKS, name),  # float64 as in ``drive``'s thread
+            lambda signal_name: stop(state, Status.ABORTED, f"{signal_name} received"),
         )
 
     def stop_requested() -> str | None:
@@ -109,7 +114,10 @@ def run(
     if len(state.points) < state.config.schedule.n_seed:
         # Prefect types a task's arguments as its function's, not as the quote() it documents for them
         ops.seed_design(quote(state.config), state.seed)  # type: ignore[call-overload]
-    final = drive(state, instrument, commit, measure, decide, stop_requested)
+    if state.config.instruments is not None:
+        final = drive_fleet(state, instrument, commit, decide, stop_requested)
+    else:
+        final = drive(state, instrument, commit, measure, decide, stop_requested)
     observe(final)
     if report is not None:
         report.finish(final)
@@ -121,9 +129,21 @@ def run(
     return recorder.h5_path
 
 
+def instruments_of(config: CampaignConfig):
+    """The campaign's driver, or with several instruments their drivers by name."""
+    return build(config.instrument) if config.instruments is None else registry.build_fleet(config)
+
+
 @contextmanager
 def opened(instrument):
-    """The instrument opened (its ``open()``, where it has one) for the campaign and closed after."""
+    """The instrument opened (its ``open()``, where it has one) for the campaign and closed
+    after; with several (a mapping of name to driver), each, in order, all closed after."""
+    if isinstance(instrument, Mapping):
+        with ExitStack() as stack:
+            for one in instrument.values():
+                stack.enter_context(opened(one))
+            yield instrument
+        return
     try:
         getattr(instrument, "open", lambda: None)()
     except InstrumentUnavailable:
@@ -141,7 +161,7 @@ def opened(instrument):
 def start_campaign(path: Path, config: CampaignConfig, seed: int) -> Recorder:
     """A new campaign's recorder: its first event (config, seed, the driver's name, version and
     settings) journaled and its file written."""
-    started = new_campaign(config, seed, registry.driver_info(config.instrument), package_versions(), now_utc())
+    started = new_campaign(config, seed, registry.campaign_driver_info(config), package_versions(), now_utc())
     return Recorder.create(path, started)
 
 
@@ -156,7 +176,8 @@ def _viewed(recorder: Recorder, instrument, record_rrd: bool, live: str | None, 
     from noisebo.view.recording import CampaignRecording, instrument_curves, rrd_path_for
     from noisebo.view.rerun_view import RerunView
 
-    truth, law = instrument_curves(config, instrument)
+    first = next(iter(instrument.values())) if isinstance(instrument, Mapping) else instrument
+    truth, law = instrument_curves(config, first)
     rrd = rrd_path_for(recorder.h5_path) if record_rrd else None
     view = RerunView(config, recorder.h5_path.stem, rrd=rrd, live=live, truth=truth, noise_law=law, warn=warn)
     recording = CampaignRecording(view, config)
@@ -205,7 +226,7 @@ def campaign(
     cfg = resolve_config(config, policy)
     if per_run_dir:
         out_dir = str(Path(out_dir) / run_folder(run_name(cfg.name, cfg.acquisition.policy, seed)))
-    with opened(build(cfg.instrument)) as instrument:
+    with opened(instruments_of(cfg)) as instrument:
         with start_campaign(campaign_path(cfg, seed, out_dir), cfg, seed) as recorder:
             report = RunReport(recorder.state, recorder.h5_path)
             with _viewed(recorder, instrument, record_rrd, live, print) as observe, abort.reclaimed():

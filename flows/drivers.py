@@ -10,10 +10,13 @@ from noisebo.storage.recorder import read_started
 
 
 def driver_of(path: Path):
-    """The driver a campaign file was made with, built from the settings its journal recorded;
-    ``DriverNotInstalled`` says which driver and version the file needs."""
+    """The driver a campaign file was made with, built from the settings its journal recorded
+    (with several instruments, their drivers by name); ``DriverNotInstalled`` says which driver
+    and version the file needs."""
     started = read_started(path)
     try:
+        if started.config.instruments is not None:
+            return registry.build_fleet(started.config)
         return build(started.config.instrument)
     except registry.DriverNotInstalled as error:
         d = started.driver

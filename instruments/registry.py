@@ -18,6 +18,7 @@ pyproject.toml.
 
 from __future__ import annotations
 
+import dataclasses
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any, Protocol
 
@@ -34,6 +35,7 @@ from noisebo.config import (
     describe_errors,
     loose_values,
 )
+import noisebo
 from noisebo.events import DriverInfo
 from noisebo.reduction import register_reduction
 from noisebo.registry import Installed
@@ -115,8 +117,8 @@ def settings_of(config: InstrumentConfig, cls: Driver | None = None) -> BaseMode
 
 
 ONE_INSTRUMENT = (
-    "instruments: a campaign of several instruments runs through noisebo.campaign.fleet.run_fleet "
-    "(simulated instruments); this command measures with one `instrument`"
+    "instruments: a campaign of several instruments runs with `noisebo run` (or the campaign flow); "
+    "this command measures with one `instrument`"
 )
 
 
@@ -213,6 +215,33 @@ def driver_info(config: InstrumentConfig) -> DriverInfo:
     """What a campaign file records of its driver: name, version and the complete settings."""
     cls = driver_class(config.kind)
     return DriverInfo(config.kind, str(cls.version), settings_of(config, cls).model_dump(mode="json"))
+
+
+FLEET = "fleet"  # the driver name a campaign file of several instruments records
+
+
+def campaign_driver_info(config: CampaignConfig) -> DriverInfo:
+    """What a campaign file records of its drivers: the one instrument's (``driver_info``), or
+    for several, "fleet" with each named instrument's driver name, version and settings."""
+    if config.instruments is None:
+        return driver_info(config.instrument)
+    drivers = {n.name: dataclasses.asdict(driver_info(n.section)) for n in config.instruments}
+    return DriverInfo(FLEET, noisebo.__version__, {"instruments": drivers})
+
+
+def build_fleet(config: CampaignConfig) -> dict[str, Any]:
+    """The drivers of a campaign of several instruments by name, each told its name where it
+    takes one (``serve_as``: the network bridge then serves that instrument's shots only)."""
+    if config.instruments is None:
+        raise ConfigError("the campaign has one instrument (`instrument:`), not several")
+    fleet = {}
+    for named in config.instruments:
+        instrument = build(named.section)
+        serve_as = getattr(instrument, "serve_as", None)
+        if callable(serve_as):
+            serve_as(named.name)
+        fleet[named.name] = instrument
+    return fleet
 
 
 def _describes(cls) -> Description:

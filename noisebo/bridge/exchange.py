@@ -3,7 +3,9 @@ the instrument PC takes the next wanted shot and hands in its reading, and the r
 acknowledged only once the campaign has journaled it.
 
 Everything the exchange knows of the campaign comes from ``committed(state)``: the next wanted
-shot is ``engine.ask(state)``, and a reading is recorded once the state holds it. So a restarted
+shot is ``engine.ask(state)`` (``engine.ask(state, name)`` for the instrument ``name`` of a
+campaign of several, each served by a bridge of its own), and a reading is recorded once the
+state holds it. So a restarted
 campaign (its state replayed from the journal) and a restarted instrument PC meet again at the
 same outstanding shot, and a reading sent twice is recorded once.
 """
@@ -24,7 +26,7 @@ from noisebo.bridge.wire import (
     outcome_of,
     request_json,
 )
-from noisebo.campaign import engine
+from noisebo.campaign import engine, flights
 from noisebo.campaign.engine import EngineState
 from noisebo.events import Done, Request, ShotError
 from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
@@ -50,10 +52,20 @@ class Exchange:
     ``silence_s``: a shot handed out fails as a timeout when its reading has not arrived
     ``t + silence_s`` seconds after the instrument PC took it, or when nothing at all has been
     heard from the PC for ``silence_s`` (before the PC first connects, the campaign waits).
-    ``ack_s``: how long a post waits to see its reading journaled before asking to be resent."""
+    ``ack_s``: how long a post waits to see its reading journaled before asking to be resent.
+    ``instrument``: the name of the instrument it serves in a campaign of several (empty: the
+    campaign's one instrument)."""
 
-    def __init__(self, shape: ReadingShape, silence_s: float, ack_s: float = 30.0, clock: Clock = time.monotonic):
+    def __init__(
+        self,
+        shape: ReadingShape,
+        silence_s: float,
+        ack_s: float = 30.0,
+        clock: Clock = time.monotonic,
+        instrument: str = "",
+    ):
         self.shape, self.silence_s, self.ack_s, self._clock = shape, float(silence_s), float(ack_s), clock
+        self.instrument = instrument
         self._cond = threading.Condition()
         self._state: EngineState | None = None
         self._handed: dict[tuple[int, int], _Handed] = {}
@@ -71,7 +83,8 @@ class Exchange:
             self._state = state
             for key in [k for k, h in self._handed.items() if _recorded(state, *k, h)]:
                 del self._handed[key]
-            for key in [k for k in self._taken_at if k[0] < len(state.points)]:
+            under_way = set(flights.under_way(state))
+            for key in [k for k in self._taken_at if k[0] not in under_way]:
                 del self._taken_at[key]
             self._cond.notify_all()
 
@@ -133,7 +146,7 @@ class Exchange:
         if self._told_done or self.closed or self._last_contact is None or self._state is None:
             return False
         recent = self._polling > 0 or self._clock() - self._last_contact < 1.0
-        return recent and isinstance(engine.ask(self._state), Done)
+        return recent and isinstance(self._ask(self._state), Done)
 
     def close(self) -> None:
         with self._cond:
@@ -173,7 +186,7 @@ class Exchange:
         state = self._state
         if state is None:
             return None
-        step = engine.ask(state)
+        step = self._ask(state)
         if isinstance(step, Done):
             self._told_done = True
             return {"kind": "done", "campaign": campaign_id(state), "status": step.status.value, "reason": step.reason}
@@ -224,7 +237,7 @@ class Exchange:
         return {"recorded": True, "duplicate": True, "point": point, "shot": shot}
 
     def _check_wanted(self, state: EngineState, point: int, shot: int, handed: _Handed) -> None:
-        step = engine.ask(state)
+        step = self._ask(state)
         if isinstance(step, Done):
             raise WireError(409, f"the campaign has ended ({step.status.value}); no reading is wanted")
         if not isinstance(step, Request):
@@ -234,7 +247,7 @@ class Exchange:
                 "take the next shot from /next",
             )
         if (point, shot) != (step.point, step.taken):
-            where = "is finished" if point < step.point else "is not wanted"
+            where = "is finished" if _committed_entry(state, point) is not None else "is not wanted"
             raise WireError(
                 409, f"point {point} shot {shot} {where}; the shot wanted now is point {step.point} shot {step.taken}"
             )
@@ -257,7 +270,7 @@ class Exchange:
         if state is None:
             return {"status": "starting", "campaign": None}
         sched = state.config.schedule
-        step = engine.ask(state)
+        step = self._ask(state)
         current = None
         if isinstance(step, Request):
             current = {
@@ -291,8 +304,12 @@ class Exchange:
         }
 
     def _wanted(self) -> Request | None:
-        step = engine.ask(self._state) if self._state is not None else None
+        step = self._ask(self._state) if self._state is not None else None
         return step if isinstance(step, Request) else None
+
+    def _ask(self, state: EngineState):
+        """What the campaign wants of the instrument this exchange serves."""
+        return engine.ask(state, self.instrument or None)
 
 
 def _phase(current: dict | None, connected: bool, status: str) -> str:
@@ -320,9 +337,15 @@ def _recorded(state: EngineState | None, point: int, shot: int, handed: _Handed)
 
 
 def _journaled_reading(state: EngineState, point: int, shot: int) -> Reading | None:
-    if point < len(state.points):
-        shots = state.points[point].shots
-        return shots[shot].reading if shot < len(shots) else None
-    if point == len(state.points) and shot < len(state.taken):
-        return state.taken[shot].reading
-    return None
+    flight = flights.flight_of(state, point)
+    entry = _committed_entry(state, point) if flight is None else None
+    shots = flight.taken if flight is not None else entry.shots if entry is not None else ()
+    return shots[shot].reading if shot < len(shots) else None
+
+
+def _committed_entry(state: EngineState, point: int):
+    """The committed point of index ``point`` (row ``point`` unless several instruments
+    committed out of order), or None."""
+    if point < len(state.points) and state.points[point].committed.index == point:
+        return state.points[point]
+    return next((e for e in state.points if e.committed.index == point), None)

@@ -200,8 +200,15 @@ class RemoteInstrument:
         from noisebo.bridge.exchange import Exchange
 
         self.settings = settings or RemoteSettings()
+        self.serving = ""  # the instrument's name in a campaign of several (serve_as)
         self.exchange = Exchange(self.settings.shape, self.settings.silence_s)
         self._server: BridgeServer | None = None
+
+    def serve_as(self, name: str) -> None:
+        """Serve the instrument named ``name`` of a campaign of several instruments: its bridge
+        hands out that instrument's shots only."""
+        self.serving = name
+        self.exchange.instrument = name
 
     @property
     def spectra(self) -> bool:
@@ -215,7 +222,7 @@ class RemoteInstrument:
         if s.tls is not None:
             check_tls(s)
         token = bridge_token(s.token_file, s.host)
-        self.exchange = Exchange(s.shape, s.silence_s)
+        self.exchange = Exchange(s.shape, s.silence_s, instrument=self.serving)
         server = BridgeServer(self.exchange, token, s.host, s.port, int(s.max_body_mib * 2**20), s.tls)
         try:
             server.start()
@@ -237,8 +244,9 @@ class RemoteInstrument:
                 flush=True,
             )
         where = f"${TOKEN_ENV}" if os.environ.get(TOKEN_ENV, "").strip() else str(Path(s.token_file).expanduser())
+        whose = f" instrument {self.serving!r}:" if self.serving else ""
         print(
-            f"bridge: serving {url}{exposed}; API at {url}/docs; waiting for the instrument PC "
+            f"bridge:{whose} serving {url}{exposed}; API at {url}/docs; waiting for the instrument PC "
             f"(noisebo/bridge/client.py: serve_instrument({url!r}, TOKEN, measure), TOKEN from {where})",
             flush=True,
         )

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Sequence
 
+from noisebo.campaign.flights import flight_of
 from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status, StatusChanged
 from noisebo.state import format_position
 
@@ -20,18 +21,26 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
         if isinstance(event, PointCommitted):
             p = event.point
             label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
+            label += _on(state, event.index)  # which of several instruments measured it
             budget = "" if state.budget_s is None else f" ({state.spent_s:.4g} of {state.budget_s:.4g} s spent)"
             lines.append(
                 f"{label}: x={format_position(p.x)} t={p.t:.4g} s shots={p.n_shots} value={p.value:.4g} "
                 f"noise={p.noise:.3g}{budget}"
             )
         elif isinstance(event, MoreShots):
-            lines.append(f"point {event.point}: {event.reason}; taking more shots ({event.wanted} in all)")
+            lines.append(
+                f"point {event.point}{_on(state, event.point)}: {event.reason}; taking more shots ({event.wanted} in all)"
+            )
         elif isinstance(event, Decided):
             lines += decision_lines(state, event.decision)
         elif isinstance(event, StatusChanged) and event.status is Status.BUDGET_SPENT:
             lines.append(event.reason)
     return lines
+
+
+def _on(state: EngineState, point: int) -> str:
+    flight = flight_of(state, point)
+    return f" on {flight.instrument}" if flight is not None and flight.instrument else ""
 
 
 def decision_lines(state: EngineState, decision) -> list[str]:

@@ -56,14 +56,27 @@ def _preflight(config, source) -> None:
     from noisebo.instruments.registry import preflight
 
     try:
-        preflight(config.instrument)
+        for section in sections(config):
+            preflight(section)
     except InstrumentUnavailable as error:
         raise UsageError(f"{source}: {error}; nothing was started") from None
 
 
+def sections(config):
+    """The config's instrument sections: its one, or each named one's."""
+    return [config.instrument] if config.instruments is None else [n.section for n in config.instruments]
+
+
+def instruments_line(config) -> str:
+    """The instrument, or the named instruments with their drivers, as the start line says them."""
+    if config.instruments is None:
+        return f"instrument {config.instrument.kind}"
+    return "instruments " + ", ".join(f"{n.name} ({n.kind})" for n in config.instruments)
+
+
 def _run(args) -> int:
-    config = validated_config(args.config, load_plugins=False)  # what needs no JAX is checked first
-    if config.instrument.kind == "manual":  # refused here, before Prefect starts and logs the driver's refusal
+    config = validated_config(args.config, load_plugins=False, several=True)  # what needs no JAX is checked first
+    if any(s.kind == "manual" for s in sections(config)):  # refused before Prefect starts and logs the driver's refusal
         from noisebo.bridge.remote import MEASURED_BY_HAND
 
         raise UsageError(f"{args.config}: {MEASURED_BY_HAND.format(config=args.config)}")
@@ -76,12 +89,12 @@ def _run(args) -> int:
     from noisebo.flows import server_launch
 
     with server_launch.launched():  # Prefect's temporary server boots while the rest loads
-        config = validated_config(args.config)  # what the policy and noise law check (their JAX code)
+        config = validated_config(args.config, several=True)  # what the policy and noise law check (their JAX code)
         if args.policy:
             config = config.with_overrides(acquisition={"policy": args.policy})
         print(
-            f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}, instrument "
-            f"{config.instrument.kind}: {config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps "
+            f"campaign {config.name!r}, seed {args.seed}, policy {config.acquisition.policy}, {instruments_line(config)}: "
+            f"{config.schedule.n_seed} seed points + {config.schedule.n_steps} BO steps "
             f"-> {path}",
             flush=True,
         )

@@ -81,14 +81,15 @@ def flow_settings():
     return settings()
 
 
-def validated_config(path, load_plugins: bool = True) -> CampaignConfig:
+def validated_config(path, load_plugins: bool = True, several: bool = False) -> CampaignConfig:
     """A config file loaded, its instrument settings checked by the driver it names; with
     ``load_plugins`` false its policy and noise law are checked by name only, without loading
-    their JAX code (a command's checks before the heavy imports)."""
+    their JAX code (a command's checks before the heavy imports). A config of several
+    instruments is refused unless ``several`` (a command that runs them)."""
     from noisebo.config import load_config
     from noisebo.instruments.registry import validated
 
-    return validated(load_config(config_path(path), load_plugins), str(path))
+    return validated(load_config(config_path(path), load_plugins), str(path), several)
 
 
 EXIT_SIGNAL = {"SIGINT": 130, "SIGTERM": 143}

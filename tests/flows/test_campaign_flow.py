@@ -137,3 +137,21 @@ def test_sweep_runs_every_campaign_and_summarises(tiny_config, finished, prefect
     written = report(tmp_path, tmp_path / "report")
     assert [p.name for p in written] == ["convergence_steps.png", "sweep_summary.md"]
     assert written[1].read_text() == Path(table).read_text()
+
+
+def test_the_flow_runs_a_campaign_of_three_instruments_each_on_its_loop(tiny_config, prefect_harness, tmp_path):
+    from noisebo.config import parse_config
+    from noisebo.storage.record import read_record
+
+    dumped = tiny_config.model_dump(mode="json")
+    one = dumped.pop("instrument")
+    fleet = parse_config({**dumped, "instruments": [{**one, "name": n} for n in ("a", "b", "c")]})
+    path = campaign(fleet, seed=5, out_dir=str(tmp_path), record_rrd=False)
+    record = read_record(path)
+    assert record.status == "completed" and len(record.points) == 3 + 4
+    assert sorted(record.points.index.tolist()) == list(range(7))
+    assert set(record.points.instrument) <= {"a", "b", "c"} and set(record.shots.instrument) == {"a", "b", "c"}
+    for index, instrument in zip(record.points.index, record.points.instrument):
+        assert {record.shots.instrument[k] for k in np.flatnonzero(record.shots.point == index)} == {instrument}
+    assert record.driver["name"] == "fleet" and set(record.driver["settings"]["instruments"]) == {"a", "b", "c"}
+    assert record.driver["settings"]["instruments"]["b"]["name"] == "forrester"

@@ -162,3 +162,38 @@ def test_the_campaign_refuses_a_shot_it_does_not_want_and_a_reading_for_another_
         exchange.wait_outcome((0.123,), 1.0)
     with pytest.raises(WireError, match="this bridge serves 'campaign/reward/s3@"):
         exchange.hand_in(0, 0, ReadingBody(value=1.0, campaign="other/reward/s0@x"))
+
+
+def test_an_exchange_serving_one_of_several_instruments_hands_out_its_points_only():
+    from noisebo.campaign.driver import in_memory
+    from tests.noisebo.campaign.test_fleet import fresh as fresh_fleet
+    from tests.noisebo.campaign.test_fleet import issue
+
+    state = fresh_fleet()  # instruments a, b, c
+    state, for_a = issue(state, "a")
+    state, for_b = issue(state, "b")
+    b = Exchange(ReadingShape(), silence_s=10.0, ack_s=5.0, clock=Clock(), instrument="b")
+    b.committed(state)
+    shot = b.next_shot(0.0)
+    assert (shot["point"], shot["shot"], shot["x"], shot["t"]) == (1, 0, list(for_b.x), for_b.t)
+    with pytest.raises(WireError, match="point 0 shot 0 is not wanted; the shot wanted now is point 1 shot 0"):
+        b.hand_in(0, 0, ReadingBody(value=1.0))  # a's point, not b's
+    result = {}
+
+    def campaign_side():
+        outcome = b.wait_outcome(for_b.x, for_b.t)
+        told = engine.tell(state, for_b, {0: outcome}, decide_next=False)
+        result["state"] = told.state
+        b.committed(told.state)
+
+    worker = threading.Thread(target=campaign_side)
+    worker.start()
+    assert b.hand_in(1, 0, ReadingBody(value=2.0))["recorded"] is True
+    worker.join(5)
+    after = result["state"]
+    assert after.flights[1].taken[0].instrument == "b" and after.flights[0].taken == ()
+    assert b.hand_in(1, 0, ReadingBody(value=2.0))["duplicate"] is True  # found among the points in flight
+    state = in_memory(after, engine.tell(after, for_a, {0: Reading(0.5)}, decide_next=False).events)
+    b.committed(state)
+    assert b.next_shot(0.0)["point"] == 1  # a's shot changes nothing for b
+    assert b.status()["current"]["point"] == 1

@@ -284,16 +284,17 @@ def test_a_finished_fleet_campaign_is_done_for_every_instrument():
     assert sorted(p.committed.index for p in run.final.points) == list(range(7))
 
 
-def test_one_instruments_loop_and_the_campaign_flow_refuse_a_fleet_config():
+def test_one_instruments_loop_refuses_a_fleet_config_and_the_campaign_flow_takes_it():
     from noisebo.flows.campaign import resolve_config
     from noisebo.instruments.registry import validated
 
     with pytest.raises(EngineError, match="names several instruments"):
         driver.run_campaign(FLEET, SIM, 0)
-    with pytest.raises(ConfigError, match="config: instruments: a campaign of several instruments runs through"):
-        resolve_config(FLEET, None)
-    with pytest.raises(ConfigError, match="this command measures with one `instrument`"):
+    with pytest.raises(
+        ConfigError, match="config: instruments: a campaign of several instruments runs with `noisebo run`"
+    ):
         validated(FLEET)
+    assert resolve_config(FLEET, None).instrument_names == NAMES
 
 
 def test_each_named_instruments_settings_are_checked_by_its_driver():

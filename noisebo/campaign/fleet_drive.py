@@ -1,0 +1,181 @@
+"""Several real instruments on one campaign: one loop per named instrument, each on a thread of
+its own, committing through the campaign's one journal writer.
+
+Each instrument's loop asks the engine for its work (``engine.ask(state, name)``), measures its
+point's next shot with nothing held, and tells the reading; every commit goes through one lock
+to ``commit`` (the recorder: the only writer of the journal). A BO decision is made by one
+instrument's thread at a time, outside the lock, so the others keep measuring and committing
+while it runs: it sees the points in flight when it starts (the believer), and is journaled
+only if no other decision or status change came in between (else it is made again). A request
+to stop is looked at after every commit. ``noisebo.campaign.fleet`` is the same loop in
+simulated time, for the benchmark; this one runs in real time, with drivers.
+"""
+
+from __future__ import annotations
+
+import contextvars
+import threading
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence
+
+from noisebo.campaign import engine, flights
+from noisebo.campaign.driver import Commit, Measure, in_memory, take_shot
+from noisebo.campaign.engine import EngineState
+from noisebo.events import DecisionDue, Done, Event, Request, Status
+from noisebo.failures import MeasurementStopped
+from noisebo.precision import float64
+
+FleetDecide = Callable[[EngineState, str], Sequence[Event]]
+RECHECK_S = 0.5  # a waiting instrument looks again this often even if nothing was committed
+
+
+def _advance(state: EngineState, name: str) -> Sequence[Event]:
+    return engine.advance(state, instrument=name)
+
+
+@dataclass
+class _Shared:
+    """The campaign every loop shares: its state as journaled, who is deciding, the first error."""
+
+    state: EngineState
+    commit: Commit
+    stop_requested: Callable[[], str | None]
+    followers: Sequence[Callable[[EngineState], None]]
+    cond: threading.Condition = field(default_factory=threading.Condition)
+    deciding: str | None = None
+    error: BaseException | None = None
+
+    def committed(self, events: Sequence[Event]) -> None:
+        """Journal ``events`` (the lock held), show the state to the followers, then stop the
+        campaign if asked to."""
+        if not events:
+            return
+        self.state = self.commit(self.state, events)
+        reason = self.stop_requested()
+        stop = () if reason is None else engine.stop(self.state, Status.ABORTED, reason)
+        if stop:
+            self.state = self.commit(self.state, stop)
+        for follow in self.followers:
+            follow(self.state)
+        self.cond.notify_all()
+
+
+def drive_fleet(
+    state: EngineState,
+    instruments: Mapping[str, object],
+    commit: Commit = in_memory,
+    decide: FleetDecide = _advance,
+    stop_requested: Callable[[], str | None] = lambda: None,
+    measure: Measure = take_shot,
+) -> EngineState:
+    """Run the campaign of ``state`` (several named instruments) with ``instruments`` (name ->
+    driver, the config's names) to its end, each instrument's loop on its own thread; returns
+    the final state. ``decide(state, name)``: a BO step's events for the instrument ``name``
+    (``engine.advance``); ``measure``: one shot (``driver.take_shot``). An instrument that stops
+    waiting because the campaign was asked to stop (``MeasurementStopped``) ends the campaign as
+    aborted; any other error in a loop stops every loop and is raised here (what was committed
+    stays journaled)."""
+    names = state.config.instrument_names
+    if not names or set(names) != set(instruments):
+        raise engine.EngineError(
+            f"the campaign names the instruments {list(names)}; the fleet has {sorted(instruments)}"
+        )
+    followers = [f for f in (getattr(instruments[n], "committed", None) for n in names) if callable(f)]
+    shared = _Shared(state, commit, stop_requested, followers)
+    for follow in followers:
+        follow(state)
+    threads = [
+        threading.Thread(
+            target=contextvars.copy_context().run,  # the caller's context (a Prefect flow run's) in each loop
+            args=(_loop, shared, name, instruments[name], decide, measure),
+            name=f"noisebo-instrument-{name}",
+            daemon=True,
+        )
+        for name in names
+    ]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    if shared.error is not None:
+        raise shared.error
+    return shared.state
+
+
+@float64
+def _loop(shared: _Shared, name: str, instrument, decide: FleetDecide, measure: Measure) -> None:
+    try:
+        while True:
+            work = _next_work(shared, name)
+            if work is None:
+                return
+            state, answer = work
+            if isinstance(answer, Request):
+                _measure(shared, name, instrument, state, answer, measure)
+            else:
+                _decide(shared, name, state, decide)
+    except BaseException as error:  # noqa: BLE001 - handed to the caller's thread
+        with shared.cond:
+            if shared.error is None:
+                shared.error = error
+            shared.cond.notify_all()
+
+
+def _next_work(shared: _Shared, name: str) -> tuple[EngineState, Request | DecisionDue] | None:
+    """This instrument's next shot or BO decision (the lock taken while it looks; what needs no
+    model, a reduction or a known point issued, is committed at once); None once the campaign
+    is done or another loop failed."""
+    with shared.cond:
+        while shared.error is None:
+            state = shared.state
+            answer = engine.ask(state, name)
+            if isinstance(answer, Done):
+                shared.cond.notify_all()
+                return None
+            if isinstance(answer, Request):
+                return state, answer
+            if isinstance(answer, DecisionDue) and not _models_needed(state, answer):
+                shared.committed(engine.advance(state, instrument=name))
+                continue
+            if isinstance(answer, DecisionDue) and shared.deciding is None:
+                shared.deciding = name
+                return state, answer
+            shared.cond.wait(RECHECK_S)  # Wait, or another instrument is deciding
+        return None
+
+
+def _models_needed(state: EngineState, due: DecisionDue) -> bool:
+    """Whether the decision due fits models: a BO step or the final summary (not a reduction or
+    the issue of a point already known)."""
+    return not due.reduce and (due.final or flights.n_issued(state) == flights.n_specified(state))
+
+
+def _measure(shared: _Shared, name: str, instrument, state: EngineState, request: Request, measure: Measure) -> None:
+    try:
+        outcome = measure(instrument, state.seed, request)
+    except MeasurementStopped as stopped:
+        with shared.cond:
+            shared.committed(engine.stop(shared.state, Status.ABORTED, str(stopped)))
+        return
+    with shared.cond:
+        if shared.state.status is Status.RUNNING:  # a reading after the campaign ended is not wanted
+            told = engine.tell(shared.state, request, {request.taken: outcome}, decide_next=False)
+            shared.committed(told.events)
+
+
+def _decide(shared: _Shared, name: str, state: EngineState, decide: FleetDecide) -> None:
+    """A decision made on ``state`` with nothing held; journaled if the campaign still wants it
+    (no other decision or status change since), else dropped: the loop asks again."""
+    try:
+        events = decide(state, name)
+    except BaseException:
+        with shared.cond:
+            shared.deciding = None
+            shared.cond.notify_all()
+        raise
+    with shared.cond:
+        shared.deciding = None
+        now = shared.state
+        if now.status is Status.RUNNING and len(now.decisions) == len(state.decisions):
+            shared.committed(events)
+        shared.cond.notify_all()
