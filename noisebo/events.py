@@ -214,13 +214,16 @@ class DecisionDue:
     shot and its commit leaves it). ``budget``: why the instrument-time budget ends the campaign
     here (then ``final``), empty otherwise. ``instrument``: with several instruments, the one
     that asked: the next point (a seed point, or step ``step``'s once decided) goes to it, and a
-    reduction is of its point."""
+    reduction is of its point. ``take_over``: the point under way that it takes over instead
+    (its instrument timed out on the point's current shot; -1: none), ``reason`` saying so."""
 
     step: int
     final: bool = False
     reduce: bool = False
     budget: str = ""
     instrument: str = ""
+    take_over: int = -1
+    reason: str = ""
 
 
 @dataclass(frozen=True)

@@ -116,6 +116,9 @@ class StatusAnswer(Answer):
 
     status: str = Field(description="starting, running, completed, aborted, failed or budget_spent")
     campaign: str | None = Field(description="the campaign's id (null while starting)")
+    instrument: str | None = Field(
+        None, description="the instrument this bridge serves, in a campaign of several (null: the campaign's one)"
+    )
     reason: str | None = Field(None, description="why it ended, in words (empty while running)")
     points: int | None = Field(None, description="points committed")
     points_total: int | None = Field(None, description="points planned: seed points plus BO steps")

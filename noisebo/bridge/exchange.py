@@ -289,6 +289,7 @@ class Exchange:
             "status": state.status.value,
             "reason": state.reason,
             "campaign": campaign_id(state),
+            "instrument": self.instrument or None,
             "points": len(state.points),
             "points_total": sched.n_seed + sched.n_steps,
             "shots": state.n_shots,

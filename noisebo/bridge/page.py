@@ -67,11 +67,12 @@ def render(status: dict, state: EngineState | None) -> str:
         ended = False
     else:
         pc = status.get("instrument_pc") or NOT_CONNECTED
-        step = engine.ask(state)
-        assert not isinstance(step, Wait)  # one instrument: nothing waits
+        name = status.get("instrument") or None  # the instrument this bridge serves, of several
+        step = engine.ask(state, name)
         ended = isinstance(step, Done)
+        serving = f", instrument {html.escape(name)}" if name else ""
         body = [
-            f"<h1>noisebo campaign {html.escape(campaign_id(state))}</h1>",
+            f"<h1>noisebo campaign {html.escape(campaign_id(state))}{serving}</h1>",
             _now(step, state, pc),
             _progress(step, state),
             _connection(pc, ended),
@@ -88,7 +89,7 @@ def render(status: dict, state: EngineState | None) -> str:
     )
 
 
-def _now(step: Request | DecisionDue | Done, state: EngineState, pc: dict) -> str:
+def _now(step: Request | DecisionDue | Wait | Done, state: EngineState, pc: dict) -> str:
     """The campaign's phase: the shot it wants (measured, or waiting for an instrument PC that has
     not connected), the decision it is making, or its end and why."""
     n_steps = state.config.schedule.n_steps
@@ -101,8 +102,15 @@ def _now(step: Request | DecisionDue | Done, state: EngineState, pc: dict) -> st
         if not pc["connected"]:
             return f"<p class='now'>waiting for the instrument PC to connect, to measure {shot}</p>"
         return f"<p class='now'>measuring {shot}</p>"
+    if isinstance(step, Wait):
+        return f"<p class='now'>waiting for the other instruments: {html.escape(step.reason)}</p>"
     if isinstance(step, DecisionDue):
-        if step.reduce:
+        own = next((f for f in state.flights if f.instrument and f.instrument == step.instrument), None)
+        if step.take_over >= 0:
+            what = f"taking over point {step.take_over}: {html.escape(step.reason)}"
+        elif step.reduce and own is not None:
+            what = f"reducing point {own.point}: its {len(own.taken)} shots are in"
+        elif step.reduce:
             what = f"reducing point {len(state.points)}: its {len(state.taken)} shots are in"
         elif step.final:
             why = f" ({html.escape(step.budget)})" if step.budget else ""
@@ -123,7 +131,7 @@ def _now(step: Request | DecisionDue | Done, state: EngineState, pc: dict) -> st
     )
 
 
-def _progress(step: Request | DecisionDue | Done, state: EngineState) -> str:
+def _progress(step: Request | DecisionDue | Wait | Done, state: EngineState) -> str:
     """Finished work only: the committed points and their shots (the shots of a point not yet
     committed are counted apart), failed attempts, instrument time spent, budget, and the
     predicted optimal t once there is one."""
@@ -139,7 +147,10 @@ def _progress(step: Request | DecisionDue | Done, state: EngineState) -> str:
     t_opt = f"{number(state.decisions[-1].t_opt)} s" if state.decisions else "not yet (after the first decision)"
     converged = "yes" if state.data.is_converged else "not yet"
     more = ""
-    if state.taken:
+    if state.config.instruments is not None and state.flights:
+        on = ", ".join(f"{f.point} on {html.escape(f.instrument)}" for f in state.flights)
+        more = f" (and {len(state.taken)} shots of the points in flight: {on})"
+    elif state.taken:
         doing = "being reduced" if isinstance(step, DecisionDue) and step.reduce else "being measured"
         more = f" (and {len(state.taken)} of point {done}, {doing})"
     return (
@@ -163,19 +174,23 @@ def _connection(pc: dict, ended: bool) -> str:
 
 
 def _last_points(state: EngineState) -> str:
+    """The last points committed, newest first (with several instruments, each one's)."""
+    several = state.config.instruments is not None
     rows = []
-    for index in range(len(state.points) - 1, max(len(state.points) - LAST_POINTS, 0) - 1, -1):
-        p = state.points[index].committed.point
+    for entry in state.points[::-1][:LAST_POINTS]:
+        p = entry.committed.point
         measured = "" if p.noise_measured else " (model)"
+        by = f"<td>{html.escape(entry.instrument)}</td>" if several else ""
         rows.append(
-            f"<tr><td>{index}</td><td>{number(p.x)}</td><td>{number(p.t)}</td><td>{p.n_shots}</td>"
+            f"<tr><td>{entry.committed.index}</td>{by}<td>{number(p.x)}</td><td>{number(p.t)}</td><td>{p.n_shots}</td>"
             f"<td>{number(p.value)}</td><td>{number(p.noise, 3)}{measured}</td></tr>"
         )
     if not rows:
         return "<h2>Last points</h2><p>none yet</p>"
+    instrument = "<th>instrument</th>" if several else ""
     return (
-        "<h2>Last points</h2><table><tr><th>point</th><th>x</th><th>t (s)</th><th>shots</th><th>value</th>"
-        f"<th>noise</th></tr>{''.join(rows)}</table>"
+        f"<h2>Last points</h2><table><tr><th>point</th>{instrument}<th>x</th><th>t (s)</th><th>shots</th>"
+        f"<th>value</th><th>noise</th></tr>{''.join(rows)}</table>"
     )
 
 

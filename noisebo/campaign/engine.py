@@ -210,10 +210,13 @@ def _apply_to_point(state: EngineState, event: ShotTaken | ShotFailed | MoreShot
         raise EngineError(f"{what} {event.shot} of point {event.point} {by}: the point is {held}")
     spent, flight = _spend(state, flight, event.t)
     if isinstance(event, ShotFailed):
+        timed_out = event.kind == "timeout" and bool(event.instrument)
+        silent = f"{event.instrument} timed out at shot {event.shot} ({event.reason})" if timed_out else ""
+        flight = replace(flight, silent=silent)
         return replace(
             state, spent_s=spent, flights=flights.with_flight(state, flight), failures=state.failures + (event,)
         )
-    flight = replace(flight, taken=flight.taken + (event,))
+    flight = replace(flight, taken=flight.taken + (event,), silent="")
     return replace(state, spent_s=spent, flights=flights.with_flight(state, flight), n_shots=state.n_shots + 1)
 
 
@@ -234,7 +237,7 @@ def _issued(state: EngineState, event: PointIssued) -> Flight:
     if held is not None:
         if not event.reason:
             raise EngineError(f"point {event.point} issued twice without a reason")
-        return replace(held, instrument=event.instrument)
+        return replace(held, instrument=event.instrument, silent="")
     nxt = flights.n_issued(state)
     if event.point != nxt or nxt >= flights.n_specified(state):
         raise EngineError(f"point {event.point} issued out of order (the next point to issue is {nxt})")
@@ -286,6 +289,9 @@ def _ask_fleet(state: EngineState, instrument: str | None) -> Request | Decision
         earlier = [f for f in state.flights if f.point < own.point]
         held = sum(_held_s(state, f) for f in earlier)
         return _measure_or_reduce(state, _request(state, own.point), held, waiting=bool(earlier))
+    silent = _silent_flight(state)
+    if silent is not None:
+        return DecisionDue(len(state.decisions), instrument=instrument, take_over=silent[0], reason=silent[1])
     held = sum(_held_s(state, f) for f in state.flights)
     waiting = bool(state.flights)
     nxt = flights.n_issued(state)
@@ -300,6 +306,12 @@ def _ask_fleet(state: EngineState, instrument: str | None) -> Request | Decision
     if isinstance(answer, DecisionDue) and answer.final and waiting:
         return Wait("the last points are being measured")
     return answer
+
+
+def _silent_flight(state: EngineState) -> tuple[int, str] | None:
+    """The first point under way whose instrument timed out on its current shot, with why it
+    is handed over; None when there is none."""
+    return next(((f.point, f.silent) for f in state.flights if f.silent), None)
 
 
 def _next_point(state: EngineState, instrument: str, held: float, waiting: bool) -> DecisionDue | Wait:
@@ -461,6 +473,8 @@ def advance(state: EngineState, stages: Stages | None = None, instrument: str | 
     if not isinstance(due, DecisionDue):
         return ()
     stages = PLAIN if stages is None else stages
+    if due.take_over >= 0:
+        return (PointIssued(due.take_over, due.instrument, due.reason),)
     if due.reduce:
         point = next(f.point for f in state.flights if f.instrument == due.instrument) if due.instrument else None
         return tuple(

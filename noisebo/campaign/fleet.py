@@ -104,7 +104,10 @@ def run_fleet(
         turn = heapq.heappop(turns)
         if turn.shot is not None:
             request, outcome = turn.shot
-            state = commit(state, engine.tell(state, request, {request.taken: outcome}, decide_next=False).events, turn)
+            now = engine.ask(state, turn.name)
+            if isinstance(now, Request) and (now.point, now.taken) == (request.point, request.taken):
+                told = engine.tell(state, request, {request.taken: outcome}, decide_next=False)
+                state = commit(state, told.events, turn)  # else taken over meanwhile: the late shot is dropped
             for name in (turn.name, *waiting):  # the campaign has changed: whoever waited asks again
                 heapq.heappush(turns, clock.turn(name, turn.time))
             waiting.clear()
@@ -129,7 +132,8 @@ def run_fleet(
 def _decide(state, due: DecisionDue, turn: _Turn, turns: list[_Turn], clock: _Clock, commit) -> EngineState:
     """A reduction or an issue of a known point at once; a BO step on the decider when it is free
     (the instrument waits for it)."""
-    deciding = not (due.reduce or due.final) and flights.n_issued(state) == flights.n_specified(state)
+    deciding = not (due.reduce or due.final or due.take_over >= 0)
+    deciding = deciding and flights.n_issued(state) == flights.n_specified(state)
     if deciding and clock.decider_free > turn.time:
         heapq.heappush(turns, clock.turn(turn.name, clock.decider_free))
         return state

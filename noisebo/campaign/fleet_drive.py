@@ -5,9 +5,11 @@ Each instrument's loop asks the engine for its work (``engine.ask(state, name)``
 point's next shot with nothing held, and tells the reading; every commit goes through one lock
 to ``commit`` (the recorder: the only writer of the journal). A BO decision is made by one
 instrument's thread at a time, outside the lock, so the others keep measuring and committing
-while it runs: it sees the points in flight when it starts (the believer), and is journaled
-only if no other decision or status change came in between (else it is made again). A request
-to stop is looked at after every commit. ``noisebo.campaign.fleet`` is the same loop in
+while it runs: it sees the points in flight when it starts (the believer); points committed
+while it runs count from the next decision on. A request to stop is looked at after every
+commit; a decision under way when the campaign ends is dropped. An idle instrument takes over a
+point whose instrument timed out on it (the engine's ``take_over``); a reading that instrument
+hands in later is dropped, the new one measures the shot. ``noisebo.campaign.fleet`` is the same loop in
 simulated time, for the benchmark; this one runs in real time, with drivers.
 """
 
@@ -145,9 +147,11 @@ def _next_work(shared: _Shared, name: str) -> tuple[EngineState, Request | Decis
 
 
 def _models_needed(state: EngineState, due: DecisionDue) -> bool:
-    """Whether the decision due fits models: a BO step or the final summary (not a reduction or
-    the issue of a point already known)."""
-    return not due.reduce and (due.final or flights.n_issued(state) == flights.n_specified(state))
+    """Whether the decision due fits models: a BO step or the final summary (not a reduction,
+    the issue of a point already known or the take-over of a silent instrument's point)."""
+    if due.reduce or due.take_over >= 0:
+        return False
+    return due.final or flights.n_issued(state) == flights.n_specified(state)
 
 
 def _measure(shared: _Shared, name: str, instrument, state: EngineState, request: Request, measure: Measure) -> None:
@@ -158,14 +162,22 @@ def _measure(shared: _Shared, name: str, instrument, state: EngineState, request
             shared.committed(engine.stop(shared.state, Status.ABORTED, str(stopped)))
         return
     with shared.cond:
-        if shared.state.status is Status.RUNNING:  # a reading after the campaign ended is not wanted
+        if _still_wanted(shared.state, name, request):
             told = engine.tell(shared.state, request, {request.taken: outcome}, decide_next=False)
             shared.committed(told.events)
 
 
+def _still_wanted(state: EngineState, name: str, request: Request) -> bool:
+    """Whether the shot measured is still this instrument's to tell: not when the campaign has
+    ended meanwhile, nor when the point was taken over by another instrument after this one
+    timed out on it (the late reading is dropped; the new instrument measures the shot)."""
+    now = engine.ask(state, name)
+    return isinstance(now, Request) and (now.point, now.taken) == (request.point, request.taken)
+
+
 def _decide(shared: _Shared, name: str, state: EngineState, decide: FleetDecide) -> None:
-    """A decision made on ``state`` with nothing held; journaled if the campaign still wants it
-    (no other decision or status change since), else dropped: the loop asks again."""
+    """A decision made on ``state`` with nothing held (no other can start meanwhile:
+    ``shared.deciding``); journaled unless the campaign has ended since."""
     try:
         events = decide(state, name)
     except BaseException:
@@ -175,7 +187,6 @@ def _decide(shared: _Shared, name: str, state: EngineState, decide: FleetDecide)
         raise
     with shared.cond:
         shared.deciding = None
-        now = shared.state
-        if now.status is Status.RUNNING and len(now.decisions) == len(state.decisions):
+        if shared.state.status is Status.RUNNING:
             shared.committed(events)
         shared.cond.notify_all()

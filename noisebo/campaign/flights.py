@@ -20,7 +20,9 @@ from noisebo.events import ShotTaken
 class Flight:
     """Point ``point`` under way on ``instrument`` ("" with one instrument): its shots so far,
     its shot count once raised by ``MoreShots`` (None: as proposed), the unusable shots counted
-    then, and whether it has had a shot or an attempt (its ``point_overhead_s`` paid)."""
+    then, whether it has had a shot or an attempt (its ``point_overhead_s`` paid), and
+    ``silent``: why its named instrument is taken to be gone (its last attempt at the current
+    shot timed out; empty otherwise), so that an idle instrument takes the point over."""
 
     point: int
     instrument: str = ""
@@ -28,6 +30,7 @@ class Flight:
     wanted: int | None = None
     rejected: int = 0
     begun: bool = False
+    silent: str = ""
 
 
 class Campaign(Protocol):

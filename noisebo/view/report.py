@@ -79,8 +79,10 @@ def campaign_report(path: Path, out_dir: Path) -> list[Path]:
             _t_map_image(axes[1, 2], data, config)
         else:
             _points_by_value(axes[1, 2], data, config)
+    several = sorted(set(data.points.instrument) - {""})
+    on = f" on {len(several)} instruments ({', '.join(several)})" if several else ""
     fig.suptitle(
-        f"{data.config['name']}: seed {data.seed}, {data.policy} policy, {len(data.points)} points ({data.status})",
+        f"{data.config['name']}: seed {data.seed}, {data.policy} policy, {len(data.points)} points{on} ({data.status})",
         fontsize=13,
     )
     written = [out_dir / f"{path.stem}_report.png"]
@@ -229,6 +231,9 @@ def _step_colourbar(fig_ax, n_steps: int) -> None:
     bar.update_ticks()
 
 
+INSTRUMENT_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
 def _trajectory(ax, data: CampaignRecord, config: CampaignConfig, colours) -> None:
     s, p, steps = config.space, data.points, data.steps
     x_label, _ = _units(config)
@@ -239,7 +244,24 @@ def _trajectory(ax, data: CampaignRecord, config: CampaignConfig, colours) -> No
         ax.imshow(
             shown, origin="lower", aspect="auto", cmap="Greys", extent=(s.x_min, s.x_max, s.t_min, s.t_max), alpha=0.6
         )
-    ax.scatter(p.x, p.t, c=colours, s=36, edgecolor="k", linewidth=0.5, zorder=3)
+    names = sorted(set(p.instrument) - {""})
+    if names:  # several instruments: one marker each, the colour still the step
+        for name, marker in zip(names, INSTRUMENT_MARKERS * len(names)):
+            mine = np.asarray(p.instrument) == name
+            ax.scatter(
+                p.x[mine],
+                p.t[mine],
+                c=np.asarray(colours)[mine],
+                marker=marker,
+                s=44,
+                edgecolor="k",
+                linewidth=0.5,
+                zorder=3,
+                label=f"measured by {name}",
+            )
+        ax.legend(fontsize=8, loc="upper right")
+    else:
+        ax.scatter(p.x, p.t, c=colours, s=36, edgecolor="k", linewidth=0.5, zorder=3)
     where = f"over the acquisition map of step {len(steps)} (darker: higher)" if len(steps) else "(no decision yet)"
     ax.set(
         xlabel=x_label,

@@ -195,3 +195,29 @@ def test_a_campaign_not_started():
 def test_an_empty_plot_says_so():
     assert "nothing measured yet" in plot("f", "x", "f", [])
     assert "nothing measured yet" in plot("f", "x", "f", [("points", [], [], None, "red")])
+
+
+def test_a_fleet_instruments_page_says_its_own_point_the_points_in_flight_and_who_measured_what():
+    from noisebo.campaign.fleet import FleetTiming, run_fleet
+    from tests.noisebo.campaign.test_fleet import FLEET, NAMES, SIM
+
+    seen = []
+    run_fleet(FLEET, {n: SIM for n in NAMES}, 4, FleetTiming(0.5, 1.0), lambda state, events: seen.append(state))
+    state = next(s for s in seen if len(s.flights) == 3 and len(s.points) >= 3 and all(f.taken for f in s.flights))
+    mine = next(f for f in state.flights if f.instrument == "b")
+    page = text_of(render({**MEASURING, "instrument": "b"}, state))
+    assert f"noisebo campaign campaign/reward/s4@{state.created_utc}, instrument b measuring" in page
+    assert f"measuring point {mine.point} (" in page and f"shot {len(mine.taken) + 1} of" in page
+    flying = ", ".join(f"{f.point} on {f.instrument}" for f in state.flights)
+    assert f"shots of the points in flight: {flying})" in page
+    last = state.points[-1]
+    assert f"point instrument x t (s) shots value noise {last.committed.index} {last.instrument} " in page
+    seeds, idle = next(
+        (s, name)
+        for s in seen
+        if 0 < len(s.points) < 3
+        for name in NAMES
+        if name not in {f.instrument for f in s.flights}
+    )  # its seed point committed, the others' not yet
+    waiting = text_of(render({**MEASURING, "instrument": idle}, seeds))
+    assert "waiting for the other instruments: the seed points are being measured" in waiting

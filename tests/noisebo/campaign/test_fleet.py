@@ -21,6 +21,7 @@ from noisebo.events import (
     DriverInfo,
     PointIssued,
     Request,
+    ShotError,
     ShotFailed,
     ShotTaken,
     Status,
@@ -205,6 +206,69 @@ def test_a_point_handed_over_keeps_its_shots_and_goes_on_on_the_new_instrument()
     assert engine.ask(state, "a") == DecisionDue(0, instrument="a")  # a is free again: it gets point 1
     handed = engine.ask(state, "b")
     assert (handed.point, handed.taken, handed.instrument) == (0, 1, "b")
+
+
+def test_a_point_whose_instrument_timed_out_is_taken_over_by_an_idle_one():
+    state = fresh()
+    state, request = issue(state, "a")
+    state, _ = engine.tell(state, request, {0: Reading(1.0)}, decide_next=False)
+    retry = engine.ask(state, "a")
+    state, _ = engine.tell(state, retry, {1: ShotError("instrument error", "stage stuck")}, decide_next=False)
+    assert engine.ask(state, "b").take_over == -1  # an instrument error is retried where it happened
+    state, _ = engine.tell(state, retry, {1: ShotError("timeout", "no reading for 120 s")}, decide_next=False)
+    due = engine.ask(state, "b")
+    assert (due.take_over, due.reason) == (0, "a timed out at shot 1 (no reading for 120 s)")
+    assert engine.advance(state, instrument="b") == (
+        PointIssued(0, "b", "a timed out at shot 1 (no reading for 120 s)"),
+    )
+    state = driver.in_memory(state, engine.advance(state, instrument="b"))
+    moved = engine.ask(state, "b")
+    assert (moved.point, moved.taken, moved.instrument) == (0, 1, "b")  # the shot taken by a is kept
+    assert engine.ask(state, "a") == DecisionDue(0, instrument="a")  # a, back, gets a point of its own
+    assert engine.ask(state, "c").take_over == -1  # taken over once
+
+
+def test_a_shot_after_the_timeout_keeps_the_point_on_its_instrument():
+    state = fresh()
+    state, request = issue(state, "a")
+    state, _ = engine.tell(state, request, {0: ShotError("timeout", "late")}, decide_next=False)
+    assert engine.ask(state, "b").take_over == 0
+    state, _ = engine.tell(state, engine.ask(state, "a"), {0: Reading(2.0)}, decide_next=False)
+    assert engine.ask(state, "b").take_over == -1
+
+
+class DiesAfter:
+    """A simulator whose every shot from call ``calls`` on times out (its instrument PC gone)."""
+
+    def __init__(self, calls):
+        self.inner, self.calls, self.made = SIM, calls, 0
+        self.name, self.version, self.truth, self.noise_law = "dies", "1", SIM.truth, SIM.noise_law
+
+    def simulate(self, x, t, rng):
+        from noisebo.failures import InstrumentTimeout
+
+        self.made += 1
+        if self.made >= self.calls:
+            raise InstrumentTimeout("no reading within timeout_s")
+        return self.inner.simulate(x, t, rng)
+
+
+def test_a_campaign_finishes_when_one_instrument_dies_its_points_taken_over():
+    events = []
+    instruments = {"a": SIM, "b": DiesAfter(5), "c": SIM}
+    run = run_fleet(FLEET, instruments, 4, FleetTiming(0.5, 1.0), lambda s, new: events.extend(new))
+    final = run.final
+    assert final.status is Status.COMPLETED and len(final.points) == 7
+    taken_over = [e for e in events if isinstance(e, PointIssued) and e.reason]
+    assert taken_over and all(e.reason.startswith("b timed out at shot") for e in taken_over)
+    assert all(e.instrument != "b" for e in taken_over)
+    for over in taken_over:  # finished by the instrument that took it over; b's shots kept, first
+        entry = next(e for e in final.points if e.committed.index == over.point)
+        by = [s.instrument for s in entry.shots]
+        assert entry.instrument == over.instrument and by == sorted(by, key=lambda name: name != "b")
+    assert all(f.instrument == "b" and f.kind == "timeout" for f in final.failures)
+    replayed = engine.replay([engine.new_campaign(FLEET, 4, final.driver, {}, "now"), *events])
+    assert replayed.points == final.points
 
 
 @pytest.mark.parametrize(

@@ -4,15 +4,14 @@ every commit through one writer, one decision at a time."""
 import threading
 import time
 
-import numpy as np
 import pytest
 
 from noisebo.campaign import engine
 from noisebo.campaign.driver import in_memory
 from noisebo.campaign.engine import EngineError
 from noisebo.campaign.fleet_drive import drive_fleet
-from noisebo.events import PointCommitted, ShotTaken, Status
-from noisebo.failures import MeasurementStopped
+from noisebo.events import Decided, PointIssued, ShotTaken, Status
+from noisebo.failures import InstrumentTimeout, MeasurementStopped
 from noisebo.instruments import build
 from noisebo.storage.event_codec import rebuild
 from noisebo.storage.journal import read
@@ -24,16 +23,19 @@ from tests.noisebo.campaign.test_fleet import FLEET, NAMES, fresh
 class Paced:
     """A simulator whose shot takes ``pace`` s per s of exposure, so that shots overlap in time."""
 
-    def __init__(self, pace=0.004, fail=None):
+    def __init__(self, pace=0.004, fail=None, dies_after=None):
         self.inner = build(FLEET.instruments[0].section)
         self.name, self.version, self.pace, self.fail = "paced", "1", pace, fail
         self.truth, self.noise_law = self.inner.truth, self.inner.noise_law
-        self.shots = 0
+        self.shots, self.dies_after = 0, dies_after
 
     def simulate(self, x, t, rng):
         self.shots += 1
         if self.fail is not None and self.shots == self.fail[0]:
             raise self.fail[1]
+        if self.dies_after is not None and self.shots > self.dies_after:
+            time.sleep(0.1)  # waits out its timeout, then gives up
+            raise InstrumentTimeout("no reading within 0.1 s")
         time.sleep(self.pace * t)
         return self.inner.simulate(x, t, rng)
 
@@ -124,9 +126,25 @@ def test_an_unexpected_error_in_one_loop_stops_all_and_is_raised_with_the_commit
     instruments["c"] = Paced(fail=(3, RuntimeError("the stage lost its home position")))
     with pytest.raises(RuntimeError, match="lost its home position"):
         drive_fleet(fresh(), instruments, commit)
-    assert any(isinstance(e, PointCommitted) for e in commits)
+    assert sum(1 for e in commits if isinstance(e, ShotTaken) and e.instrument == "c") == 2  # c's shots before it
     replayed = engine.replay([engine.new_campaign(FLEET, 4, fresh().driver, {}, "now"), *commits])
     assert replayed.status is Status.RUNNING  # resumable: nothing said it ended
+
+
+def test_an_instrument_that_dies_has_its_points_taken_over_and_the_campaign_completes():
+    events = []
+
+    def commit(state, new):
+        events.extend(new)
+        return in_memory(state, new)
+
+    instruments = {"a": Paced(), "b": Paced(dies_after=4), "c": Paced()}
+    final = drive_fleet(fresh(), instruments, commit)
+    assert final.status is Status.COMPLETED and len(final.points) == 7
+    over = [e for e in events if isinstance(e, PointIssued) and e.reason]
+    assert over and all(e.reason.startswith("b timed out") and e.instrument in ("a", "c") for e in over)
+    assert {e.committed.index for e in final.points} == set(range(7))
+    assert sum(1 for e in final.points for s in e.shots if s.instrument == "b") == 4  # all it took, kept
 
 
 def test_the_fleet_must_be_the_configs_instruments():
@@ -134,23 +152,27 @@ def test_the_fleet_must_be_the_configs_instruments():
         drive_fleet(fresh(), {"a": Paced(), "b": Paced()})
 
 
-def test_a_decision_made_while_another_was_journaled_is_dropped_and_made_again():
-    # instrument a's decision is held until b has decided the same step: a's is then dropped
-    gate = threading.Event()
-    made = []
+def test_a_decision_under_way_when_the_campaign_is_stopped_is_dropped():
+    # while step 1 is decided, step 0's point is measured: a stop comes in with one of its shots
+    commits, deciding = [], threading.Event()
 
     def decide(state, name):
-        if name == "a" and not made:
-            made.append(("a", len(state.decisions)))
-            gate.wait(5)
-        else:
-            made.append((name, len(state.decisions)))
-            gate.set()
+        if len(state.decisions) == 1:
+            deciding.set()
+            seen = len(commits)
+            deadline = time.monotonic() + 10
+            while len(commits) == seen and time.monotonic() < deadline:
+                time.sleep(0.01)
         return engine.advance(state, instrument=name)
 
-    final = drive_fleet(fresh(), {name: Paced() for name in NAMES}, decide=decide)
-    assert final.status is Status.COMPLETED
-    steps = [d.step for d in final.decisions]
-    assert steps == list(range(len(steps)))  # each step decided once in the journal
-    assert len(made) > len(steps)  # a decision was made and not journaled
-    assert np.isfinite([d.t for d in final.decisions]).all()
+    def commit(state, events):
+        commits.extend(events)
+        return in_memory(state, events)
+
+    def stop_requested():
+        return "SIGTERM received" if deciding.is_set() else None
+
+    final = drive_fleet(fresh(), {name: Paced(pace=0.02) for name in NAMES}, commit, decide, stop_requested)
+    assert final.status is Status.ABORTED and final.reason == "SIGTERM received"
+    assert [d.step for d in final.decisions] == [0]  # step 1's decision was dropped
+    assert [e.decision.step for e in commits if isinstance(e, Decided)] == [0]

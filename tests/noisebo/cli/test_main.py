@@ -61,7 +61,12 @@ BAD_CONFIGS = {  # file -> text; each is also a CASES row
     "bad_setting.yaml": "instrument: {kind: forrester, settings: {a0: -1}}\n",
     "unknown_setting.yaml": "instrument: {kind: forrester, settings: {colour: red}}\n",
     "v1_layout.yaml": "instrument: {kind: forrester, a0: 0.1}\n",
+    "fleet.yaml": "instruments: [{name: a, kind: forrester}, {name: b, kind: forrester}]\n",
+    "fleet_twins.yaml": "instruments: [{name: a, kind: forrester}, {name: a, kind: forrester}]\n",
+    "fleet_mixed.yaml": "instrument: {kind: forrester}\ninstruments: [{name: a, kind: forrester}]\n",
+    "fleet_manual.yaml": "instruments: [{name: a, kind: forrester}, {name: b, kind: manual}]\n",
 }
+FLEET_REFUSED = "instruments: a campaign of several instruments runs with `noisebo run`"
 
 CASES = [
     (["run", "no_kind.yaml"], "instrument.kind: Field required"),
@@ -82,6 +87,11 @@ CASES = [
     (["run", "unknown_setting.yaml"], "instrument.settings.colour: Extra inputs are not permitted"),
     (["run", "v1_layout.yaml"], "instrument.a0: Extra inputs are not permitted (a driver's own settings go under"),
     (["run", "binary.yaml"], "not a text (UTF-8) file"),
+    (["start", "fleet.yaml"], FLEET_REFUSED),
+    (["sweep", "fleet.yaml", "--seeds", "1"], FLEET_REFUSED),
+    (["run", "fleet_twins.yaml"], "two instruments named 'a'; each instrument needs its own name"),
+    (["run", "fleet_mixed.yaml"], "give `instrument` (one) or `instruments` (several, each with a name), not both"),
+    (["run", "fleet_manual.yaml"], "this campaign is measured by hand"),
     (["resume", "elsewhere.h5"], "was made with the instrument driver 'gramacy-lee' 0.3, which is not installed here"),
     (["sweep", "laser.yaml", "--seeds", "1"], "no installed instrument driver 'laser'"),
     (["run", "extra.yaml"], "colour: Extra inputs are not permitted"),

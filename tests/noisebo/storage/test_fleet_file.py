@@ -107,6 +107,14 @@ def test_inspect_lists_a_fleets_points_with_their_index_and_instrument(forrester
     assert table == [[str(c.point), c.instrument] for c in run.commits]
 
 
+def test_the_report_of_a_fleet_file_draws_it(forrester_fleet, tmp_path):
+    from noisebo.view.report import campaign_report
+
+    _, _, path, _ = forrester_fleet
+    written = campaign_report(path, tmp_path)
+    assert [p.name for p in written] == ["fleet_report.png"] and written[0].stat().st_size > 50_000
+
+
 def test_a_one_instrument_file_has_no_instrument_columns_and_rows_are_indices(tmp_path):
     from tests.noisebo.storage.test_hdf5 import SMALL, commit_points
     from benchmarks.storage import started
