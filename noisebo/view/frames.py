@@ -27,7 +27,7 @@ from noisebo.models.reward import normalise, reward
 from noisebo.state import format_position
 from noisebo.precision import float64
 
-POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured", "index")
+POINT_FIELDS = ("x", "t", "value", "noise", "shot_std", "n_shots", "noise_measured", "index", "instrument")
 
 
 class CampaignTables(Protocol):

@@ -274,9 +274,12 @@ class RerunView:
             if xs.shape[1] > 1
             else {"x": xs[:, 0]}
         )
+        by = {"instrument": [str(name) for name in p["instrument"]]} if _several(p) else {}
         st.log(
             "campaign/points",
-            rr.AnyValues(**coords, t=p["t"], value=p["value"], noise=p["noise"], from_step=p["frame"].astype(np.int64)),
+            rr.AnyValues(
+                **coords, t=p["t"], value=p["value"], noise=p["noise"], from_step=p["frame"].astype(np.int64), **by
+            ),
         )
         if spectrum is not None:
             self._log_spectrum(spectrum, fit)
@@ -293,8 +296,8 @@ class RerunView:
             np.log(np.asarray(p["t"], dtype=np.float64))[None, :], "plasma", (np.log(s.t_min), np.log(s.t_max))
         )[0]
         labels = [
-            f"{'seed' if k == 0 else f'step {k}'}: x={format_position(x)}, t={t:.3g} s"
-            for k, x, t in zip(p["frame"], xy, p["t"])
+            f"{'seed' if k == 0 else f'step {k}'}: x={format_position(x)}, t={t:.3g} s{_on(name)}"
+            for k, x, t, name in zip(p["frame"], xy, p["t"], p["instrument"])
         ]
         images = {}
         if frame.f is not None:
@@ -330,8 +333,8 @@ class RerunView:
         p = frame.points
         on_image = self._image_box()(p["x"], p["t"])
         labels = [
-            f"{'seed' if k == 0 else f'step {k}'}: x={x:.4g}, t={t:.3g} s"
-            for k, x, t in zip(p["frame"], p["x"], p["t"])
+            f"{'seed' if k == 0 else f'step {k}'}: x={x:.4g}, t={t:.3g} s{_on(name)}"
+            for k, x, t, name in zip(p["frame"], p["x"], p["t"], p["instrument"])
         ]
         colours = colour_by_step(p["frame"], self.config.schedule.n_steps)
         self._recording.log(
@@ -475,3 +478,13 @@ def _grow(current: tuple[float, float] | None, values: np.ndarray) -> tuple[floa
         return current or (0.0, 1.0)
     lo, hi = float(values.min()), float(values.max())
     return (lo, hi) if current is None else (min(current[0], lo), max(current[1], hi))
+
+
+def _several(points: dict) -> bool:
+    """Whether the points were measured by several named instruments."""
+    return any(str(name) for name in points["instrument"])
+
+
+def _on(name) -> str:
+    """ " on NAME" for a point of one of several instruments, nothing otherwise."""
+    return f" on {name}" if str(name) else ""

@@ -115,6 +115,24 @@ def test_the_report_of_a_fleet_file_draws_it(forrester_fleet, tmp_path):
     assert [p.name for p in written] == ["fleet_report.png"] and written[0].stat().st_size > 50_000
 
 
+def test_the_recording_of_a_fleet_file_names_each_points_instrument(forrester_fleet, tmp_path):
+    import rerun.chunk
+
+    from noisebo.view.recording import replay
+    from tests.flows.test_campaign_view import labels
+
+    _, run, path, _ = forrester_fleet
+    rrd = replay(path, tmp_path / "fleet.rrd", warn=lambda line: None)
+    last = labels(rrd, "/acquisition/points")[-1]
+    assert [label.rsplit(" on ", 1)[1] for label in last] == [c.instrument for c in run.commits]
+    logged = [
+        chunk.to_record_batch().column("instrument").to_pylist()
+        for chunk in rerun.chunk.RrdReader(rrd).stream()
+        if str(chunk.entity_path) == "/campaign/points"
+    ]
+    assert logged[-1][-1] == [c.instrument for c in run.commits]
+
+
 def test_a_one_instrument_file_has_no_instrument_columns_and_rows_are_indices(tmp_path):
     from tests.noisebo.storage.test_hdf5 import SMALL, commit_points
     from benchmarks.storage import started
