@@ -7,8 +7,9 @@ the order the instruments asked. The clock is simulated: a shot lasts its t plus
 the tip or stage), a decision ``decision_s``. Nothing sleeps: a campaign of hours runs in the
 seconds its decisions take, and the same seed, instruments and timing give the same campaign
 (turns at one time go in the order they were scheduled, the instruments first in the
-config's order). This is the fleet's benchmark and test bed; a
-fleet of real instruments runs each instrument's loop as its own flow run.
+config's order). This is the fleet's benchmark and test bed; real instruments run the same
+engine in real time, each instrument's loop on a thread of its own
+(``noisebo.campaign.fleet_drive``).
 """
 
 from __future__ import annotations
