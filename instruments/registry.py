@@ -117,8 +117,8 @@ def settings_of(config: InstrumentConfig, cls: Driver | None = None) -> BaseMode
 
 
 ONE_INSTRUMENT = (
-    "instruments: a campaign of several instruments runs with `noisebo run` (or the campaign flow); "
-    "this command measures with one `instrument`"
+    "instruments: a campaign of several instruments runs with `noisebo run` or `noisebo sweep` (or the "
+    "campaign flow); this command measures with one `instrument`"
 )
 
 

@@ -178,7 +178,7 @@ def _rebuild(args) -> int:
 
 def _sweep(args) -> int:
     seeds = parse_seeds(args.seeds)
-    config = validated_config(args.config)
+    config = validated_config(args.config, several=True)
     policies = chosen_policies(args.policy)
     if args.workers < 1:
         raise UsageError("--workers must be at least 1")

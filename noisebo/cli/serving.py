@@ -23,7 +23,7 @@ def _serve(args) -> int:
     if args.interval is not None and args.interval <= 0:
         raise UsageError("--interval must be a positive number of seconds")
     for path in args.config:
-        validated_config(path)  # every config validated before anything is registered
+        validated_config(path, several=True)  # every config validated before anything is registered
     from noisebo.flows.deployments import deployments_for, serve_all
 
     deployments = [
@@ -40,7 +40,7 @@ def _serve(args) -> int:
 def _deploy(args) -> int:
     require_server("deploy needs a Prefect server")
     for path in args.config:
-        validated_config(path)
+        validated_config(path, several=True)
     from noisebo.flows.workers import deploy_campaign
 
     for path in map(config_path, args.config):

@@ -155,3 +155,19 @@ def test_the_flow_runs_a_campaign_of_three_instruments_each_on_its_loop(tiny_con
         assert {record.shots.instrument[k] for k in np.flatnonzero(record.shots.point == index)} == {instrument}
     assert record.driver["name"] == "fleet" and set(record.driver["settings"]["instruments"]) == {"a", "b", "c"}
     assert record.driver["settings"]["instruments"]["b"]["name"] == "forrester"
+
+
+def test_a_sweep_runs_campaigns_of_several_instruments(tiny_config, prefect_harness, tmp_path):
+    from noisebo.config import parse_config
+    from noisebo.storage.record import read_record
+
+    dumped = tiny_config.model_dump(mode="json")
+    one = dumped.pop("instrument")
+    fleet = parse_config({**dumped, "instruments": [{**one, "name": n} for n in ("a", "b")]})
+    table = sweep.with_options(task_runner=task_runner("threads", 2))(
+        fleet, seeds=[1, 2], policies=["reward"], out_dir=str(tmp_path)
+    )
+    assert "| reward | 2 |" in Path(table).read_text()
+    for seed in (1, 2):
+        record = read_record(campaign_path(fleet, seed, tmp_path))
+        assert record.status == "completed" and set(record.shots.instrument) == {"a", "b"}

@@ -88,7 +88,6 @@ CASES = [
     (["run", "v1_layout.yaml"], "instrument.a0: Extra inputs are not permitted (a driver's own settings go under"),
     (["run", "binary.yaml"], "not a text (UTF-8) file"),
     (["start", "fleet.yaml"], FLEET_REFUSED),
-    (["sweep", "fleet.yaml", "--seeds", "1"], FLEET_REFUSED),
     (["run", "fleet_twins.yaml"], "two instruments named 'a'; each instrument needs its own name"),
     (["run", "fleet_mixed.yaml"], "give `instrument` (one) or `instruments` (several, each with a name), not both"),
     (["run", "fleet_manual.yaml"], "this campaign is measured by hand"),
