@@ -23,7 +23,7 @@ from prefect.utilities.annotations import quote
 
 from noisebo.flows import abort
 from noisebo.flows.drivers import driver_of
-from noisebo.flows.reporting import RunReport, campaign_run_name, resumed_run_name, run_name
+from noisebo.flows.reporting import RunReport, campaign_run_name, resumed_run_name, run_name, run_name_of
 from noisebo.instruments import build, registry
 from noisebo.campaign.driver import drive, now_utc
 from noisebo.campaign.fleet_drive import drive_fleet
@@ -115,7 +115,7 @@ def run(
         # Prefect types a task's arguments as its function's, not as the quote() it documents for them
         ops.seed_design(quote(state.config), state.seed)  # type: ignore[call-overload]
     if state.config.instruments is not None:
-        final = drive_fleet(state, instrument, commit, decide, stop_requested)
+        final = drive_fleet(state, instrument, commit, decide, stop_requested, run_loop=_instrument_flow_run(state))
     else:
         final = drive(state, instrument, commit, measure, decide, stop_requested)
     observe(final)
@@ -127,6 +127,36 @@ def run(
     if final.status is Status.ABORTED and signal_name is not None:
         raise abort.CampaignAborted(signal_name, recorder.h5_path)
     return recorder.h5_path
+
+
+def _instrument_run_name() -> str:
+    from prefect.runtime import flow_run
+
+    return f"{flow_run.parameters['campaign_run']}-{flow_run.parameters['instrument']}"
+
+
+@flow(name="instrument", flow_run_name=_instrument_run_name, persist_result=False, validate_parameters=False)
+def instrument_loop(instrument: str, campaign_run: str, loop: Callable[[], None]) -> None:
+    """One instrument's loop of a campaign of several instruments, a flow run of its own under the
+    campaign's (named CAMPAIGN-RUN-INSTRUMENT): its shots, and the stages of the decisions made
+    for it as its tasks."""
+    loop()
+
+
+def _instrument_flow_run(state: EngineState) -> Callable[[str, Callable[[], None]], None]:
+    """Runs each instrument's loop of ``state``'s campaign as an ``instrument`` flow run under the
+    flow run it is called in; outside one, as a plain call."""
+    from prefect.context import FlowRunContext
+
+    context = FlowRunContext.get()
+    if context is None or context.flow_run is None:
+        return lambda name, loop: loop()
+    campaign_run = context.flow_run.name or run_name_of(state)
+
+    def run_loop(name: str, loop: Callable[[], None]) -> None:
+        instrument_loop(name, campaign_run, loop)
+
+    return run_loop
 
 
 def instruments_of(config: CampaignConfig):

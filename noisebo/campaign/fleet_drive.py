@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextvars
 import threading
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable, Mapping, Sequence
 
 from noisebo.campaign import engine, flights
@@ -28,6 +29,7 @@ from noisebo.failures import MeasurementStopped
 from noisebo.precision import float64
 
 FleetDecide = Callable[[EngineState, str], Sequence[Event]]
+LoopRunner = Callable[[str, Callable[[], None]], None]
 RECHECK_S = 0.5  # a waiting instrument looks again this often even if nothing was committed
 
 
@@ -35,14 +37,20 @@ def _advance(state: EngineState, name: str) -> Sequence[Event]:
     return engine.advance(state, instrument=name)
 
 
+def _in_thread(name: str, loop: Callable[[], None]) -> None:
+    loop()
+
+
 @dataclass
 class _Shared:
-    """The campaign every loop shares: its state as journaled, who is deciding, the first error."""
+    """The campaign every loop shares: its state as journaled, the loops' start, who is deciding,
+    the first error."""
 
     state: EngineState
     commit: Commit
     stop_requested: Callable[[], str | None]
     followers: Sequence[Callable[[EngineState], None]]
+    started: threading.Barrier
     cond: threading.Condition = field(default_factory=threading.Condition)
     deciding: str | None = None
     error: BaseException | None = None
@@ -69,6 +77,7 @@ def drive_fleet(
     decide: FleetDecide = _advance,
     stop_requested: Callable[[], str | None] = lambda: None,
     measure: Measure = take_shot,
+    run_loop: LoopRunner = _in_thread,
 ) -> EngineState:
     """Run the campaign of ``state`` (several named instruments) with ``instruments`` (name ->
     driver, the config's names) to its end, each instrument's loop on its own thread; returns
@@ -76,20 +85,21 @@ def drive_fleet(
     (``engine.advance``); ``measure``: one shot (``driver.take_shot``). An instrument that stops
     waiting because the campaign was asked to stop (``MeasurementStopped``) ends the campaign as
     aborted; any other error in a loop stops every loop and is raised here (what was committed
-    stays journaled)."""
+    stays journaled). ``run_loop(name, loop)`` runs instrument ``name``'s loop on its thread:
+    as a plain call, or as a Prefect flow run of its own (``flows/campaign.py``)."""
     names = state.config.instrument_names
     if not names or set(names) != set(instruments):
         raise engine.EngineError(
             f"the campaign names the instruments {list(names)}; the fleet has {sorted(instruments)}"
         )
     followers = [f for f in (getattr(instruments[n], "committed", None) for n in names) if callable(f)]
-    shared = _Shared(state, commit, stop_requested, followers)
+    shared = _Shared(state, commit, stop_requested, followers, threading.Barrier(len(names)))
     for follow in followers:
         follow(state)
     threads = [
         threading.Thread(
             target=contextvars.copy_context().run,  # the caller's context (a Prefect flow run's) in each loop
-            args=(_loop, shared, name, instruments[name], decide, measure),
+            args=(_guarded, shared, name, partial(_loop, shared, name, instruments[name], decide, measure), run_loop),
             name=f"noisebo-instrument-{name}",
             daemon=True,
         )
@@ -104,23 +114,32 @@ def drive_fleet(
     return shared.state
 
 
-@float64
-def _loop(shared: _Shared, name: str, instrument, decide: FleetDecide, measure: Measure) -> None:
+def _guarded(shared: _Shared, name: str, loop: Callable[[], None], run_loop: LoopRunner) -> None:
+    """``run_loop(name, loop)``, its error handed to the caller's thread and every loop stopped."""
     try:
-        while True:
-            work = _next_work(shared, name)
-            if work is None:
-                return
-            state, answer = work
-            if isinstance(answer, Request):
-                _measure(shared, name, instrument, state, answer, measure)
-            else:
-                _decide(shared, name, state, decide)
+        run_loop(name, loop)
     except BaseException as error:  # noqa: BLE001 - handed to the caller's thread
         with shared.cond:
             if shared.error is None:
                 shared.error = error
             shared.cond.notify_all()
+        shared.started.abort()
+
+
+@float64
+def _loop(shared: _Shared, name: str, instrument, decide: FleetDecide, measure: Measure) -> None:
+    # Every loop starts once all have (a flow run takes a moment to create): the first one
+    # started would otherwise take every point while the others are still on their way.
+    shared.started.wait()
+    while True:
+        work = _next_work(shared, name)
+        if work is None:
+            return
+        state, answer = work
+        if isinstance(answer, Request):
+            _measure(shared, name, instrument, state, answer, measure)
+        else:
+            _decide(shared, name, state, decide)
 
 
 def _next_work(shared: _Shared, name: str) -> tuple[EngineState, Request | DecisionDue] | None:

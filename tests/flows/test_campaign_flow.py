@@ -155,6 +155,38 @@ def test_the_flow_runs_a_campaign_of_three_instruments_each_on_its_loop(tiny_con
         assert {record.shots.instrument[k] for k in np.flatnonzero(record.shots.point == index)} == {instrument}
     assert record.driver["name"] == "fleet" and set(record.driver["settings"]["instruments"]) == {"a", "b", "c"}
     assert record.driver["settings"]["instruments"]["b"]["name"] == "forrester"
+    loops, decided_in = instrument_flow_runs("tiny-reward-s5")
+    assert sorted(loops) == ["tiny-reward-s5-a", "tiny-reward-s5-b", "tiny-reward-s5-c"]
+    assert {run.state_name for run in loops.values()} == {"Completed"}
+    parents = {run.parent_task_run_id for run in loops.values()}
+    assert None not in parents and len(parents) == 3  # subflow runs of the campaign's, one each
+    assert sum(decided_in.values()) == 4  # the 4 BO steps' "fit noise model" tasks, each in an instrument's run
+
+
+def instrument_flow_runs(campaign_run: str):
+    """The ``instrument`` flow runs named after ``campaign_run`` (name -> flow run), and how many
+    ``fit noise model`` task runs each holds."""
+    from prefect import get_client
+    from prefect.client.schemas.filters import (
+        FlowFilter,
+        FlowFilterName,
+        FlowRunFilter,
+        FlowRunFilterId,
+        TaskRunFilter,
+        TaskRunFilterName,
+    )
+
+    with get_client(sync_client=True) as client:
+        runs = client.read_flow_runs(flow_filter=FlowFilter(name=FlowFilterName(any_=["instrument"])))
+        loops = {run.name: run for run in runs if run.name.startswith(f"{campaign_run}-")}
+        decided_in = {}
+        for name, run in loops.items():
+            tasks = client.read_task_runs(
+                flow_run_filter=FlowRunFilter(id=FlowRunFilterId(any_=[run.id])),
+                task_run_filter=TaskRunFilter(name=TaskRunFilterName(like_="fit noise model")),
+            )
+            decided_in[name] = len(tasks)
+    return loops, decided_in
 
 
 def test_a_sweep_runs_campaigns_of_several_instruments(tiny_config, prefect_harness, tmp_path):
