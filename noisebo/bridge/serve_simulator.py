@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from noisebo.bridge.client import Spectrum, serve_instrument
+from noisebo.bridge.client import Measure, Spectrum, serve_instrument
+from noisebo.campaign.driver import simulates
 from noisebo.instruments import build
 from noisebo.instruments.registry import validated
 from noisebo.config import load_config
@@ -30,14 +31,24 @@ def main(url: str, config: str = "pfm", pace: str = "0") -> str:
     seconds_per_s = float(pace)
     if not seconds_per_s >= 0:
         raise SystemExit(f"PACE is a number of seconds per second of exposure, 0 or more; got {pace!r}")
+    return serve_instrument(url, os.environ["NOISEBO_BRIDGE_TOKEN"], measure_with(instrument, seconds_per_s))
+
+
+def measure_with(instrument, pace: float = 0.0) -> Measure:
+    """The bridge client's ``measure`` for a noisebo driver: a simulator's shot drawn from the
+    stream keyed by (seed, point, shot) after pace x t seconds of real time, a device's
+    ``measure(x, t)``; a reading with a spectrum handed in as its ``Spectrum``."""
 
     def measure(request):
-        time.sleep(seconds_per_s * request.t)
-        rng = numpy_rng(request.seed, MEASURE, request.point, request.shot)
-        reading = instrument.simulate(np.asarray(request.x), request.t, rng)
+        x = np.asarray(request.x, dtype=np.float64)
+        if simulates(instrument):
+            time.sleep(pace * request.t)
+            reading = instrument.simulate(x, request.t, numpy_rng(request.seed, MEASURE, request.point, request.shot))
+        else:
+            reading = instrument.measure(x, request.t)
         return reading.value if reading.spectrum is None else Spectrum(reading.spectrum, reading.reduction)
 
-    return serve_instrument(url, os.environ["NOISEBO_BRIDGE_TOKEN"], measure)
+    return measure
 
 
 def _config_file(config: str):

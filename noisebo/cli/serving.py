@@ -1,4 +1,5 @@
-"""`noisebo serve` and `deploy`: campaign and sweep deployments on a Prefect server and its work pools."""
+"""`noisebo serve`, `deploy` and `deploy-instrument`: campaign, sweep and instrument-PC deployments on a
+Prefect server and its work pools."""
 
 from __future__ import annotations
 
@@ -51,6 +52,37 @@ def _deploy(args) -> int:
     return 0
 
 
+def _deploy_instrument(args) -> int:
+    import re
+
+    from noisebo.config.sections import INSTRUMENT_NAME
+
+    if not re.fullmatch(INSTRUMENT_NAME, args.name) or len(args.name) > 64:
+        raise UsageError(
+            f"{args.name!r}: an instrument's name is letters, digits, '_', '.' and '-' (as in the campaign's config)"
+        )
+    if not args.url.startswith(("http://", "https://")):
+        raise UsageError(f"{args.url!r}: the campaign bridge's URL starts with http:// or https://")
+    if not args.pace >= 0:
+        raise UsageError(f"--pace is seconds of real time per second of exposure, 0 or more; got {args.pace:g}")
+    config = validated_config(args.config)
+    if config.instrument.kind == "remote":
+        raise UsageError(
+            f"{args.config}: its instrument is `remote`; an instrument PC serves its own driver (pfm, forrester, ...)"
+        )
+    require_server("deploy-instrument needs a Prefect server")
+    from noisebo.flows.instrument_pc import read_token
+    from noisebo.flows.workers import deploy_instrument_pc
+
+    read_token(str(args.token_file))  # readable here, where the worker will read it
+    name = deploy_instrument_pc(args.name, args.url, config_path(args.config), args.token_file, args.pool, args.pace)
+    print(
+        f"deployed {name} to work pool {args.pool!r}; on this PC start its worker with: prefect worker start "
+        f"--pool {args.pool}; once the campaign runs, start the instrument with: prefect deployment run {name}"
+    )
+    return 0
+
+
 def add_parser(commands) -> None:
     """The group's commands, on ``commands`` (the subparsers of ``noisebo``)."""
     serve = commands.add_parser("serve", help="serve campaign and sweep deployments to a Prefect server")
@@ -84,3 +116,19 @@ def add_parser(commands) -> None:
         help="the folder under which each flow run writes a folder of its own",
     )
     deploy.set_defaults(handler=_deploy)
+
+    instrument = commands.add_parser(
+        "deploy-instrument",
+        help="register an instrument PC's loop (serving a campaign's bridge) in its own Prefect work pool",
+    )
+    instrument.add_argument("name", help="the instrument's name in the campaign's config")
+    instrument.add_argument("url", help="the URL of the campaign's bridge for this instrument")
+    instrument.add_argument("--token-file", type=Path, required=True, help="the file holding that bridge's token")
+    instrument.add_argument(
+        "--config", default="pfm", help="a campaign config whose instrument is this PC's driver (default: pfm)"
+    )
+    instrument.add_argument("--pool", required=True, help="this PC's process work pool (created if missing)")
+    instrument.add_argument(
+        "--pace", type=float, default=0.0, help="a simulator's shot takes PACE x t seconds of real time (default 0)"
+    )
+    instrument.set_defaults(handler=_deploy_instrument)

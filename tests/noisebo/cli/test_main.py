@@ -65,6 +65,7 @@ BAD_CONFIGS = {  # file -> text; each is also a CASES row
     "fleet_twins.yaml": "instruments: [{name: a, kind: forrester}, {name: a, kind: forrester}]\n",
     "fleet_mixed.yaml": "instrument: {kind: forrester}\ninstruments: [{name: a, kind: forrester}]\n",
     "fleet_manual.yaml": "instruments: [{name: a, kind: forrester}, {name: b, kind: manual}]\n",
+    "remote.yaml": "instrument: {kind: remote}\n",
 }
 FLEET_REFUSED = "instruments: a campaign of several instruments runs with `noisebo run`"
 
@@ -176,6 +177,9 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
     assert (tmp_path / "figs" / "tiny_reward_s0002_report.png").exists()
 
 
+DEPLOY_PC = ["deploy-instrument", "north", "http://pc:8765", "--token-file", "absent.token", "--pool", "pc-north"]
+
+
 @pytest.mark.parametrize(
     "argv, env, message",
     [
@@ -183,9 +187,17 @@ def test_inspect_reads_a_finished_campaign(tiny_config, tmp_path, prefect_harnes
         (["serve", "TINY", "--interval", "-5"], "http://127.0.0.1:9/api", "--interval must be a positive"),
         (["serve", "broken.yaml"], "http://127.0.0.1:9/api", "not valid YAML"),
         (["serve", "TINY", "--cron", "0 2 * * *", "--interval", "60"], None, "not allowed with argument"),
+        (DEPLOY_PC, None, "deploy-instrument needs a Prefect server"),
+        (["deploy-instrument", "a/b", *DEPLOY_PC[2:]], None, "an instrument's name is letters, digits"),
+        ([*DEPLOY_PC[:2], "ftp://pc", *DEPLOY_PC[3:]], None, "starts with http:// or https://"),
+        ([*DEPLOY_PC, "--pace", "-1"], None, "--pace is seconds of real time per second of exposure"),
+        ([*DEPLOY_PC, "--config", "remote.yaml"], None, "its instrument is `remote`; an instrument PC serves its own"),
+        ([*DEPLOY_PC, "--config", "fleet.yaml"], None, FLEET_REFUSED),
+        (DEPLOY_PC, "http://127.0.0.1:9/api", "absent.token: cannot read the bridge token"),
+        ([*DEPLOY_PC[:4], "--pool"], None, "expected one argument"),
     ],
 )
-def test_serve_refuses_bad_input_before_registering_anything(
+def test_serve_and_deploy_refuse_bad_input_before_registering_anything(
     argv, env, message, tmp_path, tiny_yaml, monkeypatch, capsys
 ):
     setup_files(tmp_path, tiny_yaml)
