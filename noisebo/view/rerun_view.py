@@ -8,12 +8,14 @@ absent viewer costs at most that, once.
 Entities (timeline ``step``, see ``view.frames``; live campaigns also carry ``wall``):
     acquisition/map      the acquisition over the (x, t) grid as an image (t upwards)
     acquisition/points   measured points on that image, coloured by the step that measured them
+                         (with several instruments, by the instrument: f/points and noise/points too)
     f/{mean,band,truth,points}, noise/{mean,band,law,points}, reward/{curve,t_opt}
                          curves in plot boxes, each with its axes (f/axes, noise/axes: lines,
                          ticks at round values, the axes' names and units)
     spectrum/{data,fit}  PFM: the latest sweep and its SHO fit
     traces/*             t_opt_s, a0, a1, latency_s, measurement_time_s as scalars
-    campaign/points      the measured points in raw units (columns x, t, value, noise, from_step)
+    campaign/points      the measured points in raw units (columns x, t, value, noise, from_step;
+                         instrument, with several)
     log                  one text line per decision
 """
 
@@ -33,7 +35,7 @@ from noisebo.config import CampaignConfig
 from noisebo.state import format_position
 from noisebo.view.area import as_image
 from noisebo.view.frames import Curve, Frame
-from noisebo.view.style import step_colours
+from noisebo.view.style import instrument_colours, step_colours
 
 if TYPE_CHECKING:
     from rerun import RecordingStream
@@ -47,6 +49,15 @@ DEFAULT_LIVE = "rerun+http://127.0.0.1:9876/proxy"
 def colour_by_step(steps: np.ndarray, n_steps: int) -> np.ndarray:
     """RGB uint8 (n, 3) of ``style.step_colours``."""
     return (step_colours(steps, n_steps)[:, :3] * 255).astype(np.uint8)
+
+
+def point_colours(points: dict, config: CampaignConfig, rows=slice(None)) -> np.ndarray:
+    """RGB uint8 (n, 3) of the ``rows`` of a frame's points: by instrument for a campaign of
+    several (``style.instrument_colours``, the step in each point's label), else by step."""
+    if config.instruments is not None:
+        names = np.asarray(points["instrument"], dtype=object)[rows]
+        return (instrument_colours(names, config.instrument_names)[:, :3] * 255).astype(np.uint8)
+    return colour_by_step(np.asarray(points["frame"])[rows], config.schedule.n_steps)
 
 
 def acquisition_image(acq_map: np.ndarray) -> np.ndarray:
@@ -336,7 +347,7 @@ class RerunView:
             f"{'seed' if k == 0 else f'step {k}'}: x={x:.4g}, t={t:.3g} s{_on(name)}"
             for k, x, t, name in zip(p["frame"], p["x"], p["t"], p["instrument"])
         ]
-        colours = colour_by_step(p["frame"], self.config.schedule.n_steps)
+        colours = point_colours(p, self.config)
         self._recording.log(
             "acquisition/points",
             self.rr.Points2D(
@@ -401,9 +412,12 @@ class RerunView:
             "f/points",
             rr.Points2D(
                 box(p["x"], p["value"]),
-                colors=colour_by_step(p["frame"], self.config.schedule.n_steps),
+                colors=point_colours(p, self.config),
                 radii=2.0,
-                labels=[f"f={v:.4g} +- {n / np.sqrt(k):.2g}" for v, n, k in zip(p["value"], p["noise"], p["n_shots"])],
+                labels=[
+                    f"f={v:.4g} +- {n / np.sqrt(k):.2g}{_on(name)}"
+                    for v, n, k, name in zip(p["value"], p["noise"], p["n_shots"], p["instrument"])
+                ],
                 show_labels=False,
             ),
         )
@@ -421,7 +435,7 @@ class RerunView:
             rr.Points2D(
                 box(p["t"][measured], p["shot_std"][measured]),
                 radii=2.0,
-                colors=colour_by_step(p["frame"][measured], self.config.schedule.n_steps),
+                colors=point_colours(p, self.config, measured),
             ),
         )
         units = f" ({self._described.value_units})" if self._described.value_units else ""

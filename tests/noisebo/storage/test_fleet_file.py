@@ -131,6 +131,17 @@ def test_the_recording_of_a_fleet_file_names_each_points_instrument(forrester_fl
         if str(chunk.entity_path) == "/campaign/points"
     ]
     assert logged[-1][-1] == [c.instrument for c in run.commits]
+    colours = [
+        row
+        for chunk in rerun.chunk.RrdReader(rrd).stream()
+        if str(chunk.entity_path) == "/acquisition/points"
+        for row in chunk.to_record_batch().column("Points2D:colors").to_pylist()
+        if row is not None
+    ][-1]
+    by_instrument = {}
+    for colour, commit in zip(colours, run.commits):  # one colour per instrument, a different one each
+        assert by_instrument.setdefault(commit.instrument, colour) == colour
+    assert len(set(by_instrument.values())) == len(by_instrument) == len({c.instrument for c in run.commits}) > 1
 
 
 def test_a_one_instrument_file_has_no_instrument_columns_and_rows_are_indices(tmp_path):
