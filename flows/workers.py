@@ -1,7 +1,6 @@
 """Campaigns as deployments of a Prefect ``process`` work pool, run by however many
 ``prefect worker start --pool POOL`` processes there are, and sweeps that hand each campaign to
-them (``noisebo deploy`` and ``noisebo sweep --runner workers``); an instrument PC's loop as a
-deployment of the PC's own pool (``noisebo deploy-instrument``)."""
+them (``noisebo deploy`` and ``noisebo sweep --runner workers``)."""
 
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -35,7 +34,7 @@ def deploy_campaign(config_path: str | Path, pool: str, out_dir: str | Path) -> 
     config_path = str(Path(config_path).resolve())
     name = load_config(config_path).name
     ensure_process_pool(pool)
-    _deploy_from_checkout(
+    deploy_from_checkout(
         "flows/campaign.py:campaign",
         name,
         pool,
@@ -46,31 +45,7 @@ def deploy_campaign(config_path: str | Path, pool: str, out_dir: str | Path) -> 
     return f"campaign/{name}"
 
 
-def deploy_instrument_pc(
-    name: str, url: str, config_path: str | Path, token_file: str | Path, pool: str, pace: float = 0.0
-) -> str:
-    """Register ``instrument-pc/NAME`` in the process work pool ``pool`` (the instrument PC's
-    own): a run serves the instrument of ``config_path`` to the campaign bridge at ``url`` as the
-    instrument ``name``, with the token in ``token_file`` (``flows/instrument_pc.py``); its code
-    taken from this checkout. Returns the deployment's full name."""
-    ensure_process_pool(pool)
-    parameters = {
-        "name": name,
-        "url": url,
-        "config": str(Path(config_path).resolve()),
-        "token_file": str(Path(token_file).expanduser().resolve()),
-        "pace": pace,
-    }
-    description = f"instrument {name}'s PC serving the campaign at {url}, on the {pool} work pool"
-    _deploy_from_checkout(
-        "flows/instrument_pc.py:instrument_pc", name, pool, parameters, description, ["noisebo", "instrument-pc", name]
-    )
-    return f"instrument-pc/{name}"
-
-
-def _deploy_from_checkout(
-    entrypoint: str, name: str, pool: str, parameters: dict, description: str, tags: list
-) -> None:
+def deploy_from_checkout(entrypoint: str, name: str, pool: str, parameters: dict, description: str, tags: list) -> None:
     """Register the flow at ``entrypoint`` of this checkout as the deployment ``name`` of ``pool``."""
     # called from sync code, Prefect's dispatcher returns the flow itself rather than a coroutine
     source = cast("Flow[..., Any]", flow.from_source(source=str(PROJECT_ROOT), entrypoint=entrypoint))

@@ -71,8 +71,7 @@ def _deploy_instrument(args) -> int:
             f"{args.config}: its instrument is `remote`; an instrument PC serves its own driver (pfm, forrester, ...)"
         )
     require_server("deploy-instrument needs a Prefect server")
-    from noisebo.flows.instrument_pc import read_token
-    from noisebo.flows.workers import deploy_instrument_pc
+    from noisebo.bridge.instrument_pc import deploy_instrument_pc, read_token
 
     read_token(str(args.token_file))  # readable here, where the worker will read it
     name = deploy_instrument_pc(args.name, args.url, config_path(args.config), args.token_file, args.pool, args.pace)

@@ -8,7 +8,7 @@ from noisebo.bridge.client import ShotRequest
 from noisebo.campaign.driver import take_shot
 from noisebo.config import ConfigError
 from noisebo.events import Request
-from noisebo.flows.instrument_pc import read_token
+from noisebo.bridge.instrument_pc import read_token
 from noisebo.instruments import build
 from noisebo.config.sections import InstrumentConfig
 

@@ -14,6 +14,7 @@ from noisebo.bridge.client import serve_instrument
 from noisebo.bridge.serve_simulator import measure_with
 from noisebo.config import ConfigError, load_config
 from noisebo.flows.campaign import opened
+from noisebo.flows.workers import deploy_from_checkout, ensure_process_pool
 from noisebo.instruments import build
 from noisebo.instruments.registry import validated
 
@@ -45,3 +46,30 @@ def instrument_pc(
     log.info("instrument %s: %s serving %s", name, instrument.__class__.__name__, url)
     with opened(instrument):
         return serve_instrument(url, token, measure_with(instrument, pace), log=log.info, cafile=cafile)
+
+
+def deploy_instrument_pc(
+    name: str, url: str, config_path: str | Path, token_file: str | Path, pool: str, pace: float = 0.0
+) -> str:
+    """Register ``instrument-pc/NAME`` in the process work pool ``pool`` (the instrument PC's
+    own): a run serves the instrument of ``config_path`` to the campaign bridge at ``url`` as the
+    instrument ``name``, with the token in ``token_file`` (``instrument_pc``); its code
+    taken from this checkout. Returns the deployment's full name."""
+    ensure_process_pool(pool)
+    parameters = {
+        "name": name,
+        "url": url,
+        "config": str(Path(config_path).resolve()),
+        "token_file": str(Path(token_file).expanduser().resolve()),
+        "pace": pace,
+    }
+    description = f"instrument {name}'s PC serving the campaign at {url}, on the {pool} work pool"
+    deploy_from_checkout(
+        "noisebo/bridge/instrument_pc.py:instrument_pc",
+        name,
+        pool,
+        parameters,
+        description,
+        ["noisebo", "instrument-pc", name],
+    )
+    return f"instrument-pc/{name}"
