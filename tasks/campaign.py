@@ -135,14 +135,14 @@ def reduce_point(x, t, readings, model_noise, reduction, clip_sd):
 
 @task(
     name="fit noise model",
-    task_run_name=_run_name(lambda parameters: f"fit noise model n={len(parameters['step'].points.points)}"),
+    task_run_name=_run_name(lambda parameters: f"fit noise model n={len(parameters['step'].noise_data.points)}"),
     **STAGE,
 )
 def fit_noise_model(step: StepInputs) -> NoiseFit:
     """The noise law (or field) on its training points (``noisebo.models.fitting.fit_noise_model``)."""
     noise = decision.noise_stage(step)
     how = "warm: from the previous step" if noise.warm else "restarts"
-    _renamed(f"fit noise model n={len(step.points.points)}: {noise.inputs} inputs ({how})")
+    _renamed(f"fit noise model n={len(step.noise_data.points)}: {noise.inputs} inputs ({how})")
     return noise
 
 

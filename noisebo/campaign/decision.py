@@ -49,7 +49,9 @@ class StepInputs:
     """What BO step ``step`` (0-based index) decides from: the config and its ``method`` (the
     objects it names, ``Method.of(config)``), the points so far, the campaign's seed (the keys are (seed, step)), the previous step's hyperparameters (None at
     the first), the instrument time the budget has left (s; None: no budget) and the points
-    proposed and not yet measured (``noisebo.models.pending``)."""
+    proposed and not yet measured (``noisebo.models.pending``). ``noise_points``: what the noise
+    model learns from and the convergence rule reads, when it is not ``points`` (a law per
+    instrument: ``noisebo.campaign.own_noise``)."""
 
     config: CampaignConfig
     method: Method
@@ -59,10 +61,16 @@ class StepInputs:
     previous: dict | None
     budget_left: float | None
     pending: tuple[Pending, ...] = ()
+    noise_points: CampaignState | None = None
+
+    @property
+    def noise_data(self) -> CampaignState:
+        """The points the noise model is fitted on, with the optimal-t history it converges by."""
+        return self.points if self.noise_points is None else self.noise_points
 
     @cached_property
     def warm(self) -> bool:
-        return warm_step(self.config, self.step, self.previous, self.points.is_converged)
+        return warm_step(self.config, self.step, self.previous, self.noise_data.is_converged)
 
     @cached_property
     def fit_keys(self) -> tuple[jax.Array, jax.Array]:
@@ -82,7 +90,9 @@ class StepInputs:
 def noise_stage(step: StepInputs) -> NoiseFit:
     """The fit noise model stage of ``step``, timed."""
     started = time.perf_counter()
-    noise = fit_noise_model(step.config, step.method.noise_law, step.points, step.fit_keys[1], step.previous, step.warm)
+    noise = fit_noise_model(
+        step.config, step.method.noise_law, step.noise_data, step.fit_keys[1], step.previous, step.warm
+    )
     return noise._replace(seconds=time.perf_counter() - started)
 
 
@@ -108,6 +118,7 @@ def acquire_stage(step: StepInputs, gp: PrimaryFit, noise: NoiseFit) -> Decision
         step.propose_key,
         step.budget_left,
         step.pending,
+        step.noise_points,
     )
     return replace(decision, latency_s=noise.seconds + gp.seconds + time.perf_counter() - started)
 
@@ -122,13 +133,15 @@ def decide_on(
     key: jax.Array | None = None,
     budget_left: float | None = None,
     pending: Sequence[Pending] = (),
+    noise_state: CampaignState | None = None,
 ) -> tuple[Decision, CampaignState]:
     """From fitted models: predict, assess convergence and acquire. Returns the decision and
     ``state`` with this step's predicted optimal t recorded. Points ``pending`` (proposed, not
     yet measured) condition f's GP at its mean there (``noisebo.models.pending``): the noise
-    model, the optimal t and convergence are the measured points' alone."""
+    model, the optimal t and convergence are the measured points' alone. ``noise_state``: the
+    optimal-t history convergence is assessed on, when not ``state``'s (a law per instrument)."""
     prediction = predict(config, method.noise_law, fitted, state, method.policy.uses_spread)
-    convergence = assess(config.schedule, prediction, state)
+    convergence = assess(config.schedule, prediction, state if noise_state is None else noise_state)
     if pending:
         noise_sd = pending_noise_sd(config.space, prediction.posterior, pending)
         fitted = believed(fitted, config.space, pending, noise_sd)

@@ -78,7 +78,8 @@ class EngineState:
     (the failure budget counts from there). ``budget_s``: the instrument-time budget (s; None:
     none), the config's until a ``BudgetChanged``; ``spent_s``: instrument time spent, every
     shot taken and every failed attempt at its t plus ``point_overhead_s`` for every point
-    begun, on all instruments together."""
+    begun, on all instruments together. ``decided_for``: with several instruments, the
+    instrument each decision's point was first issued to, in the order of ``decisions``."""
 
     config: CampaignConfig
     seed: int
@@ -98,6 +99,7 @@ class EngineState:
     budget_base: tuple[int, int] = (0, 0)
     budget_s: float | None = None
     spent_s: float = 0.0
+    decided_for: tuple[str, ...] = ()
 
     def failure_counts(self) -> tuple[int, int]:
         """(failed, attempted) shots of the whole campaign: failed attempts plus rejected shots,
@@ -168,7 +170,9 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
             data = data.with_profile(d.profile_in_use, d.step)
         return replace(state, decisions=state.decisions + (d,), data=data)
     if isinstance(event, PointIssued):
-        return replace(state, flights=flights.with_flight(state, _issued(state, event)))
+        first = flights.flight_of(state, event.point) is None and event.point >= state.config.schedule.n_seed
+        decided_for = state.decided_for + (event.instrument,) if first else state.decided_for
+        return replace(state, flights=flights.with_flight(state, _issued(state, event)), decided_for=decided_for)
     if isinstance(event, Summarised):
         return replace(state, summary=event.summary)
     if isinstance(event, StatusChanged):
@@ -490,19 +494,26 @@ def advance(state: EngineState, stages: Stages | None = None, instrument: str | 
     nxt = flights.n_issued(state)
     if nxt < flights.n_specified(state):
         return (PointIssued(nxt, due.instrument),)
-    return Decided(run_decision(step_inputs(state), stages)), PointIssued(nxt, due.instrument)
+    return Decided(run_decision(step_inputs(state, due.instrument), stages)), PointIssued(nxt, due.instrument)
 
 
-def step_inputs(state: EngineState) -> StepInputs:
+def step_inputs(state: EngineState, instrument: str = "") -> StepInputs:
     """What the due BO step decides from: the points, the keys' seed and step, the previous
     step's hyperparameters, the budget left beside what the points in flight will spend, and
-    those points (pending: each with the shots it wants)."""
+    those points (pending: each with the shots it wants). With a noise law per instrument, the
+    decision for ``instrument`` learns its noise from that instrument's own points, from the
+    previous decision made for it (``noisebo.campaign.own_noise``)."""
     from noisebo.acquisition.method import Method
     from noisebo.campaign.decision import StepInputs
+    from noisebo.campaign.own_noise import own_data, own_previous
 
     from noisebo.models.pending import Pending
 
-    previous = state.decisions[-1].hyperparameters if state.decisions else None
+    if state.config.noise_model.per_instrument and instrument:
+        previous, noise_points = own_previous(state, instrument), own_data(state, instrument)
+    else:
+        previous = state.decisions[-1].hyperparameters if state.decisions else None
+        noise_points = None
     method = Method.of(state.config)
     requests = [_request(state, f.point) for f in state.flights]
     pending = tuple(Pending(r.x, r.t, r.wanted) for r in requests)
@@ -510,7 +521,7 @@ def step_inputs(state: EngineState) -> StepInputs:
     if left is not None:
         left -= sum(_held_s(state, f) for f in state.flights)
     step = len(state.decisions)
-    return StepInputs(state.config, method, state.data, state.seed, step, previous, left, pending)
+    return StepInputs(state.config, method, state.data, state.seed, step, previous, left, pending, noise_points)
 
 
 def stop(state: EngineState, status: Status, reason: str) -> tuple[Event, ...]:

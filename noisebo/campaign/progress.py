@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Sequence
 
 from noisebo.campaign.flights import flight_of
-from noisebo.events import Decided, Event, MoreShots, PointCommitted, Status, StatusChanged
+from noisebo.events import Decided, Event, MoreShots, PointCommitted, PointIssued, Status, StatusChanged
 from noisebo.state import format_position
 
 if TYPE_CHECKING:
@@ -32,7 +32,8 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
                 f"point {event.point}{_on(state, event.point)}: {event.reason}; taking more shots ({event.wanted} in all)"
             )
         elif isinstance(event, Decided):
-            lines += decision_lines(state, event.decision)
+            issued = next((e.instrument for e in events if isinstance(e, PointIssued)), "")
+            lines += decision_lines(state, event.decision, issued)
         elif isinstance(event, StatusChanged) and event.status is Status.BUDGET_SPENT:
             lines.append(event.reason)
     return lines
@@ -43,9 +44,10 @@ def _on(state: EngineState, point: int) -> str:
     return f" on {flight.instrument}" if flight is not None and flight.instrument else ""
 
 
-def decision_lines(state: EngineState, decision) -> list[str]:
+def decision_lines(state: EngineState, decision, instrument: str = "") -> list[str]:
     """What a decision tells a person: the noise profile dropped (first time only), the noise
-    model converged (first time only)."""
+    model converged (first time only; with a law per instrument, each instrument's: the
+    decision's, made for ``instrument``)."""
     lines = []
     dropped = state.config.noise_model.profile is not None and not decision.profile_in_use
     if dropped and state.data.profile_dropped_step is None:
@@ -54,6 +56,14 @@ def decision_lines(state: EngineState, decision) -> list[str]:
             f"{decision.profile_p:.2g} < {state.config.noise_model.profile_alpha:g} on the replicate "
             "scatter): its prior is dropped and the noise law is learned afresh"
         )
-    if decision.converged and not state.data.is_converged:
+    own = state.config.noise_model.per_instrument and instrument
+    if own:
+        from noisebo.campaign.own_noise import own_data
+
+        if decision.converged and not own_data(state, instrument).is_converged:
+            lines.append(
+                f"noise model of {instrument} converged at step {decision.step + 1}: t_opt = {decision.t_opt:.4g} s"
+            )
+    elif decision.converged and not state.data.is_converged:
         lines.append(f"noise model converged at step {decision.step + 1}: t_opt = {decision.t_opt:.4g} s")
     return lines

@@ -101,6 +101,18 @@ class CampaignConfig(FrozenModel):
         return tuple(i.name for i in self.instruments or ())
 
     @model_validator(mode="after")
+    def _law_per_instrument(self) -> CampaignConfig:
+        noise = self.noise_model
+        if not noise.per_instrument:
+            return self
+        if len(self.instrument_names) < 2:
+            raise ValueError("noise_model.per_instrument: a law per instrument needs several `instruments:`")
+        if noise.field is not None or noise.profile is not None:
+            given = "noise_model.field" if noise.field is not None else "noise_model.profile"
+            raise ValueError(f"noise_model.per_instrument: not with {given} (one law per instrument, learned afresh)")
+        return self
+
+    @model_validator(mode="after")
     def _fixed_t_in_range(self) -> CampaignConfig:
         fixed, s = self.acquisition.fixed_t, self.space
         if fixed is not None and not s.t_min <= fixed <= s.t_max:

@@ -108,7 +108,9 @@ class NoiseModelConfig(FrozenModel):
     priors and its spread over positions the field amplitude's prior median; its check is
     ``noisebo.models.field_profile_check``. ``profile_check``: refuse a profile of
     another driver or other driver settings (false: use it anyway, e.g. after a change of
-    settings known not to touch the noise).
+    settings known not to touch the noise). ``per_instrument``: with several instruments, a law
+    per instrument, learned from its own points (``noisebo.campaign.own_noise``); false: one law
+    for all.
     """
 
     mean: NoiseLawName = Field(
@@ -148,6 +150,11 @@ class NoiseModelConfig(FrozenModel):
     )
     profile_check: Flag = Field(
         True, description="refuse a profile made with another driver or other driver settings (false: use it anyway)"
+    )
+    per_instrument: Flag = Field(
+        False,
+        description="with several instruments: each learns its own noise law from its own points, and the "
+        "decisions made for it use it (false: one law for all, learned from every point)",
     )
     profile_alpha: Annotated[Number, Field(gt=0, lt=0.5)] = Field(
         0.01,

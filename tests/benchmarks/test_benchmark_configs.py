@@ -27,7 +27,7 @@ from noisebo.config import load_config  # noqa: E402
 from noisebo.models.reward import true_optimal_t  # noqa: E402
 
 # Every benchmark that loads a config (--config) and builds an instrument from it.
-CONFIG_BENCHMARKS = ("pfm", "budget", "field", "forrester", "pfm2d", "t_estimability", "sweeps", "fleet")
+CONFIG_BENCHMARKS = ("pfm", "budget", "field", "forrester", "pfm2d", "t_estimability", "sweeps", "fleet", "fleet_laws")
 
 
 @pytest.fixture(scope="module")

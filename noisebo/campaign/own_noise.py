@@ -1,0 +1,59 @@
+"""A noise law per instrument (``noise_model.per_instrument``): what a decision made for one
+instrument of several learns its noise from.
+
+Two instruments on one sample see one f but may not share a noise law: a noisier detector, a
+worn tip. With a law per instrument, the decision made for an instrument fits the noise model
+on that instrument's own committed points, and its optimal t, its convergence and its warm start
+are those of the decisions made for that instrument before; f's model is learned from every
+point, each with the noise its own measurement showed. So each instrument is sent to its own
+optimal exposure, and long exposures go where they pay.
+
+Until an instrument has ``MIN_OWN_POINTS`` points of its own, its decisions learn the noise
+from every instrument's points (the best guess there is before it has measured its own), with
+its own optimal-t history. A point's instrument is the one that measured it; a decision's, the
+instrument its point was first issued to (``EngineState.decided_for``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from noisebo.state import CampaignState
+
+if TYPE_CHECKING:
+    from noisebo.campaign.engine import EngineState
+
+MIN_OWN_POINTS = 3
+
+
+def decisions_for(state: EngineState, name: str) -> list[int]:
+    """The 0-based steps of the decisions made for instrument ``name``, in order."""
+    return [step for step, who in enumerate(state.decided_for) if who == name]
+
+
+def own_points(state: EngineState, name: str) -> CampaignState:
+    """The committed points (and their rejected counts) that instrument ``name`` measured, in
+    commit order, in ``state.data``'s form without its history."""
+    mine = [k for k, entry in enumerate(state.points) if entry.instrument == name]
+    data = state.data
+    rejected = tuple(data.rejected[k] for k in mine) if len(data.rejected) == len(data.points) else ()
+    return CampaignState(points=tuple(data.points[k] for k in mine), rejected=rejected)
+
+
+def own_data(state: EngineState, name: str) -> CampaignState:
+    """What the noise model of the decision for ``name`` sees: its own points (every point while
+    it has fewer than ``MIN_OWN_POINTS``), with the optimal t of the decisions made for it and
+    the first of them that found its noise model converged."""
+    steps = decisions_for(state, name)
+    history = tuple(float(state.decisions[k].t_opt) for k in steps)
+    converged = next((n for n, k in enumerate(steps) if state.decisions[k].converged), None)
+    own = own_points(state, name)
+    points = own if len(own.points) >= MIN_OWN_POINTS else replace(state.data, t_opt_maps=())
+    return replace(points, t_opt_history=history, converged_step=converged, profile_dropped_step=None)
+
+
+def own_previous(state: EngineState, name: str) -> dict | None:
+    """The hyperparameters of the last decision made for ``name`` (None before its first)."""
+    steps = decisions_for(state, name)
+    return state.decisions[steps[-1]].hyperparameters if steps else None

@@ -1,0 +1,59 @@
+"""The benchmark of two instruments with different noise laws: a small run of both designs, its
+report and JSON, and its refusals."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "benchmarks" / "fleet_laws.py"
+
+
+def run_benchmark(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(SCRIPT), "--seeds", "1", "--steps", "3", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def test_a_small_run_scores_each_instrument_against_its_own_t_star(tmp_path):
+    path = tmp_path / "laws.json"
+    done = run_benchmark("--json", str(path))
+    assert done.returncode == 0, done.stderr[-2000:]
+    records = json.loads(path.read_text())["records"]
+    assert sorted(records) == ["own", "shared"]
+    for record in records["own"] + records["shared"]:
+        assert set(record["t_final"]) == {"good", "bad"} and sum(record["points"].values()) == 4 + 3
+    lines = done.stdout.splitlines()
+    assert lines[0] == "t*: good 2.512 s, bad 3.314 s"  # Forrester's reward with A1 = 2 and 4, A0 = 0.1
+    rows = [line.split(" | ") for line in lines[-4:]]
+    assert [(r[0].strip("| "), r[1]) for r in rows] == [
+        ("own", "good"),
+        ("own", "bad"),
+        ("shared", "good"),
+        ("shared", "bad"),
+    ]
+    again = run_benchmark("--json", str(path))
+    assert again.returncode == 0 and "seed 0" not in again.stdout  # nothing measured again
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--designs", "both"], "--designs: own and/or shared, got 'both'"),
+        (["--ratio", "0"], "--ratio: a positive number, got 0"),
+        (["--config", str(ROOT / "data" / "configs" / "pfm.yaml")], "has no a1 setting"),
+    ],
+)
+def test_bad_input_is_one_line(args, message):
+    done = run_benchmark(*args)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1 and message in lines[0], done.stderr
