@@ -1,6 +1,6 @@
 """Two instruments whose noise laws differ on one campaign: does each end at its own optimal t?
 
-    python benchmarks/fleet_laws.py [--config PATH] [--ratio 2] [--seeds 20] [--designs own,shared]
+    python benchmarks/fleet_laws.py [--config PATH] [--ratio 2] [--seeds 20] [--designs own,shared,alone]
                                     [--steps 30] [--n-seed 4] [--json PATH] [--report]
 
 One campaign of the config (its schedule, with --steps BO steps and --n-seed seed points) on two
@@ -10,7 +10,11 @@ read-out per shot, 1 s per decision). The designs:
 
 - "own": ``noise_model.per_instrument: true``, each instrument's law learned from its own points
   (``noisebo.campaign.own_noise``);
-- "shared": one law learned from every point, as with one instrument.
+- "shared": one law learned from every point, as with one instrument;
+- "alone": the yardstick, each instrument on a campaign of its own with half the seed points
+  and half the steps (about the points each instrument measures in the designs above), seeds
+  seed*1000 + 0 and + 1; its final t is its last decision's optimal t, its RMSE the mean of
+  the two campaigns' final models'.
 
 Each instrument's t* (``t*(law)``, ``benchmarks/_tstar.py``) maximises the config's reward with
 that instrument's own noise law. A campaign's final t for an instrument is the optimal t
@@ -40,12 +44,14 @@ from _config import Parser, benchmark_config, refuse  # noqa: E402
 from _tstar import law_t_star  # noqa: E402
 from budget import scorer  # noqa: E402
 
+from noisebo.campaign.driver import run_campaign  # noqa: E402
 from noisebo.campaign.fleet import FleetTiming, run_fleet  # noqa: E402
 from noisebo.config import parse_config  # noqa: E402
 from noisebo.instruments import build  # noqa: E402
 
 NAMES = ("good", "bad")
 WITHIN = 0.05
+SEED_STRIDE = 1000
 
 
 def two_instrument_config(base, ratio: float, per_instrument: bool):
@@ -73,6 +79,31 @@ def run_design(config, seed: int, score) -> dict:
     }
 
 
+def run_alone(config, seed: int, score) -> dict:
+    """Each instrument of ``config`` on a campaign of its own (half the seed points and steps)."""
+    started = time.perf_counter()
+    sched = config.schedule
+    finals, rmse = {}, []
+    for j, named in enumerate(config.instruments):
+        data = config.model_dump(mode="json")
+        data.pop("instruments")
+        data["instrument"] = named.section.model_dump(mode="json")
+        data["noise_model"]["per_instrument"] = False
+        data["schedule"] |= {"n_seed": max(sched.n_seed // 2, 2), "n_steps": max(sched.n_steps // 2, 1)}
+        alone = parse_config(data)
+        final = run_campaign(alone, build(alone.instrument), seed * SEED_STRIDE + j).final
+        finals[named.name] = final
+        rmse.append(score(final.summary.f_mean) if final.summary else float("nan"))
+    return {
+        "seed": seed,
+        "t_final": {n: float(f.decisions[-1].t_opt) if f.decisions else float("nan") for n, f in finals.items()},
+        "converged": {n: bool(f.decisions[-1].converged) if f.decisions else False for n, f in finals.items()},
+        "points": {n: len(f.points) for n, f in finals.items()},
+        "rmse": float(np.mean(rmse)),
+        "cpu_s": time.perf_counter() - started,
+    }
+
+
 def report(records: dict, t_star: dict) -> list[str]:
     lines = [
         "| design | instrument | t* (s) | final t (median) | abs(t/t* - 1) (median) | within 5 % | converged "
@@ -96,7 +127,7 @@ def build_parser() -> Parser:
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
     parser.add_argument("--ratio", type=float, default=2.0, help="the bad instrument's A1 over the good one's")
     parser.add_argument("--seeds", type=int, default=20)
-    parser.add_argument("--designs", default="own,shared", help="own, shared or both (default)")
+    parser.add_argument("--designs", default="own,shared,alone", help="own, shared and/or alone (default: all)")
     parser.add_argument("--steps", type=int, default=30, help="BO steps (default 30)")
     parser.add_argument("--n-seed", type=int, default=4, help="seed points (default 4)")
     parser.add_argument("--json", type=Path, default=None)
@@ -108,8 +139,8 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     designs = [v.strip() for v in args.designs.split(",")]
-    if not set(designs) <= {"own", "shared"}:
-        refuse(parser, f"--designs: own and/or shared, got {args.designs!r}")
+    if not set(designs) <= {"own", "shared", "alone"}:
+        refuse(parser, f"--designs: own, shared and/or alone, got {args.designs!r}")
     if not args.ratio > 0:
         refuse(parser, f"--ratio: a positive number, got {args.ratio:g}")
 
@@ -133,7 +164,8 @@ def main(argv=None) -> int:
         for design in designs:
             done = {r["seed"] for r in records.get(design, [])}
             for seed in (s for s in range(args.seeds) if s not in done):
-                record = run_design(configs[design], seed, score)
+                run = run_alone if design == "alone" else run_design
+                record = run(configs[design], seed, score)
                 records.setdefault(design, []).append(record)
                 finals = ", ".join(f"{n} {record['t_final'][n]:.3f} s" for n in NAMES)
                 print(f"{design} seed {seed}: final t {finals} ({record['cpu_s']:.0f} s)", flush=True)

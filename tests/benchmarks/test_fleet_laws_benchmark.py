@@ -29,18 +29,15 @@ def test_a_small_run_scores_each_instrument_against_its_own_t_star(tmp_path):
     done = run_benchmark("--json", str(path))
     assert done.returncode == 0, done.stderr[-2000:]
     records = json.loads(path.read_text())["records"]
-    assert sorted(records) == ["own", "shared"]
+    assert sorted(records) == ["alone", "own", "shared"]
     for record in records["own"] + records["shared"]:
         assert set(record["t_final"]) == {"good", "bad"} and sum(record["points"].values()) == 4 + 3
+    assert records["alone"][0]["points"] == {"good": 2 + 1, "bad": 2 + 1}  # half the seeds and steps each
     lines = done.stdout.splitlines()
     assert lines[0] == "t*: good 2.512 s, bad 3.314 s"  # Forrester's reward with A1 = 2 and 4, A0 = 0.1
-    rows = [line.split(" | ") for line in lines[-4:]]
-    assert [(r[0].strip("| "), r[1]) for r in rows] == [
-        ("own", "good"),
-        ("own", "bad"),
-        ("shared", "good"),
-        ("shared", "bad"),
-    ]
+    rows = [line.split(" | ") for line in lines[-6:]]
+    designs = [(design, name) for design in ("own", "shared", "alone") for name in ("good", "bad")]
+    assert [(r[0].strip("| "), r[1]) for r in rows] == designs
     again = run_benchmark("--json", str(path))
     assert again.returncode == 0 and "seed 0" not in again.stdout  # nothing measured again
 
@@ -48,7 +45,7 @@ def test_a_small_run_scores_each_instrument_against_its_own_t_star(tmp_path):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--designs", "both"], "--designs: own and/or shared, got 'both'"),
+        (["--designs", "both"], "--designs: own, shared and/or alone, got 'both'"),
         (["--ratio", "0"], "--ratio: a positive number, got 0"),
         (["--config", str(ROOT / "data" / "configs" / "pfm.yaml")], "has no a1 setting"),
     ],
