@@ -113,6 +113,7 @@ def inspect_summary(path: Path) -> dict:
         "measurement_time_s": record.measurement_time_s,
         "budget_s": record.budget_s,
         "spent_s": record.spent_s,
+        "spent_s_by_instrument": record.spent_by_instrument,
         "points": rows,
     }
 
@@ -146,6 +147,13 @@ def _inspect(args) -> int:
         print(
             f"  instrument-time budget {summary['budget_s']:.4g} s, {summary['spent_s']:.4g} s spent "
             f"(shots and {summary['config']['schedule']['point_overhead_s']:g} s per point)"
+        )
+    by_instrument = summary["spent_s_by_instrument"]
+    if by_instrument:
+        print(
+            "  instrument time: "
+            + ", ".join(f"{name} {seconds:.4g} s" for name, seconds in by_instrument.items())
+            + f" (shots, failed attempts and {summary['config']['schedule']['point_overhead_s']:g} s per point begun)"
         )
     profile = summary["noise_profile"]
     if profile is not None:

@@ -169,6 +169,30 @@ class CampaignRecord:
         begun = len(set(self.shots.point.tolist()) | set(self.failures.point.tolist()))
         return self.measurement_time_s + float(np.sum(self.failures.t)) + overhead * begun
 
+    @property
+    def spent_by_instrument(self) -> dict[str, float]:
+        """With several instruments, each one's share of ``spent_s`` (s): its shots and failed
+        attempts at their t, and the point overhead of every point whose first attempt it made
+        (a failed one before a shot, else the first shot); {} with one instrument."""
+        shots, failures = self.shots, self.failures
+        names = sorted(set(shots.instrument) | set(failures.instrument) - {""})
+        if not names:
+            return {}
+        spent = dict.fromkeys(names, 0.0)
+        first: dict[int, str] = {}
+        for point, shot, t, name in zip(failures.point, failures.shot, failures.t, failures.instrument):
+            spent[name] += float(t)
+            if shot == 0:
+                first.setdefault(int(point), name)
+        for point, shot, t, name in zip(shots.point, shots.shot, shots.t, shots.instrument):
+            spent[name] += float(t)
+            if shot == 0:
+                first.setdefault(int(point), name)
+        overhead = float(self.config["schedule"].get("point_overhead_s", 0.0))
+        for name in first.values():
+            spent[name] += overhead
+        return spent
+
 
 def read_record(path: Path) -> CampaignRecord:
     """The campaign file at ``path`` as a ``CampaignRecord``; ``CampaignFileError`` (one line)

@@ -192,3 +192,30 @@ def test_spectra_of_a_fleet_are_found_by_point_index(pfm_fleet):
                 want = np.stack([s.reading.spectrum for s in entry.shots])
                 np.testing.assert_array_equal(stacked, want)
     assert_reads_as_whole(running_path, running, folder)  # points in flight, their sweeps included
+
+
+def test_each_instruments_time_is_its_shots_attempts_and_the_points_it_began(forrester_fleet, capsys):
+    from dataclasses import replace
+
+    from noisebo.cli.main import main
+
+    _, run, path, _ = forrester_fleet
+    record = read_record(path)
+    by_instrument = record.spent_by_instrument
+    assert set(by_instrument) == set(NAMES) and sum(by_instrument.values()) == pytest.approx(record.spent_s)
+    for name in NAMES:
+        assert by_instrument[name] == pytest.approx(
+            sum(t for t, n in zip(record.shots.t, record.shots.instrument) if n == name)
+        )
+    # point 1 begun by b's failed attempt, then taken over by c; point 2 only attempted, by c
+    shots = replace(record.shots, point=np.array([0, 0, 1, 1]), shot=np.array([0, 1, 0, 1]),
+                    t=np.array([1.0, 1.0, 2.0, 2.0]), instrument=("a", "a", "b", "c"))  # fmt: skip
+    failures = replace(record.failures, point=np.array([1, 2]), shot=np.array([0, 0]), t=np.array([2.0, 3.0]),
+                       instrument=("b", "c"))  # fmt: skip
+    config = {**record.config, "schedule": {**record.config["schedule"], "point_overhead_s": 0.5}}
+    handmade = replace(record, shots=shots, failures=failures, config=config)
+    assert handmade.spent_by_instrument == {"a": 2.5, "b": 4.5, "c": 5.5}
+    assert handmade.spent_s == pytest.approx(12.5)
+    assert main(["inspect", str(path)]) == 0
+    line = next(line for line in capsys.readouterr().out.splitlines() if "instrument time:" in line)
+    assert line.startswith("  instrument time: a ") and ", b " in line and ", c " in line
