@@ -8,9 +8,10 @@ are those of the decisions made for that instrument before; f's model is learned
 point, each with the noise its own measurement showed. So each instrument is sent to its own
 optimal exposure, and long exposures go where they pay.
 
-Until an instrument has ``MIN_OWN_POINTS`` points of its own, its decisions learn the noise
-from every instrument's points (the best guess there is before it has measured its own), with
-its own optimal-t history. A point's instrument is the one that measured it; a decision's, the
+Until an instrument has one point of its own more than its law has parameters (3 for A0 and A1,
+4 when the law infers p: ``min_own_points``), its decisions learn the noise from every
+instrument's points (the best guess there is before it has measured its own), with its own
+optimal-t history. A point's instrument is the one that measured it; a decision's, the
 instrument its point was first issued to (``EngineState.decided_for``).
 """
 
@@ -24,7 +25,13 @@ from noisebo.state import CampaignState
 if TYPE_CHECKING:
     from noisebo.campaign.engine import EngineState
 
-MIN_OWN_POINTS = 3
+
+def min_own_points(config) -> int:
+    """The points an instrument needs of its own before its law is learned from them alone: one
+    more than the law's parameters."""
+    from noisebo import registry
+
+    return 4 if registry.noise_law(config.noise_model.mean).infers_exponent else 3
 
 
 def decisions_for(state: EngineState, name: str) -> list[int]:
@@ -43,13 +50,13 @@ def own_points(state: EngineState, name: str) -> CampaignState:
 
 def own_data(state: EngineState, name: str) -> CampaignState:
     """What the noise model of the decision for ``name`` sees: its own points (every point while
-    it has fewer than ``MIN_OWN_POINTS``), with the optimal t of the decisions made for it and
+    it has fewer than ``min_own_points``), with the optimal t of the decisions made for it and
     the first of them that found its noise model converged."""
     steps = decisions_for(state, name)
     history = tuple(float(state.decisions[k].t_opt) for k in steps)
     converged = next((n for n, k in enumerate(steps) if state.decisions[k].converged), None)
     own = own_points(state, name)
-    points = own if len(own.points) >= MIN_OWN_POINTS else replace(state.data, t_opt_maps=())
+    points = own if len(own.points) >= min_own_points(state.config) else replace(state.data, t_opt_maps=())
     return replace(points, t_opt_history=history, converged_step=converged, profile_dropped_step=None)
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from noisebo.campaign import engine
 from noisebo.campaign.fleet import FleetTiming, run_fleet
-from noisebo.campaign.own_noise import MIN_OWN_POINTS, decisions_for, own_data, own_previous
+from noisebo.campaign.own_noise import decisions_for, min_own_points, own_data, own_previous
 from noisebo.campaign.stages import run_decision
 from noisebo.config import CampaignConfig, ConfigError, parse_config
 from noisebo.instruments import build
@@ -58,7 +58,7 @@ def test_an_instruments_noise_model_sees_its_own_points_and_its_own_decisions(ca
         own = own_data(final, name)
         mine = [e.committed.point for e in final.points if e.instrument == name]
         steps = decisions_for(final, name)
-        if len(mine) >= MIN_OWN_POINTS:
+        if len(mine) >= min_own_points(final.config):
             assert own.points == tuple(mine)
         else:
             assert own.points == final.data.points
@@ -131,3 +131,8 @@ def test_each_instruments_convergence_is_told_once_with_its_name(campaign):
         told = [line for line in said if line.startswith(f"noise model of {name} converged")]
         assert len(told) == (own_data(final, name).is_converged is True)
     assert not [line for line in said if line.startswith("noise model converged")]
+
+
+@pytest.mark.parametrize("law, points", [("inv_sqrt", 3), ("quadrature", 3), ("power", 4)])
+def test_an_instrument_learns_alone_once_it_has_a_point_more_than_its_law_has_parameters(law, points):
+    assert min_own_points(two_laws(mean=law)) == points
