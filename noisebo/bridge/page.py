@@ -22,6 +22,7 @@ import numpy as np
 
 from noisebo.bridge.wire import campaign_id
 from noisebo.campaign import engine
+from noisebo.campaign.own_noise import own_data
 from noisebo.events import DecisionDue, Done, Request, Status, Wait
 from noisebo.storage.steps import shown as shown_step
 
@@ -74,7 +75,7 @@ def render(status: dict, state: EngineState | None) -> str:
         body = [
             f"<h1>noisebo campaign {html.escape(campaign_id(state))}{serving}</h1>",
             _now(step, state, pc),
-            _progress(step, state),
+            _progress(step, state, name),
             _connection(pc, ended),
             "<h2>What the campaign has learned</h2><div class='plots'>",
             _f_plot(state),
@@ -131,7 +132,7 @@ def _now(step: Request | DecisionDue | Wait | Done, state: EngineState, pc: dict
     )
 
 
-def _progress(step: Request | DecisionDue | Wait | Done, state: EngineState) -> str:
+def _progress(step: Request | DecisionDue | Wait | Done, state: EngineState, name: str | None = None) -> str:
     """Finished work only: the committed points and their shots (the shots of a point not yet
     committed are counted apart), failed attempts, instrument time spent, budget, and the
     predicted optimal t once there is one."""
@@ -144,8 +145,13 @@ def _progress(step: Request | DecisionDue | Wait | Done, state: EngineState) -> 
         if state.budget_s is None
         else f"; budget {number(state.budget_s)} s, {number(max(state.budget_s - state.spent_s, 0.0))} s left"
     )
-    t_opt = f"{number(state.decisions[-1].t_opt)} s" if state.decisions else "not yet (after the first decision)"
-    converged = "yes" if state.data.is_converged else "not yet"
+    own = state.config.noise_model.per_instrument and name
+    learned = own_data(state, name) if own and name else state.data
+    t_opts = learned.t_opt_history if own else tuple(d.t_opt for d in state.decisions)
+    t_opt = f"{number(t_opts[-1])} s" if t_opts else "not yet (after the first decision)"
+    converged = "yes" if learned.is_converged else "not yet"
+    if own:  # a law per instrument: this instrument's
+        t_opt, converged = f"{t_opt} for {html.escape(str(name))}", f"{converged} (its own law)"
     more = ""
     if state.config.instruments is not None and state.flights:
         on = ", ".join(f"{f.point} on {html.escape(f.instrument)}" for f in state.flights)

@@ -221,3 +221,19 @@ def test_a_fleet_instruments_page_says_its_own_point_the_points_in_flight_and_wh
     )  # its seed point committed, the others' not yet
     waiting = text_of(render({**MEASURING, "instrument": idle}, seeds))
     assert "waiting for the other instruments: the seed points are being measured" in waiting
+
+
+def test_with_a_law_per_instrument_each_page_shows_its_instruments_optimal_t_and_convergence():
+    from noisebo.campaign.fleet import FleetTiming, run_fleet
+    from noisebo.campaign.own_noise import own_data
+    from tests.noisebo.campaign.test_own_noise import two_laws
+
+    config = two_laws()
+    final = run_fleet(config, {i.name: build(i.section) for i in config.instruments}, 3, FleetTiming(0.1, 1.0)).final
+    for name in ("good", "bad"):
+        own = own_data(final, name)
+        page = text_of(render({**MEASURING, "instrument": name}, final))
+        converged = "yes" if own.is_converged else "not yet"
+        said = f"predicted optimal t: {number(own.t_opt_history[-1])} s for {name}; noise model converged: {converged} (its own law)"
+        assert said in page
+    assert own_data(final, "good").t_opt_history[-1] != own_data(final, "bad").t_opt_history[-1]
