@@ -18,12 +18,31 @@ instrument its point was first issued to (``EngineState.decided_for``).
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import Protocol
 
+from noisebo.acquisition.records import Decision
+from noisebo.config import CampaignConfig
 from noisebo.state import CampaignState
 
-if TYPE_CHECKING:
-    from noisebo.campaign.engine import EngineState
+
+class _Entry(Protocol):
+    @property
+    def instrument(self) -> str: ...
+
+
+class Fleet(Protocol):
+    """What these read of a campaign (``engine.EngineState``, which imports this module)."""
+
+    @property
+    def config(self) -> CampaignConfig: ...
+    @property
+    def data(self) -> CampaignState: ...
+    @property
+    def points(self) -> tuple[_Entry, ...]: ...
+    @property
+    def decisions(self) -> tuple[Decision, ...]: ...
+    @property
+    def decided_for(self) -> tuple[str, ...]: ...
 
 
 def min_own_points(config) -> int:
@@ -34,12 +53,12 @@ def min_own_points(config) -> int:
     return 4 if registry.noise_law(config.noise_model.mean).infers_exponent else 3
 
 
-def decisions_for(state: EngineState, name: str) -> list[int]:
+def decisions_for(state: Fleet, name: str) -> list[int]:
     """The 0-based steps of the decisions made for instrument ``name``, in order."""
     return [step for step, who in enumerate(state.decided_for) if who == name]
 
 
-def own_points(state: EngineState, name: str) -> CampaignState:
+def own_points(state: Fleet, name: str) -> CampaignState:
     """The committed points (and their rejected counts) that instrument ``name`` measured, in
     commit order, in ``state.data``'s form without its history."""
     mine = [k for k, entry in enumerate(state.points) if entry.instrument == name]
@@ -48,7 +67,7 @@ def own_points(state: EngineState, name: str) -> CampaignState:
     return CampaignState(points=tuple(data.points[k] for k in mine), rejected=rejected)
 
 
-def own_data(state: EngineState, name: str) -> CampaignState:
+def own_data(state: Fleet, name: str) -> CampaignState:
     """What the noise model of the decision for ``name`` sees: its own points (every point while
     it has fewer than ``min_own_points``), with the optimal t of the decisions made for it and
     the first of them that found its noise model converged."""
@@ -60,7 +79,7 @@ def own_data(state: EngineState, name: str) -> CampaignState:
     return replace(points, t_opt_history=history, converged_step=converged, profile_dropped_step=None)
 
 
-def own_previous(state: EngineState, name: str) -> dict | None:
+def own_previous(state: Fleet, name: str) -> dict | None:
     """The hyperparameters of the last decision made for ``name`` (None before its first)."""
     steps = decisions_for(state, name)
     return state.decisions[steps[-1]].hyperparameters if steps else None
