@@ -145,13 +145,12 @@ def _progress(step: Request | DecisionDue | Wait | Done, state: EngineState, nam
         if state.budget_s is None
         else f"; budget {number(state.budget_s)} s, {number(max(state.budget_s - state.spent_s, 0.0))} s left"
     )
-    own = state.config.noise_model.per_instrument and name
-    learned = own_data(state, name) if own and name else state.data
-    t_opts = learned.t_opt_history if own else tuple(d.t_opt for d in state.decisions)
-    t_opt = f"{number(t_opts[-1])} s" if t_opts else "not yet (after the first decision)"
+    own = name if state.config.noise_model.per_instrument and name else None
+    learned = state.data if own is None else own_data(state, own)  # a law per instrument: this one's
+    t_opt = f"{number(learned.t_opt_history[-1])} s" if learned.t_opt_history else "not yet (after the first decision)"
     converged = "yes" if learned.is_converged else "not yet"
-    if own:  # a law per instrument: this instrument's
-        t_opt, converged = f"{t_opt} for {html.escape(str(name))}", f"{converged} (its own law)"
+    if own is not None:
+        t_opt, converged = f"{t_opt} for {html.escape(own)}", f"{converged} (its own law)"
     more = ""
     if state.config.instruments is not None and state.flights:
         on = ", ".join(f"{f.point} on {html.escape(f.instrument)}" for f in state.flights)

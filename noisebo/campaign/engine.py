@@ -279,6 +279,14 @@ def ask(state: EngineState, instrument: str | None = None) -> Request | Decision
     return _next_point(state, "", 0.0, waiting=False)
 
 
+def still_wanted(state: EngineState, instrument: str, request: Request) -> bool:
+    """Whether the shot ``request`` asked ``instrument`` for is still its to tell: not once the
+    campaign has ended, nor once the point was taken over by another instrument after this one
+    timed out on it (a late reading is then dropped; the new instrument measures the shot)."""
+    now = ask(state, instrument)
+    return isinstance(now, Request) and (now.point, now.taken) == (request.point, request.taken)
+
+
 def _ask_fleet(state: EngineState, instrument: str | None) -> Request | DecisionDue | Wait | Done:
     names = state.config.instrument_names
     if instrument is None:  # a reader, not an instrument: the first point under way, or the end

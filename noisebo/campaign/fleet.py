@@ -105,8 +105,7 @@ def run_fleet(
         turn = heapq.heappop(turns)
         if turn.shot is not None:
             request, outcome = turn.shot
-            now = engine.ask(state, turn.name)
-            if isinstance(now, Request) and (now.point, now.taken) == (request.point, request.taken):
+            if engine.still_wanted(state, turn.name, request):
                 told = engine.tell(state, request, {request.taken: outcome}, decide_next=False)
                 state = commit(state, told.events, turn)  # else taken over meanwhile: the late shot is dropped
             for name in (turn.name, *waiting):  # the campaign has changed: whoever waited asks again

@@ -181,17 +181,9 @@ def _measure(shared: _Shared, name: str, instrument, state: EngineState, request
             shared.committed(engine.stop(shared.state, Status.ABORTED, str(stopped)))
         return
     with shared.cond:
-        if _still_wanted(shared.state, name, request):
+        if engine.still_wanted(shared.state, name, request):
             told = engine.tell(shared.state, request, {request.taken: outcome}, decide_next=False)
             shared.committed(told.events)
-
-
-def _still_wanted(state: EngineState, name: str, request: Request) -> bool:
-    """Whether the shot measured is still this instrument's to tell: not when the campaign has
-    ended meanwhile, nor when the point was taken over by another instrument after this one
-    timed out on it (the late reading is dropped; the new instrument measures the shot)."""
-    now = engine.ask(state, name)
-    return isinstance(now, Request) and (now.point, now.taken) == (request.point, request.taken)
 
 
 def _decide(shared: _Shared, name: str, state: EngineState, decide: FleetDecide) -> None:
