@@ -1,6 +1,7 @@
 """Two instruments whose noise laws differ on one campaign: does each end at its own optimal t?
 
-    python benchmarks/fleet_laws.py [--config PATH] [--ratio 2] [--seeds 20] [--designs own,shared,alone]
+    python benchmarks/fleet_laws.py [--config PATH] [--ratio 2] [--seeds 20]
+                                    [--designs own,shared,alone,pooled] [--between a0=0.05]
                                     [--steps 30] [--n-seed 4] [--json PATH] [--report]
 
 One campaign of the config (its schedule, with --steps BO steps and --n-seed seed points) on two
@@ -10,6 +11,9 @@ read-out per shot, 1 s per decision). The designs:
 
 - "own": ``noise_model.per_instrument: true``, each instrument's law learned from its own points
   (``noisebo.campaign.own_noise``);
+- "pooled": a law each under a hierarchical prior between them (``noise_model.between_instruments``
+  set to --between, each parameter's spread: "a0=0.05", the default, all but shares A0 and
+  leaves each its own A1; ``noisebo.models.between``), reported as "pooled a0=0.05";
 - "shared": one law learned from every point, as with one instrument;
 - "alone": the yardstick, each instrument on a campaign of its own with half the seed points
   and half the steps (about the points each instrument measures in the designs above), seeds
@@ -54,12 +58,13 @@ WITHIN = 0.05
 SEED_STRIDE = 1000
 
 
-def two_instrument_config(base, ratio: float, per_instrument: bool):
-    """``base`` on the instruments "good" (its settings) and "bad" (A1 ``ratio`` times higher)."""
+def two_instrument_config(base, ratio: float, per_instrument: bool, between: dict | None = None):
+    """``base`` on the instruments "good" (its settings) and "bad" (A1 ``ratio`` times higher);
+    ``between``: the spreads of a prior between their laws (with ``per_instrument``)."""
     data = base.model_dump(mode="json")
     one = data.pop("instrument")
     bad = {**one, "name": "bad", "settings": {**one["settings"], "a1": one["settings"]["a1"] * ratio}}
-    data["noise_model"] |= {"per_instrument": per_instrument}
+    data["noise_model"] |= {"per_instrument": per_instrument, "between_instruments": between}
     return parse_config({**data, "instruments": [{**one, "name": "good"}, bad]})
 
 
@@ -122,12 +127,31 @@ def report(records: dict, t_star: dict) -> list[str]:
     return lines
 
 
+def parse_between(parser: Parser, text: str) -> dict[str, float]:
+    """--between "a0=0.05,a1=0.5" as the config's ``between_instruments``; refused in one line."""
+    spreads = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        name, _, value = item.partition("=")
+        try:
+            spreads[name.strip()] = float(value)
+        except ValueError:
+            refuse(parser, f"--between: NAME=SD pairs of a0, a1, p, got {item!r}")
+        if name.strip() not in ("a0", "a1", "p") or not spreads[name.strip()] > 0:
+            refuse(parser, f"--between: a positive spread of a0, a1 or p, got {item!r}")
+    if not spreads:
+        refuse(parser, f"--between: at least one NAME=SD, got {text!r}")
+    return spreads
+
+
 def build_parser() -> Parser:
     parser = Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", default=str(ROOT / "data" / "configs" / "forrester.yaml"))
     parser.add_argument("--ratio", type=float, default=2.0, help="the bad instrument's A1 over the good one's")
     parser.add_argument("--seeds", type=int, default=20)
-    parser.add_argument("--designs", default="own,shared,alone", help="own, shared and/or alone (default: all)")
+    parser.add_argument("--designs", default="own,shared,alone", help="own, shared, alone and/or pooled")
+    parser.add_argument(
+        "--between", default="a0=0.05", help="the pooled design's spreads, NAME=SD,... of a0, a1, p (default a0=0.05)"
+    )
     parser.add_argument("--steps", type=int, default=30, help="BO steps (default 30)")
     parser.add_argument("--n-seed", type=int, default=4, help="seed points (default 4)")
     parser.add_argument("--json", type=Path, default=None)
@@ -139,8 +163,9 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     designs = [v.strip() for v in args.designs.split(",")]
-    if not set(designs) <= {"own", "shared", "alone"}:
-        refuse(parser, f"--designs: own, shared and/or alone, got {args.designs!r}")
+    if not set(designs) <= {"own", "shared", "alone", "pooled"}:
+        refuse(parser, f"--designs: own, shared, alone and/or pooled, got {args.designs!r}")
+    between = parse_between(parser, args.between)
     if not args.ratio > 0:
         refuse(parser, f"--ratio: a positive number, got {args.ratio:g}")
 
@@ -150,7 +175,11 @@ def main(argv=None) -> int:
     base, instrument = benchmark_config(parser, args.config, edit)
     if "a1" not in base.instrument.settings:
         refuse(parser, f"{args.config}: its instrument has no a1 setting to make a noisier one of")
-    configs = {d: two_instrument_config(base, args.ratio, d == "own") for d in designs}
+    label = {d: f"pooled {args.between}" if d == "pooled" else d for d in designs}
+    configs = {
+        label[d]: two_instrument_config(base, args.ratio, d in ("own", "pooled"), between if d == "pooled" else None)
+        for d in designs
+    }
     laws = {i.name: build(i.section) for i in next(iter(configs.values())).instruments}
     t_star = {n: law_t_star(base, laws[n]) for n in NAMES}
     settings = {"config": base.model_dump(mode="json"), "ratio": args.ratio}
@@ -161,7 +190,7 @@ def main(argv=None) -> int:
     print("t*: " + ", ".join(f"{n} {t_star[n]:.4g} s" for n in NAMES), flush=True)
     if not args.report:
         score = scorer(base, instrument)
-        for design in designs:
+        for design in map(label.get, designs):
             done = {r["seed"] for r in records.get(design, [])}
             for seed in (s for s in range(args.seeds) if s not in done):
                 run = run_alone if design == "alone" else run_design
@@ -171,7 +200,7 @@ def main(argv=None) -> int:
                 print(f"{design} seed {seed}: final t {finals} ({record['cpu_s']:.0f} s)", flush=True)
                 if args.json is not None:
                     args.json.write_text(json.dumps({"settings": settings, "records": records}))
-    for line in report({d: records[d] for d in designs if d in records}, t_star):
+    for line in report({label[d]: records[label[d]] for d in designs if label[d] in records}, t_star):
         print(line)
     return 0
 

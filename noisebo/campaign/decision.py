@@ -26,6 +26,7 @@ from noisebo.acquisition.proposal import acquire, propose_key
 from noisebo.acquisition.records import Decision
 from noisebo.campaign.compile_ahead import wait_for_compilation
 from noisebo.config import CampaignConfig
+from noisebo.models.between import Other, fleet_prior
 from noisebo.models.convergence import assess
 from noisebo.models.fitting import (
     Fitted,
@@ -51,7 +52,9 @@ class StepInputs:
     the first), the instrument time the budget has left (s; None: no budget) and the points
     proposed and not yet measured (``noisebo.models.pending``). ``noise_points``: what the noise
     model learns from and the convergence rule reads, when it is not ``points`` (a law per
-    instrument: ``noisebo.campaign.own_noise``)."""
+    instrument: ``noisebo.campaign.own_noise``); ``others``: with a prior between the instruments'
+    laws (``noise_model.between_instruments``), each other instrument it is drawn from: its own
+    points and last decision (``noisebo.models.between``)."""
 
     config: CampaignConfig
     method: Method
@@ -62,6 +65,7 @@ class StepInputs:
     budget_left: float | None
     pending: tuple[Pending, ...] = ()
     noise_points: CampaignState | None = None
+    others: tuple[Other, ...] = ()
 
     @property
     def noise_data(self) -> CampaignState:
@@ -90,9 +94,9 @@ class StepInputs:
 def noise_stage(step: StepInputs) -> NoiseFit:
     """The fit noise model stage of ``step``, timed."""
     started = time.perf_counter()
-    noise = fit_noise_model(
-        step.config, step.method.noise_law, step.noise_data, step.fit_keys[1], step.previous, step.warm
-    )
+    law, key = step.method.noise_law, step.fit_keys[1]
+    fleet = fleet_prior(step.config, law, step.others, key, step.step)
+    noise = fit_noise_model(step.config, law, step.noise_data, key, step.previous, step.warm, fleet=fleet)
     return noise._replace(seconds=time.perf_counter() - started)
 
 

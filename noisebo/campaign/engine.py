@@ -510,15 +510,18 @@ def step_inputs(state: EngineState, instrument: str = "") -> StepInputs:
     step's hyperparameters, the budget left beside what the points in flight will spend, and
     those points (pending: each with the shots it wants). With a noise law per instrument, the
     decision for ``instrument`` learns its noise from that instrument's own points, from the
-    previous decision made for it (``noisebo.campaign.own_noise``)."""
+    previous decision made for it, and with a prior between the laws from the other instruments'
+    own points (``noisebo.campaign.own_noise``)."""
     from noisebo.acquisition.method import Method
     from noisebo.campaign.decision import StepInputs
-    from noisebo.campaign.own_noise import own_data, own_previous
+    from noisebo.campaign.own_noise import others_data, own_data, own_previous
 
     from noisebo.models.pending import Pending
 
+    others: tuple = ()
     if state.config.noise_model.per_instrument and instrument:
         previous, noise_points = own_previous(state, instrument), own_data(state, instrument)
+        others = others_data(state, instrument)
     else:
         previous = state.decisions[-1].hyperparameters if state.decisions else None
         noise_points = None
@@ -529,7 +532,7 @@ def step_inputs(state: EngineState, instrument: str = "") -> StepInputs:
     if left is not None:
         left -= sum(_held_s(state, f) for f in state.flights)
     step = len(state.decisions)
-    return StepInputs(state.config, method, state.data, state.seed, step, previous, left, pending, noise_points)
+    return StepInputs(state.config, method, state.data, state.seed, step, previous, left, pending, noise_points, others)
 
 
 def stop(state: EngineState, status: Status, reason: str) -> tuple[Event, ...]:

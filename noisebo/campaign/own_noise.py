@@ -13,6 +13,9 @@ Until an instrument has one point of its own more than its law has parameters (3
 instrument's points (the best guess there is before it has measured its own), with its own
 optimal-t history. A point's instrument is the one that measured it; a decision's, the
 instrument its point was first issued to (``EngineState.decided_for``).
+
+With ``noise_model.between_instruments`` an instrument's law is learned under a hierarchical
+prior drawn from the other instruments' laws (``others_data``, ``noisebo.models.between``).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from typing import Protocol
 
 from noisebo.acquisition.records import Decision
 from noisebo.config import CampaignConfig
+from noisebo.models.between import Other
 from noisebo.state import CampaignState
 
 
@@ -83,3 +87,23 @@ def own_previous(state: Fleet, name: str) -> dict | None:
     """The hyperparameters of the last decision made for ``name`` (None before its first)."""
     steps = decisions_for(state, name)
     return state.decisions[steps[-1]].hyperparameters if steps else None
+
+
+def others_data(state: Fleet, name: str) -> tuple[Other, ...]:
+    """With a prior between the instruments' laws (``noise_model.between_instruments``), each
+    other instrument with ``min_own_points`` points of its own, in the config's order: its own
+    points and the last decision made for it, that the prior of the decision for ``name`` is
+    drawn from; none while ``name`` itself has fewer (its decision learns from every point then)
+    or without such a prior."""
+    config = state.config
+    if config.noise_model.between_instruments is None:
+        return ()
+    least = min_own_points(config)
+    if len(own_points(state, name).points) < least:
+        return ()
+    others = (other for other in config.instrument_names if other != name)
+    return tuple(
+        Other(own_data(state, other), own_previous(state, other))
+        for other in others
+        if len(own_points(state, other).points) >= least
+    )

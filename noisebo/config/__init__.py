@@ -17,6 +17,7 @@ checks across sections; ``parse_config`` and ``load_config``). Everything is imp
 from noisebo.config.campaign import MIN_T_DRAWS, CampaignConfig, load_config, parse_config
 from noisebo.config.loading import SCHEMA_VERSION, describe_errors, migrate_v1, read_profile
 from noisebo.config.model_sections import (
+    BetweenInstruments,
     MAX_INPUTS_ONE_AXIS,
     MAX_INPUTS_SEVERAL_AXES,
     InferenceConfig,
@@ -95,6 +96,7 @@ __all__ = [
     "InferenceConfig",
     "InstrumentConfig",
     "NamedInstrument",
+    "BetweenInstruments",
     "NoiseFieldConfig",
     "NoiseLawName",
     "NoiseModelConfig",

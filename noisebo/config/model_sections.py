@@ -84,6 +84,38 @@ class NoiseFieldConfig(FrozenModel):
     )
 
 
+class BetweenInstruments(FrozenModel):
+    """A hierarchical prior between the noise laws of several instruments (with
+    ``noise_model.per_instrument``): each instrument's log A0, log A1 (and p) drawn about the
+    fleet's, with these standard deviations (the between-instrument spread; log units for A0 and
+    A1, so 0.1 is about 10 %, and p's own units). A parameter left out (null) is the instrument's
+    own, learned from its points alone; a small spread (0.01) all but shares it, as a noise floor
+    set by the sample rather than the detector is. The fleet's value is not given: the decision
+    made for an instrument takes its prior from the other instruments' laws, each fitted on their
+    own points (``noisebo.campaign.own_noise.fleet_prior``)."""
+
+    a0: PositiveFloat | None = Field(
+        None, description="log-sd of an instrument's A0 about the other instruments' (null: its own)"
+    )
+    a1: PositiveFloat | None = Field(
+        None, description="log-sd of an instrument's A1 about the other instruments' (null: its own)"
+    )
+    p: PositiveFloat | None = Field(
+        None, description="sd of an instrument's exponent p about the other instruments' (a law with p; null: its own)"
+    )
+
+    @model_validator(mode="after")
+    def _one_shared(self) -> BetweenInstruments:
+        if self.spreads == {}:
+            raise ValueError("between_instruments: give the spread of a0, a1 or p (what the instruments share)")
+        return self
+
+    @property
+    def spreads(self) -> dict[str, float]:
+        """The pooled parameters' spreads, by name in the order a0, a1, p."""
+        return {name: value for name in ("a0", "a1", "p") if (value := getattr(self, name)) is not None}
+
+
 class NoiseModelConfig(FrozenModel):
     """Structured GP for the single-shot noise standard deviation Noise(t).
 
@@ -110,7 +142,8 @@ class NoiseModelConfig(FrozenModel):
     another driver or other driver settings (false: use it anyway, e.g. after a change of
     settings known not to touch the noise). ``per_instrument``: with several instruments, a law
     per instrument, learned from its own points (``noisebo.campaign.own_noise``); false: one law
-    for all.
+    for all. ``between_instruments``: with a law per instrument, a hierarchical prior between the
+    laws (``BetweenInstruments``): what the instruments share, and how closely.
     """
 
     mean: NoiseLawName = Field(
@@ -156,12 +189,28 @@ class NoiseModelConfig(FrozenModel):
         description="with several instruments: each learns its own noise law from its own points, and the "
         "decisions made for it use it (false: one law for all, learned from every point)",
     )
+    between_instruments: BetweenInstruments | None = Field(
+        None,
+        description="with a law per instrument: a hierarchical prior between the instruments' laws, the "
+        "spread of each shared parameter (null: each law learned from its own points alone)",
+    )
     profile_alpha: Annotated[Number, Field(gt=0, lt=0.5)] = Field(
         0.01,
         description="the profile is dropped for good "
         "once its posterior predictive p-value on the "
         "replicate scatter falls below this",
     )
+
+    @model_validator(mode="after")
+    def _pooling_fits(self) -> NoiseModelConfig:
+        pooled = self.between_instruments
+        if pooled is None:
+            return self
+        if not self.per_instrument:
+            raise ValueError("between_instruments: a prior between the instruments' laws needs per_instrument: true")
+        if pooled.p is not None and not registry.noise_law(self.mean).infers_exponent:
+            raise ValueError(f"between_instruments.p: the law {self.mean!r} has no exponent p")
+        return self
 
     @model_validator(mode="after")
     def _profile_fits(self) -> NoiseModelConfig:

@@ -14,6 +14,7 @@ from functools import lru_cache
 from typing import NamedTuple
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from noisebo.config import (
@@ -185,13 +186,16 @@ def fit_noise_model(
     previous: dict | None = None,
     warm: bool = False,
     capacity: int | None = None,
+    fleet: np.ndarray | None = None,
 ) -> NoiseFit:
     """Fit the noise model (or the noise field, when ``noise_model.field`` is set) of mean
     ``law`` (the one ``noise_model.mean`` names) on its training points, drawing from ``key`` (the noise model's half of the step's fit key:
     ``fit_keys``). ``previous``: the previous step's ``hyperparameters``, an extra start; ``warm``: start
     from them alone, when both models' are all there (the record says whether it did).
     ``capacity``: the padded size of the training set (default the smallest that fits; padding
-    changes no result, only which compiled program runs)."""
+    changes no result, only which compiled program runs). ``fleet``: with
+    ``noise_model.between_instruments``, the prior between instruments in value units
+    (``noisebo.models.between.fleet_prior``; None: none yet)."""
     s, inf = config.space, config.inference
     x, t, _, n_shots, _ = _columns(config, state)
     k_noise = key
@@ -208,6 +212,8 @@ def fit_noise_model(
     data, scale, groups = noise_model.prepare(
         t_train, std_train, n_train, cfg, s.t_min, s.t_max, inf.max_inputs_for(1), capacity, check.in_use
     )
+    if cfg.between_instruments is not None:  # present, weighted or not, so one program serves every step
+        data = data._replace(fleet=jnp.asarray(noise_model.fleet_rows(fleet, scale)))
     n_warm = _previous_guesses(previous, "noise", scale, np.asarray(data.bounds))
     warm = warm and bool(n_warm)
     guesses = (

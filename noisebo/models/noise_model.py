@@ -38,7 +38,10 @@ class NoiseData(NamedTuple):
     normal prior's (mean, sd) of (A0, A1, p) in scaled units (a law without p: its row unused),
     or (3, 5) where the profile records their correlation (its matrix in the last three columns),
     and prior_weight () 1.0 while the profile is in use, 0.0 once dropped (the uniform bounds
-    alone); both None without one."""
+    alone); both None without one. With a prior between instruments
+    (``noise_model.between_instruments``): fleet (3, 3), rows a0, a1, p, columns (loc, sd,
+    weight) of a normal prior of a0, a1 (scaled units) and p, a row's weight 0 where it
+    does not apply (``fleet_rows``); None without one."""
 
     t: jnp.ndarray
     ts: jnp.ndarray
@@ -50,6 +53,7 @@ class NoiseData(NamedTuple):
     bounds: jnp.ndarray
     prior: jnp.ndarray | None = None
     prior_weight: jnp.ndarray | None = None
+    fleet: jnp.ndarray | None = None
 
 
 def c4(n: np.ndarray) -> np.ndarray:
@@ -87,8 +91,33 @@ def make_model(cfg: NoiseModelConfig, law: NoiseLaw):
         # What merging a group's points into their mean left out of the likelihood: the spread of
         # its points about that mean, whose variances m^2 rel_var_i depend on the law (0 for one point).
         numpyro.factor("within_groups", group_log_factor(m, data))
+        fleet_factor(data, a0, a1, p)
 
     return noise_model
+
+
+def fleet_factor(data: NoiseData, a0, a1, p) -> None:
+    """Inside the numpyro model: the prior between instruments (``data.fleet``), a normal
+    density of a0, a1 and p, each row weighted; nothing without one."""
+    if data.fleet is None:
+        return
+    import numpyro
+    import numpyro.distributions as dist
+
+    rows = data.fleet
+    values = jnp.stack([a0, a1, jnp.asarray(p, dtype=a0.dtype)])
+    numpyro.factor("fleet", jnp.sum(rows[:, 2] * dist.Normal(rows[:, 0], rows[:, 1]).log_prob(values)))
+
+
+def fleet_rows(prior: np.ndarray | None, scale: float) -> np.ndarray:
+    """``NoiseData.fleet`` in the model's units (A0 and A1 over the data ``scale``) from a prior
+    between instruments in value units, (3, 3): rows a0, a1, p of (loc, sd, weight)
+    (``noisebo.models.between``); None: every weight 0 (no prior yet)."""
+    if prior is None:
+        return np.array([[0.0, 1.0, 0.0]] * 3)
+    rows = np.array(prior, dtype=np.float64)
+    rows[:2, :2] /= scale
+    return rows
 
 
 class Replicates(Protocol):

@@ -42,10 +42,27 @@ def test_a_small_run_scores_each_instrument_against_its_own_t_star(tmp_path):
     assert again.returncode == 0 and "seed 0" not in again.stdout  # nothing measured again
 
 
+def test_the_pooled_design_is_reported_with_its_spreads(tmp_path):
+    path = tmp_path / "laws.json"
+    done = run_benchmark("--designs", "pooled", "--between", "a0=0.05,a1=0.5", "--json", str(path))
+    assert done.returncode == 0, done.stderr[-2000:]
+    records = json.loads(path.read_text())["records"]
+    assert list(records) == ["pooled a0=0.05,a1=0.5"]
+    assert sum(records["pooled a0=0.05,a1=0.5"][0]["points"].values()) == 4 + 3
+    assert [line.split(" | ")[:2] for line in done.stdout.splitlines()[-2:]] == [
+        ["| pooled a0=0.05,a1=0.5", "good"],
+        ["| pooled a0=0.05,a1=0.5", "bad"],
+    ]
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--designs", "both"], "--designs: own, shared and/or alone, got 'both'"),
+        (["--designs", "both"], "--designs: own, shared, alone and/or pooled, got 'both'"),
+        (["--designs", "pooled", "--between", "a0"], "--between: NAME=SD pairs of a0, a1, p, got 'a0'"),
+        (["--designs", "pooled", "--between", "a2=0.1"], "--between: a positive spread of a0, a1 or p, got 'a2=0.1'"),
+        (["--designs", "pooled", "--between", "a0=0"], "--between: a positive spread of a0, a1 or p, got 'a0=0'"),
+        (["--designs", "pooled", "--between", ","], "--between: at least one NAME=SD, got ','"),
         (["--ratio", "0"], "--ratio: a positive number, got 0"),
         (["--config", str(ROOT / "data" / "configs" / "pfm.yaml")], "has no a1 setting"),
     ],

@@ -97,6 +97,46 @@ def test_a_replayed_journal_gives_the_same_views(campaign):
 
 
 @pytest.mark.parametrize(
+    "per_instrument, law, between, message",
+    [
+        (
+            False,
+            "inv_sqrt",
+            {"a0": 0.1},
+            "between_instruments: a prior between the instruments' laws needs per_instrument",
+        ),
+        (True, "inv_sqrt", {"p": 0.1}, "between_instruments.p: the law 'inv_sqrt' has no exponent p"),
+        (True, "inv_sqrt", {}, "between_instruments: give the spread of a0, a1 or p"),
+        (True, "inv_sqrt", {"a0": 0}, "between_instruments.a0"),
+        (True, "inv_sqrt", {"a0": 0.1, "a2": 0.1}, "between_instruments.a2"),
+    ],
+)
+def test_a_prior_between_laws_refuses_what_it_cannot_do_in_one_line(per_instrument, law, between, message):
+    dumped = two_laws().model_dump(mode="json")
+    dumped["noise_model"] |= {"per_instrument": per_instrument, "mean": law, "between_instruments": between}
+    with pytest.raises(ConfigError) as info:
+        parse_config(dumped)
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_prior_of_an_instrument_is_drawn_from_the_others_with_enough_points(campaign):
+    from noisebo.campaign.own_noise import others_data, own_points
+    from noisebo.models.between import Other
+
+    _, _, final, _ = campaign
+    assert others_data(final, "good") == ()  # no prior between the laws in this config
+    dumped = final.config.model_dump(mode="json")
+    dumped["noise_model"]["between_instruments"] = {"a0": 0.1}
+    pooled = engine.EngineState(**{**final.__dict__, "config": parse_config(dumped)})
+    counts = {n: len(own_points(final, n).points) for n in A1}
+    for name, other in (("good", "bad"), ("bad", "good")):
+        expected = (Other(own_data(final, other), own_previous(final, other)),) if min(counts.values()) >= 3 else ()
+        assert others_data(pooled, name) == expected
+        inputs = engine.step_inputs(pooled, name)
+        assert inputs.others == expected and engine.step_inputs(final, name).others == ()
+
+
+@pytest.mark.parametrize(
     "change, message",
     [
         ({"instruments": None}, "noise_model.per_instrument: a law per instrument needs several `instruments:`"),
