@@ -172,10 +172,18 @@ def page() -> str:
                 layout,
                 layout.POINT_COLUMNS,
                 [(code("step"), "int32", *layout.POINT_STEP), (code("index"), "int32", *layout.POINT_INDEX)]
-                + [_instrument_row(layout, "points")],
+                + [_instrument_row(layout, "points")]
+                + [
+                    (
+                        code("committed_after"),
+                        "int32",
+                        layout.POINT_COMMITTED_AFTER[0],
+                        f"{layout.POINT_COMMITTED_AFTER[1]} (a campaign of several named instruments only)",
+                    )
+                ],
             ),
             f"### `/steps`\n\nOne row per BO step, (n_steps,); {X_SHAPE}.\n",
-            column_table(layout, layout.STEP_COLUMNS, hyper + step_arrays),
+            column_table(layout, layout.STEP_COLUMNS, hyper + step_arrays + [_instrument_row(layout, "steps")]),
             f"### `/shots`\n\nOne row per shot, (n_shots,); {X_SHAPE}.\n",
             typed_table(layout.SHOT_COLUMNS, layout.SHOT_TEXT | {"instrument": _instrument_words(layout, "shots")}),
             "### `/shots/fit`\n\nResonance sweeps only: each sweep's SHO fit, (n_shots,).\n",

@@ -60,11 +60,14 @@ class EngineError(ValueError):
 @dataclass(frozen=True)
 class PointEntry:
     """A committed point with its shots, in shot order, and the named instrument that finished
-    it (empty with a single instrument; each shot names the one that took it)."""
+    it (empty with a single instrument; each shot names the one that took it).
+    ``after_decisions``: the BO decisions made when it was committed (with several
+    instruments, which decisions it was in flight for)."""
 
     committed: PointCommitted
     shots: tuple[ShotTaken, ...]
     instrument: str = ""
+    after_decisions: int = 0
 
 
 @dataclass(frozen=True)
@@ -194,7 +197,7 @@ def _apply_to_point(state: EngineState, event: ShotTaken | ShotFailed | MoreShot
         return replace(
             state,
             data=state.data.with_point(event.point, rejected),
-            points=state.points + (PointEntry(event, flight.taken, flight.instrument),),
+            points=state.points + (PointEntry(event, flight.taken, flight.instrument, len(state.decisions)),),
             flights=flights.without(state, event.index),
             n_rejected=state.n_rejected + rejected,
         )

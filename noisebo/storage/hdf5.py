@@ -42,6 +42,7 @@ from noisebo.storage.layout import (
     LIBVER,
     INSTRUMENT_TEXT,
     POINT_COLUMNS,
+    POINT_COMMITTED_AFTER,
     POINT_INDEX,
     POINT_STEP,
     READABLE_VERSIONS,
@@ -85,6 +86,8 @@ def _fill(f: h5py.File, state: EngineState) -> None:
         put_dataset(points, name, tables["points"][name], units, description)
     put_dataset(points, "step", tables["points"]["step"], *POINT_STEP)
     put_dataset(points, "index", tables["points"]["index"], *POINT_INDEX)
+    if "committed_after" in tables["points"]:
+        put_dataset(points, "committed_after", tables["points"]["committed_after"], *POINT_COMMITTED_AFTER)
     _fill_instrument(state, points, tables["points"]["instrument"])
 
     steps = f.create_group("steps")
@@ -96,6 +99,7 @@ def _fill(f: h5py.File, state: EngineState) -> None:
     for name, (units, description) in ARRAY_COLUMNS.items():
         if name in tables["steps"]:
             put_dataset(steps, name, tables["steps"][name], units, description)
+    _fill_instrument(state, steps, tables["steps"].get("instrument", []))
     fill_summary(f, state)
     manifest.write(f)
 

@@ -72,17 +72,23 @@ POINT_COLUMNS = {
     "noise_measured": ("bool", "True: noise = shot_std; False: noise-model prediction"),
 }
 POINT_STEP = ("1", "BO step that proposed it, counted from 1 (0: a seed point)")
+POINT_COMMITTED_AFTER = (
+    "1",
+    "BO decisions made when the point was committed (several instruments: the points in flight at "
+    "decision k are those handed out before it and committed after it, committed_after >= k)",
+)
 POINT_INDEX = (
     "1",
     "the point's index, the order it was handed out in (shots/point and failures/point refer to it); "
     "rows are in the order points were committed, which with several instruments need not be index order",
 )
 # A campaign of several named instruments (config ``instruments:``) has an "instrument" text column
-# in /points, /shots and /failures; a campaign of one has none.
+# in /points, /shots, /failures and /steps; a campaign of one has none.
 INSTRUMENT_TEXT = {
     "points": "the named instrument that finished the point",
     "shots": "the named instrument that took the shot",
     "failures": "the named instrument whose attempt failed",
+    "steps": "the named instrument the step's point was first handed to: the one the decision was made for",
 }
 # Root attributes that change with every committed point; a running file keeps them in /committed.
 MUTABLE_ATTRS = ("converged_step", "n_points", "n_steps", "n_shots", "n_failed_attempts")
@@ -170,9 +176,10 @@ def several(state: EngineState) -> bool:
     return state.config.instruments is not None
 
 
-def point_rows(entries: Sequence[PointEntry], dimensions: int) -> dict:
+def point_rows(entries: Sequence[PointEntry], dimensions: int, several: bool = False) -> dict:
     """/points columns (POINT_COLUMNS, "step" and "index") of these committed points,
-    (len(entries),) each; x (len(entries), d) for d > 1 axes; "instrument" a list of str."""
+    (len(entries),) each; x (len(entries), d) for d > 1 axes; "instrument" a list of str; with
+    ``several`` instruments also "committed_after" (``POINT_COMMITTED_AFTER``)."""
     points = [e.committed.point for e in entries]
     rows: dict[str, np.ndarray | list[str]] = {
         name: np.asarray([getattr(p, name) for p in points], dtype=column_dtype(name, units))
@@ -183,6 +190,8 @@ def point_rows(entries: Sequence[PointEntry], dimensions: int) -> dict:
     rows["step"] = np.asarray([numbering.shown(e.committed.step) for e in entries], dtype=np.int32)
     rows["index"] = np.asarray([e.committed.index for e in entries], dtype=np.int32)
     rows["instrument"] = [e.instrument for e in entries]
+    if several:
+        rows["committed_after"] = np.asarray([e.after_decisions for e in entries], dtype=np.int32)
     return rows
 
 
@@ -248,6 +257,8 @@ def state_tables(state: EngineState) -> dict:
     decisions = state.decisions
     d = state.config.space.dimensions
     steps = step_rows(decisions, hyperparameter_names(decisions), array_shapes(state), d)
+    if several(state):
+        steps["instrument"] = list(state.decided_for)
     summary = None
     if state.summary is not None:
         s = state.summary
@@ -261,7 +272,7 @@ def state_tables(state: EngineState) -> dict:
         summary |= {name: getattr(s, name) for name in SUMMARY_MAPS if getattr(s, name).size}
     return {
         "grid": {"x": g.x, "t": g.t, "t_fine": g.t_fine},
-        "points": point_rows(state.points, d),
+        "points": point_rows(state.points, d, several(state)),
         "steps": steps,
         "shots": shot_columns(state),
         "summary": summary,

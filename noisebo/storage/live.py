@@ -57,6 +57,7 @@ from noisebo.storage.layout import (
     MUTABLE_ATTRS,
     INSTRUMENT_TEXT,
     POINT_COLUMNS,
+    POINT_COMMITTED_AFTER,
     POINT_INDEX,
     POINT_STEP,
     SHOT_COLUMNS,
@@ -303,10 +304,13 @@ class LiveFile:
         for name, (units, description) in (POINT_COLUMNS | {"step": POINT_STEP}).items():
             self._add(_column(points, name, column_dtype(name, units), units, description, self._tail(name)))
         self._add(_column(points, "index", np.int32, *POINT_INDEX))
+        if self._several:
+            self._add(_column(points, "committed_after", np.int32, *POINT_COMMITTED_AFTER))
         self._layout_instrument(points)
         steps = self._f.create_group("steps")
         for name, (units, description) in STEP_COLUMNS.items():
             self._add(_column(steps, name, column_dtype(name, units), units, description, self._tail(name)))
+        self._layout_instrument(steps)
         hyper = steps.create_group("hyperparameters")
         for name in self._names:
             self._add(
@@ -360,13 +364,14 @@ class LiveFile:
         last, to be written again), a flush, then the counters that make them count, a flush."""
         rows, f = self._rows, self._f
         new_points = state.points[rows["points"] :]
-        points = point_rows(new_points, self._dimensions)
+        points = point_rows(new_points, self._dimensions, self._several)
         self._write_table("points", rows["points"], points)
         self._write_instrument("points", rows["points"], points["instrument"])
         crash()
         steps = step_rows(state.decisions[rows["steps"] :], self._names, self._shapes, self._dimensions)
         self._write_table("steps", rows["steps"], steps)
         self._write_table("steps/hyperparameters", rows["steps"], steps["hyperparameters"])
+        self._write_instrument("steps", rows["steps"], list(state.decided_for[rows["steps"] :]))
         crash()
         self._write_failures(state.failures[rows["failures"] :])
         crash()

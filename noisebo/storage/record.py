@@ -37,7 +37,9 @@ class Points:
     GP used) (n,) f units; n_shots (n,); noise_measured (n,): True when noise is the shots' sd;
     step (n,): 0 a seed point, BO steps from 1; index (n,): the point's index, which ``Shots.point``
     refers to (the row number, unless several instruments committed points out of order);
-    instrument: the named instrument that finished each (empty names with one instrument)."""
+    instrument: the named instrument that finished each (empty names with one instrument);
+    committed_after (n,): the BO decisions made when each was committed (several instruments;
+    None in a file without the column: ``after`` is then ``step``, exact for one instrument)."""
 
     x: np.ndarray
     t: np.ndarray
@@ -49,16 +51,25 @@ class Points:
     step: np.ndarray
     index: np.ndarray
     instrument: tuple[str, ...]
+    committed_after: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
+
+    @property
+    def after(self) -> np.ndarray:
+        """(n,) the BO decisions made when each point was committed: a seed point committed
+        before the first decision 0, one instrument's point of step k after decision k, k."""
+        return self.step if self.committed_after is None else self.committed_after
 
 
 @dataclass(frozen=True)
 class Steps:
     """One row per BO step (k,), as ``STEP_COLUMNS`` of ``storage.layout`` describes them, with the
     fitted hyperparameters per step and the per-step arrays (``ARRAY_COLUMNS``: acq_map, f_mean,
-    f_var, noise_mean, noise_var, and for a noise field t_opt_map), each (k, ...)."""
+    f_var, noise_mean, noise_var, and for a noise field t_opt_map), each (k, ...); instrument:
+    the named instrument each decision was made for (empty names with one instrument, or a file
+    without the column)."""
 
     step: np.ndarray
     x: np.ndarray
@@ -78,6 +89,7 @@ class Steps:
     profile_in_use: np.ndarray
     hyperparameters: dict[str, np.ndarray] = field(default_factory=dict)
     arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    instrument: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.step)
@@ -267,7 +279,10 @@ def _points(table: dict) -> Points:
     n = len(table["t"])
     columns = {name: _column(table, name, units, n) for name, (units, _) in POINT_COLUMNS.items()}
     index = np.asarray(table["index"]) if "index" in table else np.arange(n, dtype=np.int32)
-    return Points(**columns, step=np.asarray(table["step"]), index=index, instrument=_names(table, n))
+    after = np.asarray(table["committed_after"]) if "committed_after" in table else None
+    return Points(
+        **columns, step=np.asarray(table["step"]), index=index, instrument=_names(table, n), committed_after=after
+    )
 
 
 def _steps(table: dict) -> Steps:
@@ -275,7 +290,7 @@ def _steps(table: dict) -> Steps:
     columns = {name: _column(table, name, units, n) for name, (units, _) in STEP_COLUMNS.items()}
     arrays = {name: np.asarray(table[name]) for name in ARRAY_COLUMNS if name in table}
     hyper = {name: np.asarray(v) for name, v in (table.get("hyperparameters") or {}).items()}
-    return Steps(**columns, hyperparameters=hyper, arrays=arrays)
+    return Steps(**columns, hyperparameters=hyper, arrays=arrays, instrument=_names(table, n))
 
 
 def _shots(table: dict, fits: dict | None) -> Shots:

@@ -7,14 +7,16 @@ from noisebo.instruments.registry import description
 
 
 def blueprint(config: CampaignConfig):
-    """The ``rerun.blueprint.Blueprint``: acquisition map with the measured points, f with its
+    """The ``rerun.blueprint.Blueprint``: acquisition map with the measured points (and those in
+    flight, with several instruments), f with its
     band and the truth (for two axes: images of the GP mean and sd, the truth and the
     acquisition over the area; for more, the table of points), the noise model with its data, the normalised reward with t_opt (and the
     latest sweep where the driver's shots are spectra); below them the scalar traces and the decision log."""
     import rerun.blueprint as rrb
 
+    coloured = "points by instrument, pale: in flight" if config.instruments is not None else "points by step"
     top: list[rrb.View] = [
-        rrb.Spatial2DView(origin="acquisition", name="acquisition over (x, t); points by step"),
+        rrb.Spatial2DView(origin="acquisition", name=f"acquisition over (x, t); {coloured}"),
         rrb.Spatial2DView(origin="f", name="f(x): mean, +-2 sd band, truth, points"),
     ]
     if config.space.dimensions == 2:

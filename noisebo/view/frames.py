@@ -10,6 +10,12 @@ for the seed points, k (1..n_steps) for BO step k.
 Frame numbering (the ``step`` timeline): 0 holds the seed points; k (1..n_steps) the decision of
 BO step k and the point it measured (1-based, as the progress lines print it); n_steps + 1 the
 final models after the last point.
+
+With several instruments points are committed out of order, while others are measured: frame k
+then holds the points committed before decision k + 1 (``Points.after``; for one instrument the
+same as those of steps up to k), and the points in flight then (handed out and not yet committed:
+``Frame.in_flight``); it is whole once decision k + 1 is made, or the campaign ended
+(``complete_frames``).
 """
 
 from __future__ import annotations
@@ -68,7 +74,9 @@ class Frame:
     exists yet (frame 0); ``latest_point`` the index of the last point committed by then (None
     for none; with several instruments not always the highest); ``acq_map`` (n_x, n_t) only for BO steps ((m,), its best over t at
     each reference point, for d > 1 axes); ``proposal`` (x, t), x a float for one axis, a tuple
-    for more; ``scalars`` the traces."""
+    for more; ``scalars`` the traces; ``in_flight`` (several instruments): the points handed out
+    and not yet committed at the frame's end, columns x, t, index and instrument (the one its
+    decision was made for; empty for a seed point), None for one instrument."""
 
     step: int
     points: dict
@@ -81,6 +89,7 @@ class Frame:
     scalars: dict
     text: str
     latest_point: int | None
+    in_flight: dict | None = None
 
 
 @float64
@@ -90,8 +99,25 @@ def normalised_reward(t: np.ndarray, noise: np.ndarray, alpha: float, beta: floa
 
 
 def n_frames(tables: CampaignTables, config: CampaignConfig) -> int:
-    """Frames a campaign holds so far: seeds, one per committed BO point, the final one if done."""
-    return 1 + int(np.sum(tables.points.step >= 1)) + (tables.summary is not None)
+    """Frames a campaign holds so far: seeds, one per committed BO point (several instruments: one
+    per decision), the final one if done."""
+    done = tables.summary is not None
+    if _fleet(tables):
+        return 1 + len(tables.steps.step) + done
+    return 1 + int(np.sum(tables.points.step >= 1)) + done
+
+
+def complete_frames(tables: CampaignTables, config: CampaignConfig) -> int:
+    """Frames that no later commit changes: all of them once the campaign is done; while it runs,
+    with several instruments those before the last decision (its frame takes the points committed
+    until the next), with one every frame whose point is committed."""
+    frames = n_frames(tables, config)
+    return frames - 1 if _fleet(tables) and tables.summary is None else frames
+
+
+def _fleet(tables: CampaignTables) -> bool:
+    """Whether the points record the decisions each was committed after (several instruments)."""
+    return tables.points.committed_after is not None
 
 
 def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
@@ -100,13 +126,25 @@ def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
     final = tables.summary is not None and k == int(np.sum(tables.points.step >= 1)) + 1
     bo = min(k, len(steps.step)) - 1  # index of the latest decision shown, -1 for none
     points = _points_until(tables.points, k)
+    in_flight = _in_flight(tables, config.schedule.n_seed, k) if _fleet(tables) and not final else None
     scalars = {"measurement_time_s": _measurement_time(tables.shots, points)}
     if final:
         return _final_frame(tables, config, k, points, scalars)
     if bo < 0:
         n = len(points["x"])
         return Frame(
-            0, points, None, None, None, None, None, None, scalars, f"{n} seed points measured", _latest(points)
+            0,
+            points,
+            None,
+            None,
+            None,
+            None,
+            None,
+            None,
+            scalars,
+            f"{n} seed points measured" + _flying(in_flight),
+            _latest(points),
+            in_flight,
         )
     arrays, grid = steps.arrays, tables.grid
     f = Curve(grid["x"], arrays["f_mean"][bo], np.sqrt(np.maximum(arrays["f_var"][bo], 0.0)))
@@ -120,7 +158,9 @@ def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
     text = (
         f"step {bo + 1}: measure x={format_position(x)} at t={t:.4g} s with {int(steps.shots[bo])} shots; "
         f"predicted optimal t {t_opt:.4g} s{' (noise model converged)' if steps.converged[bo] else ''}; "
-        f"decision {latency:.3f} s" + (" (the first: it compiles or loads the models)" if bo == 0 else "")
+        f"decision {latency:.3f} s"
+        + (" (the first: it compiles or loads the models)" if bo == 0 else "")
+        + _flying(in_flight)
     )
     return Frame(
         bo + 1,
@@ -134,6 +174,7 @@ def frame_at(tables: CampaignTables, config: CampaignConfig, k: int) -> Frame:
         scalars,
         text,
         _latest(points),
+        in_flight,
     )
 
 
@@ -142,8 +183,31 @@ def frames(tables: CampaignTables, config: CampaignConfig) -> list[Frame]:
     return [frame_at(tables, config, k) for k in range(n_frames(tables, config))]
 
 
+def _in_flight(tables: CampaignTables, n_seed: int, k: int) -> dict:
+    """The points of decisions 1..k (point index n_seed + j - 1 for decision j) not committed
+    before decision k + 1, at their proposals, with the instrument each decision was made for (a
+    running campaign's tables and its file's say the same). Seed points are all committed before
+    the first decision, so never in flight at a frame's end."""
+    points, steps = tables.points, tables.steps
+    done = {int(i) for i, after in zip(points.index, points.after) if after <= k}
+    flying = [j for j in range(min(k, len(steps.step))) if n_seed + j not in done]
+    names = steps.instrument if len(steps.instrument) == len(steps.step) else ("",) * len(steps.step)
+    return {
+        "x": np.asarray([steps.x[j] for j in flying], dtype=np.float64),
+        "t": np.asarray([steps.t[j] for j in flying], dtype=np.float64),
+        "index": np.asarray([n_seed + j for j in flying], dtype=np.int64),
+        "instrument": tuple(str(names[j]) for j in flying),
+    }
+
+
+def _flying(in_flight: dict | None) -> str:
+    if not in_flight or not len(in_flight["t"]):
+        return ""
+    return f"; in flight: {len(in_flight['t'])} point(s)"
+
+
 def _points_until(points: Points, k: int) -> dict:
-    keep = points.step <= k  # a point of step s belongs to frame s (seed points: 0)
+    keep = points.after <= k  # committed before decision k + 1 (one instrument: a point of step s is frame s's)
     out = {name: np.asarray(getattr(points, name))[keep] for name in POINT_FIELDS}
     out["frame"] = points.step[keep]
     return out

@@ -17,7 +17,7 @@ from noisebo.config import CampaignConfig, parse_config
 from noisebo.models.grids import grids
 from noisebo.storage.layout import STEP_COLUMNS
 from noisebo.storage.record import Points, Shots, Steps, from_state, read_record
-from noisebo.view.frames import CampaignTables, Frame, frame_at, frames, n_frames
+from noisebo.view.frames import CampaignTables, Frame, complete_frames, frame_at, frames
 from noisebo.view.rerun_view import RerunView
 
 FIT_KEYS = ("amplitude", "resonance_hz", "q", "sign")
@@ -141,13 +141,18 @@ class CampaignRecording:
         hyper = rows.pop("hyperparameters")
         # each _PerStep stands in for a (k, ...) array: frame_at only takes one step's array from it
         arrays = cast("dict[str, np.ndarray]", {name: _PerStep(decisions, name) for name in array_shapes(state)})
-        steps = Steps(**{name: rows[name] for name in STEP_COLUMNS}, hyperparameters=hyper, arrays=arrays)
+        steps = Steps(
+            **{name: rows[name] for name in STEP_COLUMNS},
+            hyperparameters=hyper,
+            arrays=arrays,
+            instrument=tuple(state.decided_for),
+        )
         g = grids(self.config)
         point, t = np.asarray(self._shot_point, dtype=np.int32), np.asarray(self._shot_t)
         shots = Shots(
             point=point, shot=np.zeros_like(point), t=t, value=np.full(len(t), np.nan), ok=np.ones(len(t), dtype=bool)
         )  # frames read a shot's point and t only
-        rows = point_rows(state.points, d)
+        rows = point_rows(state.points, d, state.config.instruments is not None)
         points = Points(**rows | {"instrument": tuple(rows["instrument"])})
         return _Running({"x": g.x, "t": g.t, "t_fine": g.t_fine}, points, steps, shots)
 
@@ -156,8 +161,9 @@ class CampaignRecording:
         if not self.view.enabled:
             return
         tables = self._tables(state)
-        seeded = len(state.points) >= self.config.schedule.n_seed
-        ready = n_frames(tables, self.config) if seeded else 0  # frame 0 waits for the last seed point
+        one = tables.points.committed_after is None  # one instrument: frame 0 waits for the last seed point
+        seeded = not one or len(state.points) >= self.config.schedule.n_seed
+        ready = complete_frames(tables, self.config) if seeded else 0
         for k in range(self.logged, ready):
             frame = frame_at(tables, self.config, k)
             self.view.log(frame, *_latest_sweep(frame, state))

@@ -44,6 +44,7 @@ if TYPE_CHECKING:
 BOX_W, BOX_H = 300.0, 150.0
 TRACES = ("t_opt_s", "a0", "a1", "latency_s", "measurement_time_s")
 DEFAULT_LIVE = "rerun+http://127.0.0.1:9876/proxy"
+IN_FLIGHT_ALPHA = 110  # of 255: a point in flight is drawn pale, the measured ones solid
 
 
 def colour_by_step(steps: np.ndarray, n_steps: int) -> np.ndarray:
@@ -265,6 +266,7 @@ class RerunView:
         f_box, n_box = self._ranges(frame)
         if self.config.space.dimensions == 1:
             self._log_points_on_map(frame)
+            self._log_in_flight("acquisition/in_flight", frame, lambda x, t: self._image_box()(x, t))
             if frame.acq_map is not None:
                 st.log("acquisition/map", rr.Image(acquisition_image(frame.acq_map)))
                 axis = self.config.space.axes[0]
@@ -299,10 +301,8 @@ class RerunView:
         """Two axes: GP mean and sd over the area (and the truth, and the acquisition's best
         over t) as images, the measured points on each coloured by their t (log scale)."""
         rr, st, s, p = self.rr, self._recording, self.config.space, frame.points
-        n0, n1 = s.points_per_axis
         xy = np.asarray(p["x"], dtype=np.float64).reshape(len(p["t"]), 2)
-        px = (xy[:, 0] - s.lows[0]) / (s.highs[0] - s.lows[0]) * (n0 - 1) + 0.5
-        py = (s.highs[1] - xy[:, 1]) / (s.highs[1] - s.lows[1]) * (n1 - 1) + 0.5
+        pixels = self._area_pixels(xy, p["t"])
         t_colour = colour_image(
             np.log(np.asarray(p["t"], dtype=np.float64))[None, :], "plasma", (np.log(s.t_min), np.log(s.t_max))
         )[0]
@@ -324,16 +324,50 @@ class RerunView:
                 rr.Image(colour_image(as_image(values, self.config)[::-1], "magma" if name == "f_sd" else "viridis")),
             )
         for name in ("f_mean", "f_sd", "truth", "acquisition"):
+            self._log_in_flight(f"area/{name}/in_flight", frame, self._area_pixels)
             st.log(
                 f"area/{name}/points",
                 rr.Points2D(
-                    np.stack([px, py], axis=-1),
+                    pixels,
                     colors=t_colour,
                     radii=np.where(p["frame"] == frame.step, 2.0, 1.2),
                     labels=labels,
                     show_labels=False,
                 ),
             )
+
+    def _log_in_flight(self, path: str, frame: Frame, place: Callable) -> None:
+        """The points in flight at the frame's end (several instruments) at ``place(x, t)``: a
+        wide, pale disc in their instrument's colour each, labelled; none: cleared."""
+        flying = frame.in_flight
+        if flying is None or not len(flying["t"]):
+            self._recording.log(path, self.rr.Clear(recursive=False))
+            return
+        names = flying["instrument"]
+        colours = (instrument_colours(names, self.config.instrument_names) * 255).astype(np.uint8)
+        colours[:, 3] = IN_FLIGHT_ALPHA
+        self._recording.log(
+            path,
+            self.rr.Points2D(
+                place(flying["x"], flying["t"]),
+                colors=colours,
+                radii=4.0,
+                labels=[
+                    f"in flight: point {i}, t={t:.3g} s{_on(name)}"
+                    for i, t, name in zip(flying["index"], flying["t"], names)
+                ],
+                show_labels=False,
+            ),
+        )
+
+    def _area_pixels(self, x, t=None) -> np.ndarray:
+        """(n, 2) pixel positions on the area's images of n positions (n, 2) (``t`` unused)."""
+        s = self.config.space
+        n0, n1 = s.points_per_axis
+        xy = np.asarray(x, dtype=np.float64).reshape(-1, 2)
+        px = (xy[:, 0] - s.lows[0]) / (s.highs[0] - s.lows[0]) * (n0 - 1) + 0.5
+        py = (s.highs[1] - xy[:, 1]) / (s.highs[1] - s.lows[1]) * (n1 - 1) + 0.5
+        return np.stack([px, py], axis=-1)
 
     def _image_box(self) -> ImageBox:
         """(x, t) onto the acquisition image's pixels (one per grid point, t upwards)."""

@@ -59,6 +59,8 @@ def forrester_fleet(tmp_path_factory):
         record = read_record(path)  # the running file, appended in place
         assert record.points.index.tolist() == [e.committed.index for e in state.points]
         assert record.points.instrument == tuple(e.instrument for e in state.points)
+        assert record.points.committed_after.tolist() == [e.after_decisions for e in state.points]
+        assert record.steps.instrument == state.decided_for
         expected = from_state(state)
         assert record.shots.point.tolist() == expected.shots.point.tolist()
         assert record.shots.instrument == expected.shots.instrument
@@ -83,6 +85,11 @@ def test_a_fleet_file_keeps_commit_order_indices_and_instruments(forrester_fleet
         mine = record.shots.point == point
         assert mine.sum() >= 1 and {record.shots.instrument[k] for k in np.flatnonzero(mine)} == {instrument}
     assert set(record.shots.instrument) == set(NAMES)
+    assert record.points.committed_after.tolist() == [e.after_decisions for e in final.points]
+    assert record.steps.instrument == final.decided_for and len(set(final.decided_for)) > 1
+    bo = record.points.step >= 1
+    assert np.all(record.points.committed_after[bo] >= record.points.step[bo])  # after the decision that made it
+    assert np.any(record.points.committed_after[bo] > record.points.step[bo])  # and some while others decided
     assert_same(read_campaign(path)["points"], read_campaign(_rewritten(final, tmp_path))["points"])
 
 
@@ -142,6 +149,50 @@ def test_the_recording_of_a_fleet_file_names_each_points_instrument(forrester_fl
     for colour, commit in zip(colours, run.commits):  # one colour per instrument, a different one each
         assert by_instrument.setdefault(commit.instrument, colour) == colour
     assert len(set(by_instrument.values())) == len(by_instrument) == len({c.instrument for c in run.commits}) > 1
+    logged = [
+        chunk.to_record_batch()
+        for chunk in rerun.chunk.RrdReader(rrd).stream()
+        if str(chunk.entity_path) == "/acquisition/in_flight"
+    ]
+    flying = [
+        row
+        for batch in logged
+        if "Points2D:labels" in batch.schema.names
+        for row in batch.column("Points2D:labels").to_pylist()
+        if row
+    ]
+    assert flying and all(label.startswith("in flight: point ") for row in flying for label in row)
+    assert {int(label.split()[3].rstrip(",")) for row in flying for label in row} <= {c.point for c in run.commits}
+    assert len(flying) < sum(batch.num_rows for batch in logged)  # and cleared where nothing was in flight
+
+
+def test_the_live_recording_of_a_fleet_shows_what_its_replay_shows(tmp_path):
+    import rerun.chunk
+
+    from noisebo.view.recording import CampaignRecording, replay
+    from noisebo.view.rerun_view import RerunView
+
+    config = fleet_config(n_steps=6)
+    view = RerunView(config, "live", rrd=tmp_path / "live.rrd", warn=lambda line: None, wall_clock=False)
+    live = CampaignRecording(view, config)
+    final, _ = recorded_fleet(config, tmp_path / "fleet.h5", seed=3, check=lambda recorder: live.update(recorder.state))
+    live.update(final)
+    live.close()
+    replay(tmp_path / "fleet.h5", tmp_path / "replay.rrd", warn=lambda line: None)
+
+    def shown(rrd, entity):
+        rows = []
+        for chunk in rerun.chunk.RrdReader(rrd).stream():
+            if str(chunk.entity_path) == entity:
+                batch = chunk.to_record_batch()
+                steps = batch.column("step").to_pylist()
+                labels = batch.column("Points2D:labels").to_pylist() if "Points2D:labels" in batch.schema.names else []
+                rows += list(zip(steps, labels or [None] * len(steps)))
+        return sorted(rows, key=lambda row: row[0])
+
+    for entity in ("/acquisition/points", "/acquisition/in_flight"):
+        assert shown(tmp_path / "live.rrd", entity) == shown(tmp_path / "replay.rrd", entity), entity
+    assert any(labels for _, labels in shown(tmp_path / "live.rrd", "/acquisition/in_flight"))
 
 
 def test_a_one_instrument_file_has_no_instrument_columns_and_rows_are_indices(tmp_path):

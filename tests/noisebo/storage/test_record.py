@@ -67,8 +67,13 @@ def test_a_column_an_older_schema_lacks_reads_empty(campaign):
 def test_the_typed_tables_are_the_layouts_columns():
     from noisebo.storage.layout import POINT_COLUMNS, STEP_COLUMNS
 
-    assert {f.name for f in dataclasses.fields(Points)} == set(POINT_COLUMNS) | {"step", "index", "instrument"}
-    assert {f.name for f in dataclasses.fields(Steps)} == set(STEP_COLUMNS) | {"hyperparameters", "arrays"}
+    point_fields = set(POINT_COLUMNS) | {"step", "index", "instrument", "committed_after"}
+    assert {f.name for f in dataclasses.fields(Points)} == point_fields
+    assert {f.name for f in dataclasses.fields(Steps)} == set(STEP_COLUMNS) | {
+        "hyperparameters",
+        "arrays",
+        "instrument",
+    }
 
 
 def test_a_missing_file_is_the_readers_one_line_error(tmp_path):

@@ -9,7 +9,7 @@ import pytest
 from noisebo.config import CampaignConfig
 from noisebo.storage.layout import STEP_COLUMNS
 from noisebo.storage.record import Points, Shots, Steps, Summary
-from noisebo.view.frames import frame_at, frames, n_frames, normalised_reward
+from noisebo.view.frames import complete_frames, frame_at, frames, n_frames, normalised_reward
 
 CONFIG = CampaignConfig().with_overrides(
     space={"n_x": 3, "n_t": 2, "t_min": 1.0, "t_max": 2.0}, schedule={"n_seed": 2, "n_steps": 2}
@@ -126,3 +126,50 @@ def test_normalised_reward_by_hand():
     np.testing.assert_allclose(
         normalised_reward(np.array([1.0, 2.0, 3.0]), np.array([0.5, 0.0, 0.0]), 1.0, 2.0), [1.0, 5 / 7, 0.0]
     )
+
+
+def fleet_tables() -> Tables:
+    """Two instruments: seeds 0 and 1 committed before any decision; decision 1's point 2 and
+    decision 2's point 3 both committed after decision 2 (point 3 first); decision 3's point 4
+    never committed (the campaign stopped)."""
+    base = tables(False)
+    points = dataclasses.replace(
+        base.points,
+        x=np.array([0.1, 0.9, 0.0, 0.5]),
+        t=np.array([1.0, 2.0, 1.0, 1.5]),
+        value=np.arange(4.0),
+        noise=np.full(4, 0.3),
+        shot_std=np.full(4, 0.3),
+        n_shots=np.full(4, 2),
+        noise_measured=np.ones(4, dtype=bool),
+        step=np.array([0, 0, 2, 1]),
+        index=np.array([0, 1, 3, 2]),
+        instrument=("a", "b", "a", "b"),
+        committed_after=np.array([0, 0, 2, 2]),
+    )
+    steps = base.steps
+    three = {name: np.append(v, v[-1]) for name, v in vars(steps).items() if isinstance(v, np.ndarray)}
+    three |= {"step": np.array([1, 2, 3]), "x": np.array([0.5, 0.0, 1.0]), "t": np.array([1.5, 1.0, 2.0])}
+    arrays = {name: np.concatenate([v, v[-1:]]) for name, v in steps.arrays.items()}
+    hyper = {name: np.append(v, v[-1]) for name, v in steps.hyperparameters.items()}
+    steps = dataclasses.replace(steps, **three, arrays=arrays, hyperparameters=hyper, instrument=("b", "a", "a"))
+    return dataclasses.replace(base, points=points, steps=steps)
+
+
+def test_a_fleets_frames_hold_what_was_committed_and_what_was_in_flight_at_each_decision():
+    fleet = fleet_tables()
+    assert n_frames(fleet, CONFIG) == 4 and complete_frames(fleet, CONFIG) == 3  # one per decision
+    shown = [(f.points["index"].tolist(), f.in_flight["index"].tolist()) for f in frames(fleet, CONFIG)]
+    assert shown == [([0, 1], []), ([0, 1], [2]), ([0, 1, 3, 2], []), ([0, 1, 3, 2], [4])]
+    at_three = frame_at(fleet, CONFIG, 3).in_flight
+    assert at_three["x"].tolist() == [1.0] and at_three["t"].tolist() == [2.0]  # decision 3's proposal
+    assert at_three["instrument"] == ("a",)  # never committed: the instrument it was made for
+    at_one = frame_at(fleet, CONFIG, 1)
+    assert at_one.in_flight["t"].tolist() == [1.5] and at_one.in_flight["instrument"] == ("b",)  # made for b
+    assert at_one.text.endswith("; in flight: 1 point(s)")
+
+
+def test_one_instrument_has_nothing_in_flight_and_its_frames_as_before():
+    one = tables(True)
+    assert frame_at(one, CONFIG, 1).in_flight is None
+    assert complete_frames(one, CONFIG) == n_frames(one, CONFIG) == 3
