@@ -216,7 +216,7 @@ def _multi_fidelity_model(d: int, X, Y, Yvar):
     return SingleTaskMultiFidelityGP(X, Y, train_Yvar=Yvar, data_fidelities=[d])
 
 
-def variance_removed(model, mc_points, candidates):
+def variance_removed(model, mc_points, candidates, pending=None):
     """(C,) what one more point at each of the (C, d + 1) ``candidates`` would take off the posterior
     variance of f averaged over the (M, d + 1) ``mc_points``: qNegIntegratedPosteriorVariance's
     value at the candidate (q = 1) less its value now, in closed form (one fantasy of a Gaussian
@@ -224,12 +224,19 @@ def variance_removed(model, mc_points, candidates):
     one qNIPV fantasises with, the average of the points' measured noise), from the model's own
     fitted kernel and noise; tests/benchmarks/test_botorch_peer.py checks it against qNIPV. In the
     units of f squared. (Formed directly: gpytorch's lazy joint posterior of 20 000 candidates
-    took seconds per decision.)"""
+    took seconds per decision.) ``pending`` (P, d + 1): points in flight, fantasised first (each
+    with that noise; the posterior variance does not depend on their values), so the value is
+    what the candidate takes off beyond them: qNIPV's value of the q-batch pending + candidate
+    less that of the pending points alone (BoTorch's ``X_pending``)."""
     import torch
     from linear_operator.utils.cholesky import psd_safe_cholesky
 
     kernel, train = model.covar_module, model.train_inputs[0]
     noise = model.likelihood.noise.reshape(-1)  # the outcome transform's units
+    fantasy_noise = noise.mean()
+    if pending is not None and len(pending):
+        train = torch.cat([train, pending])
+        noise = torch.cat([noise, fantasy_noise.expand(len(pending))])
     removed = []
     with torch.no_grad():
         chol = psd_safe_cholesky(kernel(train).to_dense() + torch.diag(noise))  # gpytorch's jitter, as qNIPV's
@@ -238,7 +245,7 @@ def variance_removed(model, mc_points, candidates):
             a_c = torch.linalg.solve_triangular(chol, kernel(train, chunk).to_dense(), upper=False)
             k_zc = kernel(mc_points, chunk).to_dense() - a_z.T @ a_c
             k_cc = kernel(chunk, diag=True) - (a_c**2).sum(0)
-            removed.append((k_zc**2).mean(0) / (k_cc + noise.mean()))
+            removed.append((k_zc**2).mean(0) / (k_cc + fantasy_noise))
     return torch.cat(removed) * model.outcome_transform.stdvs.squeeze() ** 2
 
 
@@ -265,9 +272,9 @@ def grid_inputs(enc: _Encoding, x_grid, t_grid):
     return _tensor(np.column_stack([np.repeat(units, n_t, axis=0), np.tile(enc.last(t_grid), n_x)]))
 
 
-def _ask(model, enc: _Encoding, x_grid, t_grid, mc_points, cost_model):
+def _ask(model, enc: _Encoding, x_grid, t_grid, mc_points, cost_model, pending=None):
     """The (x, t) of the grids, (n_x, d) and (n_t,), whose integrated variance reduction per
-    second is largest."""
+    second (beyond the ``pending`` points' model inputs, ``variance_removed``) is largest."""
     import torch
     from botorch.acquisition.cost_aware import InverseCostWeightedUtility
 
@@ -275,7 +282,7 @@ def _ask(model, enc: _Encoding, x_grid, t_grid, mc_points, cost_model):
     choices = grid_inputs(enc, x_grid, t_grid)
     per_second = InverseCostWeightedUtility(cost_model)
     with torch.no_grad():
-        value = per_second(choices.unsqueeze(-2), deltas=variance_removed(model, mc_points, choices))
+        value = per_second(choices.unsqueeze(-2), deltas=variance_removed(model, mc_points, choices, pending))
     best = int(torch.argmax(value))
     return np.asarray(x_grid[best // n_t]), float(t_grid[best % n_t])
 

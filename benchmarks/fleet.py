@@ -2,7 +2,8 @@
 instruments, and against as many independent campaigns.
 
     python benchmarks/fleet.py [--config PATH] [--budget S] [--overhead S] [--shot-overhead S]
-                               [--decision-s S] [--k 1,2,4] [--seeds 20] [--target R]
+                               [--decision-s S] [--k 1,2,4] [--designs fleet,independent,botorch]
+                               [--seeds 20] [--target R]
                                [--json PATH] [--figure PATH] [--report]
 
 Every campaign spends the instrument-time budget --budget (all its instruments together; default
@@ -18,18 +19,23 @@ shot also --overhead (``schedule.point_overhead_s``: moving the tip or stage), a
 - "independent k=K" (K > 1): K campaigns of one instrument each, budget/K each, their seeds
   seed*1000 + j: what a lab runs today. Their points are pooled: at each checkpoint the error is
   that of one model fitted to every point all K campaigns have committed by then (the same
-  final models a campaign gives, ``summarize``), which is more than any one of them knows.
+  final models a campaign gives, ``summarize``), which is more than any one of them knows;
+- "botorch k=K": BoTorch's cost-aware design of the budget benchmark on one campaign of K
+  instruments, the points in flight on the others as its pending points
+  (``benchmarks/_botorch_fleet.py``; needs ``noisebo[peers]``).
 
 A fleet campaign is scored after every decision (the GP mean it was made with, on the x grid
 against the simulator's truth, 200 positions for one axis) at the wall time it was made and the
 instrument time spent by then, and at the end its final model; an independent design at 24
 evenly spaced wall times up to its end. The report gives per design the median wall time to first
 reach --target (default 2 % of the range of the true f over the x grid) and its ratio to k=1's
-("-" where a seed never reaches it), the median RMSE once the whole budget is spent (equal
-total instrument time) and its ratio to k=1's, the median points and the median share of the wall
-time an instrument is at work ("busy": measuring, moving or deciding; the rest it waits for the
-decider, the seed points or the last points). The clock is simulated, so every figure but the
-decisions' own latency is independent of the machine and its load.
+(BoTorch's own k=1 for BoTorch's rows; a seed that never reaches it counts as never: "-" where
+half of them do not), the median RMSE once the whole budget is spent (equal total instrument
+time) and its ratio to k=1's, the median points, the median share of the wall time an
+instrument is at work ("busy": measuring, moving or deciding; the rest it waits for the decider,
+the seed points or the last points) and how many seeds reach the target at all. The clock is
+simulated, so every figure but the decisions' own latency is independent of the machine and its
+load.
 
     python benchmarks/fleet.py --latency [--n 100,1000] [--repeats 7] [--config PATH]
 
@@ -156,13 +162,18 @@ def busy(recs: list) -> str:
     return f"{np.median(shares):.0%}" if shares else "-"
 
 
+def reference(design: str) -> str:
+    """The design a row's "x k=1" ratios are taken against: BoTorch's own on one instrument for
+    BoTorch's, noisebo's on one instrument for the others."""
+    return "botorch k=1" if design.startswith("botorch") else "fleet k=1"
+
+
 def report(records: dict, target: float) -> list[str]:
     lines = [
-        f"{'design':<18} {'seeds':>5} {'wall to target (s)':>19} {'x k=1':>7} {'final RMSE':>11} {'x k=1':>7} {'points':>7} {'busy':>5}"
+        f"{'design':<18} {'seeds':>5} {'wall to target (s)':>19} {'x k=1':>7} {'final RMSE':>11} {'x k=1':>7} {'points':>7} {'busy':>5} {'reached':>8}"
     ]
-    ref = records.get("fleet k=1", [])
-    ref_by_seed = {r["seed"]: r for r in ref}
     for name, recs in records.items():
+        ref_by_seed = {r["seed"]: r for r in records.get(reference(name), [])}
         times = [time_to(r, target) for r in recs]
         finals = [final_rmse(r) for r in recs]
         ratio_t = [
@@ -172,7 +183,8 @@ def report(records: dict, target: float) -> list[str]:
         lines.append(
             f"{name:<18} {len(recs):>5} {median_or_dash(times):>19} {median_or_dash(ratio_t, '{:.3f}'):>7} "
             f"{median_or_dash(finals):>11} {median_or_dash(ratio_e, '{:.3f}'):>7} "
-            f"{int(np.median([r['points'] for r in recs])):>7} {busy(recs):>5}"
+            f"{int(np.median([r['points'] for r in recs])):>7} {busy(recs):>5} "
+            f"{sum(np.isfinite(times)):>5}/{len(recs):<2}"
         )
     return lines
 
@@ -213,7 +225,9 @@ def build_parser() -> Parser:
     parser.add_argument("--shot-overhead", type=float, default=0.1, help="per shot besides its t (s; default 0.1)")
     parser.add_argument("--decision-s", type=float, default=1.0, help="simulated time of a decision (s; default 1)")
     parser.add_argument("--k", default="1,2,4", help="numbers of instruments (default 1,2,4)")
-    parser.add_argument("--designs", default="fleet,independent", help="fleet, independent or both (default)")
+    parser.add_argument(
+        "--designs", default="fleet,independent", help="fleet, independent and/or botorch (default fleet,independent)"
+    )
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--target", type=float, default=None)
     parser.add_argument("--json", type=Path, default=None)
@@ -234,8 +248,13 @@ def main(argv=None) -> int:
     if ks[0] < 1:
         refuse(parser, f"--k: at least one instrument, got {ks[0]}")
     kinds = {v.strip() for v in args.designs.split(",")}
-    if not kinds <= {"fleet", "independent"}:
-        refuse(parser, f"--designs: fleet and/or independent, got {args.designs!r}")
+    if not kinds <= {"fleet", "independent", "botorch"}:
+        refuse(parser, f"--designs: fleet, independent and/or botorch, got {args.designs!r}")
+    if "botorch" in kinds and not args.report:
+        from _botorch import available
+
+        if (reason := available()) is not None:
+            refuse(parser, reason)
 
     def edit(config):
         schedule = {}
@@ -274,6 +293,7 @@ def main(argv=None) -> int:
         score = scorer(base, instrument)
         designs = [(f"fleet k={k}", k, "fleet") for k in ks if "fleet" in kinds]
         designs += [(f"independent k={k}", k, "independent") for k in ks if k > 1 and "independent" in kinds]
+        designs += [(f"botorch k={k}", k, "botorch") for k in ks if "botorch" in kinds]
         for name, k, kind in designs:
             config = fleet_config(base, k, base.schedule.budget_s)
             done = {r["seed"] for r in records.get(name, [])}
@@ -282,6 +302,10 @@ def main(argv=None) -> int:
                     continue
                 if kind == "fleet":
                     record = run_fleet_design(config, instrument, seed, timing, score)
+                elif kind == "botorch":
+                    from _botorch_fleet import run_botorch_fleet
+
+                    record = run_botorch_fleet(config, instrument, seed, timing, score, k)
                 else:
                     record = run_independent(base, instrument, seed, timing, score, k)
                 records.setdefault(name, []).append(record)

@@ -7,8 +7,9 @@ Each JSON is one setting written by ``benchmarks/fleet.py``. Its panel shows, pe
 median over seeds of the RMSE of the last model made by each wall time (simulated s; a seed with
 no model yet counts as the worst), shaded between the quartiles, and the target as a dashed line.
 The last panel shows, per setting, the median over seeds of the wall time to the target as a
-multiple of one instrument's (``fleet k=1``, the same seed), against k: one campaign (solid) and
-k independent campaigns pooled (dashed), with perfect scaling 1/k (dotted).
+multiple of one instrument's (``fleet k=1``, the same seed; BoTorch's own k=1 for BoTorch's),
+against k: one campaign (solid), k independent campaigns pooled (dashed) and BoTorch with the
+points in flight as pending (dash-dot, where measured), with perfect scaling 1/k (dotted).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from fleet import time_to  # noqa: E402
+from fleet import reference, time_to  # noqa: E402
 
 GRID = 200  # wall times per panel
 
@@ -44,13 +45,23 @@ def quartile_curves(records: list, walls: np.ndarray) -> tuple[np.ndarray, np.nd
     return q[0], q[1], q[2]
 
 
+FAMILIES = ("fleet", "independent", "botorch")  # fleet.py's designs, in the order they are drawn
+STYLES = {"fleet": "-", "independent": "--", "botorch": "-."}
+
+
+def family(name: str) -> str:
+    """ "fleet", "independent" or "botorch" of a design "NAME k=K"."""
+    return name.split(" ", 1)[0]
+
+
 def k_of(name: str) -> int:
     return int(name.rsplit("=", 1)[1])
 
 
 def ratio_to_one(records: dict, name: str, target: float) -> float:
-    """Median over seeds of the wall time to the target over k=1's (NaN where half never reach)."""
-    ones = {r["seed"]: time_to(r, target) for r in records["fleet k=1"]}
+    """Median over seeds of the wall time to the target over k=1's (``fleet.reference``: BoTorch's
+    own for BoTorch's designs; NaN where half never reach)."""
+    ones = {r["seed"]: time_to(r, target) for r in records[reference(name)]}
     ratios = [time_to(r, target) / ones[r["seed"]] for r in records[name] if r["seed"] in ones]
     v = np.nan_to_num(np.asarray(ratios, dtype=np.float64), nan=np.inf)
     return float(np.median(v)) if len(v) else float("nan")
@@ -69,9 +80,9 @@ def draw(paths: list[Path], titles: list[str], out: Path) -> None:
         records, target = data["records"], data["settings"]["target"]
         end = max(r["wall_s"][-1] for recs in records.values() for r in recs)
         walls = np.linspace(0.0, end, GRID)
-        for name in sorted(records, key=lambda n: (n.startswith("independent"), k_of(n))):
+        for name in sorted(records, key=lambda n: (FAMILIES.index(family(n)), k_of(n))):
             median, low, high = quartile_curves(records[name], walls)
-            style = "--" if name.startswith("independent") else "-"
+            style = STYLES[family(name)]
             (line,) = ax.plot(walls, median, style, label=name)
             ax.fill_between(walls, low, high, color=line.get_color(), alpha=0.15)
         ax.axhline(target, color="k", linestyle=":", linewidth=1, label=f"target {target:g}")
@@ -80,8 +91,16 @@ def draw(paths: list[Path], titles: list[str], out: Path) -> None:
         ax.set_ylabel("RMSE of f (median over seeds)")
         ax.set_title(f"{title}: {len(records['fleet k=1'])} seeds")
         ax.legend(fontsize=7)
-        for kind, style, said in (("fleet", "o-", "one campaign"), ("independent", "s--", "independent campaigns")):
-            names = ["fleet k=1", *sorted((n for n in records if n.startswith(kind) and k_of(n) > 1), key=k_of)]
+        for kind, style, said in (
+            ("fleet", "o-", "one campaign"),
+            ("independent", "s--", "independent campaigns"),
+            ("botorch", "^-.", "BoTorch, points in flight pending"),
+        ):
+            more = sorted((n for n in records if family(n) == kind and k_of(n) > 1), key=k_of)
+            first = reference(f"{kind} k=1")
+            if not more or first not in records:
+                continue
+            names = [first, *more]
             ratios = [ratio_to_one(records, n, target) for n in names]
             scaling.plot([k_of(n) for n in names], ratios, style, color=f"C{setting}", label=f"{title}: {said}")
     ks = np.array([1, 2, 4])

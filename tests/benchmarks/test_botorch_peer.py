@@ -1,7 +1,10 @@
 """BoTorch as two peer designs of the budget benchmark (benchmarks/_botorch.py): the closed-form
 variance reduction is qNegIntegratedPosteriorVariance's own, and a short Forrester campaign of
 each design gives a record of budget.py's run_one layout, spends no more than its budget, scores
-every model, starts from noisebo's seed points, and is the same twice for one seed."""
+every model, starts from noisebo's seed points, and is the same twice for one seed; with points
+in flight (benchmarks/_botorch_fleet.py) the closed form is what a candidate adds to the pending
+batch, and a short campaign on two instruments gives the fleet benchmark's record within its
+budget, the same twice for one seed."""
 
 from __future__ import annotations
 
@@ -23,10 +26,13 @@ if str(BENCHMARKS) not in sys.path:
     sys.path.append(str(BENCHMARKS))  # the benchmarks' shared helpers (_config, _botorch)
 
 import _botorch
+import _botorch_fleet
 import budget
+import fleet
 from _config import validated_config
 from _tstar import LAW, t_stars
 
+from noisebo.campaign.fleet import FleetTiming
 from noisebo.campaign.steps import seed_points
 from noisebo.instruments import build
 from noisebo.models.grids import grids, integration_points
@@ -88,6 +94,30 @@ def test_the_closed_form_is_qnipvs_value_less_its_value_now(campaign, fidelity):
     np.testing.assert_allclose(got.numpy(), expected.numpy(), rtol=1e-7, atol=1e-12)
 
 
+def test_with_points_in_flight_it_is_what_the_candidate_adds_to_the_pending_batch(campaign):
+    import torch
+    from botorch.acquisition import qNegIntegratedPosteriorVariance
+
+    config = campaign[0]
+    enc = _botorch._Encoding(config, fidelity=False)
+    rng = np.random.default_rng(1)
+    x, t = rng.random(10), np.exp(rng.uniform(np.log(0.2), np.log(10.0), 10))
+    y, yvar = np.sin(6 * x) + rng.normal(0, 0.3, 10), rng.uniform(0.01, 0.05, 10)
+    with _botorch._quiet_and_seeded(0):
+        model = _botorch._fitted(_botorch._cost_aware_model, np.column_stack([x, enc.last(t)]), y, yvar, None)
+        mc = _botorch._target_fidelity(enc, enc.inputs(integration_points(config.space).reshape(-1, 1), 1.0))
+        pending = torch.rand(3, 2, dtype=torch.float64)
+        candidates = torch.rand(5, 2, dtype=torch.float64)
+        qnipv = qNegIntegratedPosteriorVariance(model, mc_points=mc)
+        with torch.no_grad():
+            batches = torch.stack([torch.cat([pending, c.unsqueeze(0)]) for c in candidates])
+            expected = qnipv(batches) - qnipv(pending.unsqueeze(0))
+        got = _botorch.variance_removed(model, mc, candidates, pending)
+        alone = _botorch.variance_removed(model, mc, candidates)
+    assert torch.all(expected > 0) and torch.all(got < alone)  # the pending points take part of it
+    np.testing.assert_allclose(got.numpy(), expected.numpy(), rtol=1e-6, atol=1e-12)
+
+
 def test_record_has_run_ones_layout(records, campaign):
     config = campaign[0]
     rec = records[0]
@@ -143,3 +173,42 @@ def test_leaves_the_warning_filters_and_torchs_threads_as_they_were(records, thr
     with pytest.raises(UserWarning):  # pyproject's filterwarnings = error still holds after BoTorch ran
         warnings.warn("after BoTorch", UserWarning, stacklevel=1)
     assert torch.get_num_threads() == threads_before
+
+
+# BoTorch with points in flight (benchmarks/_botorch_fleet.py): a short Forrester campaign on two
+# instruments, the fleet benchmark's record.
+
+FLEET_BUDGET_S = 120.0
+FLEET_TIMING = FleetTiming(shot_overhead_s=0.1, decision_s=1.0)
+
+
+@pytest.fixture(scope="module")
+def fleet_records():
+    base = validated_config(
+        ROOT / "data" / "configs" / "forrester.yaml",
+        lambda c: c.with_overrides(schedule={"budget_s": FLEET_BUDGET_S, "point_overhead_s": 0.5}),
+    )
+    instrument = build(base.instrument)
+    config = fleet.fleet_config(base, 2, FLEET_BUDGET_S)
+    score = budget.scorer(base, instrument)
+    return [_botorch_fleet.run_botorch_fleet(config, instrument, 3, FLEET_TIMING, score, 2) for _ in range(2)]
+
+
+def test_a_fleet_gives_a_record_of_fleets_layout_within_the_budget(fleet_records):
+    rec = fleet_records[0]
+    assert rec["status"] == "budget_spent" and rec["fit_failures"] == []
+    assert len(rec["wall_s"]) == len(rec["spent_s"]) == len(rec["rmse"]) >= 2
+    assert rec["wall_s"] == sorted(rec["wall_s"]) and rec["spent_s"] == sorted(rec["spent_s"])
+    assert rec["spent_s"][-1] <= FLEET_BUDGET_S + 1e-9
+    assert np.all(np.isfinite(rec["rmse"])) and rec["points"] > 4
+    assert set(rec["busy_s"]) == {"i0", "i1"} and sum(rec["busy_s"].values()) > rec["wall_s"][-1]
+    assert rec["latency_s"] > 0
+
+
+def test_a_fleet_is_the_same_campaign_for_one_seed(fleet_records):
+    first, second = ({k: v for k, v in r.items() if k not in ("latency_s", "cpu_s")} for r in fleet_records)
+    assert first == second
+
+
+def test_its_rows_are_set_against_its_own_single_instrument():
+    assert fleet.reference("botorch k=4") == "botorch k=1" and fleet.reference("independent k=4") == "fleet k=1"

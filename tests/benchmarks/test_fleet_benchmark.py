@@ -68,13 +68,23 @@ def test_a_resumed_run_measures_nothing_again_and_other_settings_are_refused(mea
     [
         (["--k", "1,x"], "--k: expected whole numbers separated by commas, got '1,x'"),
         (["--k", "0,2"], "--k: at least one instrument, got 0"),
-        (["--designs", "fleet,batch"], "--designs: fleet and/or independent, got 'fleet,batch'"),
+        (["--designs", "fleet,batch"], "--designs: fleet, independent and/or botorch, got 'fleet,batch'"),
     ],
 )
 def test_bad_arguments_are_one_line(args, message, capsys):
     with pytest.raises(SystemExit) as stop:
         fleet.main([*SMALL, *args])
     assert stop.value.code == 2 and capsys.readouterr().err.strip().endswith(message)
+
+
+def test_botorch_without_botorch_is_one_line(capsys):
+    from _botorch import INSTALL, available
+
+    if available() is None:
+        pytest.skip("BoTorch is installed here")
+    with pytest.raises(SystemExit) as stop:
+        fleet.main([*SMALL, "--designs", "botorch"])
+    assert stop.value.code == 2 and capsys.readouterr().err.strip().endswith(INSTALL)
 
 
 def test_the_error_at_a_wall_time_is_the_last_models_and_the_ratio_is_per_seed():
