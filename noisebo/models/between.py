@@ -25,6 +25,7 @@ import numpy as np
 from noisebo.config import CampaignConfig
 from noisebo.models.fitting import fit_noise_model, warm_step
 from noisebo.models.noise_laws import NoiseLaw
+from noisebo.models.profile import law_draws
 from noisebo.state import CampaignState
 
 PARAMETERS = ("a0", "a1", "p")
@@ -45,12 +46,8 @@ def law_posterior(
     ``previous`` hyperparameters (alone when ``warm``, ``fit_noise_model``): each parameter's
     (mean, sd) over the fit's draws, A0 and A1 in value units."""
     fit = fit_noise_model(config, law, state, key, previous, warm)
-    out = {}
-    for name in PARAMETERS:
-        if name in fit.samples.params:
-            draws = np.asarray(fit.samples.params[name], dtype=np.float64) * (fit.scale if name != "p" else 1.0)
-            out[name] = (float(np.mean(draws)), float(np.std(draws)))
-    return out
+    draws = law_draws(fit.samples.params, fit.scale)
+    return {name: (float(np.mean(values)), float(np.std(values))) for name, values in draws.items()}
 
 
 def fleet_prior(

@@ -75,7 +75,7 @@ def distil(
     fitted = inference.fit_map(model, data, key, inf.restarts, LAPLACE_DRAWS, [guess], name=name, depends_on=depends_on)
     if at_a_bound(fitted.params, np.asarray(data.bounds)):
         fitted = inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, inf.nuts_samples)
-    draws = _law_draws(fitted.params, scale)
+    draws = law_draws(fitted.params, scale)
     return Distilled({name: _summary(values) for name, values in draws.items()}, correlation(draws))
 
 
@@ -101,7 +101,7 @@ def correlation(draws: dict[str, np.ndarray]) -> dict[str, float]:
     return pairs
 
 
-def _law_draws(params: dict, scale: float) -> dict[str, np.ndarray]:
+def law_draws(params: dict, scale: float) -> dict[str, np.ndarray]:
     """The law's parameters' draws from a fit's samples: a0, a1 in value units (times the data
     ``scale``), and p where the law has it."""
     return {
@@ -156,7 +156,7 @@ def _field_fit(
         model = noise_field.cached_model(own, law, field, data.freq.shape[1])  # one sampler for every campaign
         keep = LAPLACE_DRAWS + 1  # as many draws as a Laplace fit's (nuts_samples allowing), so campaigns weigh alike
         samples = inference.fit_nuts(model, data, key, inf.nuts_warmup, inf.nuts_samples, keep)
-    draws = _law_draws(samples.params, scale)
+    draws = law_draws(samples.params, scale)
     hyper = noise_field.field_hyperparameters(data)
     for prefix in noise_field.field_names(field):
         for k, name in enumerate(field_length_names(prefix, spans.size)):

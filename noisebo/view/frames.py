@@ -76,7 +76,7 @@ class Frame:
     each reference point, for d > 1 axes); ``proposal`` (x, t), x a float for one axis, a tuple
     for more; ``scalars`` the traces; ``in_flight`` (several instruments): the points handed out
     and not yet committed at the frame's end, columns x, t, index and instrument (the one its
-    decision was made for; empty for a seed point), None for one instrument."""
+    decision was made for), None for one instrument."""
 
     step: int
     points: dict
