@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from noisebo.bridge.wire import campaign_id
-from noisebo.campaign import engine
+from noisebo.campaign import engine, instrument_budget
 from noisebo.campaign.own_noise import own_data
 from noisebo.events import DecisionDue, Done, Request, Status, Wait
 from noisebo.storage.steps import shown as shown_step
@@ -145,6 +145,10 @@ def _progress(step: Request | DecisionDue | Wait | Done, state: EngineState, nam
         if state.budget_s is None
         else f"; budget {number(state.budget_s)} s, {number(max(state.budget_s - state.spent_s, 0.0))} s left"
     )
+    own_budget = instrument_budget.budget(state, name or "")
+    if own_budget is not None:
+        left = max(own_budget - state.spent_by.get(name or "", 0.0), 0.0)
+        budget += f"; {html.escape(name or '')}'s own budget {number(own_budget)} s, {number(left)} s left"
     own = name if state.config.noise_model.per_instrument and name else None
     learned = state.data if own is None else own_data(state, own)  # a law per instrument: this one's
     t_opt = f"{number(learned.t_opt_history[-1])} s" if learned.t_opt_history else "not yet (after the first decision)"

@@ -14,7 +14,7 @@ and journals the events it gets back; replaying those events rebuilds the same s
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
 
 from noisebo.acquisition.records import Decision
@@ -42,7 +42,7 @@ from noisebo.events import (
     Summary,
     Wait,
 )
-from noisebo.campaign import flights
+from noisebo.campaign import flights, instrument_budget
 from noisebo.campaign.flights import Flight
 from noisebo.failures import budget_message
 from noisebo.reduction import NoUsableShots, Reading
@@ -81,8 +81,10 @@ class EngineState:
     (the failure budget counts from there). ``budget_s``: the instrument-time budget (s; None:
     none), the config's until a ``BudgetChanged``; ``spent_s``: instrument time spent, every
     shot taken and every failed attempt at its t plus ``point_overhead_s`` for every point
-    begun, on all instruments together. ``decided_for``: with several instruments, the
-    instrument each decision's point was first issued to, in the order of ``decisions``."""
+    begun, on all instruments together; ``spent_by``: with several instruments, each one's
+    share of it (the overhead to the instrument that begins the point). ``decided_for``: with
+    several instruments, the instrument each decision's point was first issued to, in the order
+    of ``decisions``."""
 
     config: CampaignConfig
     seed: int
@@ -102,6 +104,7 @@ class EngineState:
     budget_base: tuple[int, int] = (0, 0)
     budget_s: float | None = None
     spent_s: float = 0.0
+    spent_by: Mapping[str, float] = field(default_factory=dict)
     decided_for: tuple[str, ...] = ()
 
     def failure_counts(self) -> tuple[int, int]:
@@ -136,11 +139,13 @@ def start(started: Started) -> EngineState:
     )
 
 
-def _spend(state: EngineState, flight: Flight, t: float) -> tuple[float, Flight]:
-    """The instrument time spent after a shot or an attempt of t seconds at ``flight``'s point
-    (its first also pays the point's overhead), and the point's entry marked begun."""
-    overhead = 0.0 if flight.begun else state.config.schedule.point_overhead_s
-    return state.spent_s + overhead + t, replace(flight, begun=True)
+def _spend(state: EngineState, flight: Flight, t: float, instrument: str) -> tuple[EngineState, Flight]:
+    """The state after a shot or an attempt of t seconds at ``flight``'s point by ``instrument``
+    ("" with one) with the instrument time spent (the point's first attempt also pays its
+    overhead), and the point's entry marked begun."""
+    cost = t + (0.0 if flight.begun else state.config.schedule.point_overhead_s)
+    by = {**state.spent_by, instrument: state.spent_by.get(instrument, 0.0) + cost} if instrument else state.spent_by
+    return replace(state, spent_s=state.spent_s + cost, spent_by=by), replace(flight, begun=True)
 
 
 def _flight_for(state: EngineState, point: int, out_of_order: str) -> Flight:
@@ -215,16 +220,14 @@ def _apply_to_point(state: EngineState, event: ShotTaken | ShotFailed | MoreShot
         by = f"by {event.instrument!r}" if event.instrument else "by no named instrument"
         held = f"measured by {flight.instrument!r}" if flight.instrument else "not issued to a named instrument"
         raise EngineError(f"{what} {event.shot} of point {event.point} {by}: the point is {held}")
-    spent, flight = _spend(state, flight, event.t)
+    state, flight = _spend(state, flight, event.t, event.instrument)
     if isinstance(event, ShotFailed):
         timed_out = event.kind == "timeout" and bool(event.instrument)
         silent = f"{event.instrument} timed out at shot {event.shot} ({event.reason})" if timed_out else ""
         flight = replace(flight, silent=silent)
-        return replace(
-            state, spent_s=spent, flights=flights.with_flight(state, flight), failures=state.failures + (event,)
-        )
+        return replace(state, flights=flights.with_flight(state, flight), failures=state.failures + (event,))
     flight = replace(flight, taken=flight.taken + (event,), silent="")
-    return replace(state, spent_s=spent, flights=flights.with_flight(state, flight), n_shots=state.n_shots + 1)
+    return replace(state, flights=flights.with_flight(state, flight), n_shots=state.n_shots + 1)
 
 
 def _issued(state: EngineState, event: PointIssued) -> Flight:
@@ -305,7 +308,7 @@ def _ask_fleet(state: EngineState, instrument: str | None) -> Request | Decision
         held = sum(_held_s(state, f) for f in earlier)
         return _measure_or_reduce(state, _request(state, own.point), held, waiting=bool(earlier))
     silent = _silent_flight(state)
-    if silent is not None:
+    if silent is not None and instrument_budget.pays(state, instrument, _held_s(state, _flight(state, silent[0]))):
         return DecisionDue(len(state.decisions), instrument=instrument, take_over=silent[0], reason=silent[1])
     held = sum(_held_s(state, f) for f in state.flights)
     waiting = bool(state.flights)
@@ -314,7 +317,11 @@ def _ask_fleet(state: EngineState, instrument: str | None) -> Request | Decision
         request = _request(state, nxt)
         cost = state.config.schedule.point_overhead_s + request.t * request.wanted
         short = _unaffordable(state, cost + held, f"point {nxt} costs {cost:.4g} s")
-        return _budget_due(state, short, held, waiting) or DecisionDue(len(state.decisions), instrument=instrument)
+        return (
+            _budget_due(state, short, held, waiting)
+            or instrument_budget.due(state, instrument, cost, f"point {nxt} costs {cost:.4g} s")
+            or DecisionDue(len(state.decisions), instrument=instrument)
+        )
     if len(state.points) < state.config.schedule.n_seed:
         return Wait("the seed points are being measured")
     answer = _next_point(state, instrument, held, waiting)
@@ -338,8 +345,13 @@ def _next_point(state: EngineState, instrument: str, held: float, waiting: bool)
     from noisebo.acquisition.proposal import cheapest_point_s
 
     cheapest = cheapest_point_s(state.config)
-    short = _unaffordable(state, cheapest + held, f"the cheapest point costs {cheapest:.4g} s")
-    return _budget_due(state, short, held, waiting) or DecisionDue(len(state.decisions), instrument=instrument)
+    what = f"the cheapest point costs {cheapest:.4g} s"
+    short = _unaffordable(state, cheapest + held, what)
+    return (
+        _budget_due(state, short, held, waiting)
+        or instrument_budget.due(state, instrument, cheapest, what)
+        or DecisionDue(len(state.decisions), instrument=instrument)
+    )
 
 
 def _budget_due(state: EngineState, short: str, held: float, waiting: bool) -> DecisionDue | Wait | None:
@@ -377,7 +389,6 @@ def _held_s(state: EngineState, flight: Flight) -> float:
     return overhead + request.t * max(request.wanted - request.taken, 0)
 
 
-BUDGET_SLACK_S = 1e-9  # sums of sweep times round
 MIN_POINTS_TO_SUMMARISE = 2
 
 
@@ -389,7 +400,7 @@ def budget_left(state: EngineState) -> float | None:
 def _unaffordable(state: EngineState, cost: float, what: str) -> str:
     """Why ``cost`` seconds more do not fit the budget ("" when they do, or without one)."""
     left = budget_left(state)
-    if left is None or cost <= left + BUDGET_SLACK_S:
+    if left is None or cost <= left + instrument_budget.SLACK_S:
         return ""
     return f"budget spent: {state.spent_s:.4g} s of {state.budget_s:.4g} s; {what}"
 
@@ -534,6 +545,7 @@ def step_inputs(state: EngineState, instrument: str = "") -> StepInputs:
     left = budget_left(state)
     if left is not None:
         left -= sum(_held_s(state, f) for f in state.flights)
+    left = instrument_budget.within(left, instrument_budget.left(state, instrument))
     step = len(state.decisions)
     return StepInputs(state.config, method, state.data, state.seed, step, previous, left, pending, noise_points, others)
 

@@ -149,10 +149,11 @@ def _inspect(args) -> int:
             f"(shots and {summary['config']['schedule']['point_overhead_s']:g} s per point)"
         )
     by_instrument = summary["spent_s_by_instrument"]
+    budgets = {i["name"]: i.get("budget_s") for i in summary["config"].get("instruments") or ()}
     if by_instrument:
         print(
             "  instrument time: "
-            + ", ".join(f"{name} {seconds:.4g} s" for name, seconds in by_instrument.items())
+            + ", ".join(f"{name} {_of_budget(seconds, budgets.get(name))}" for name, seconds in by_instrument.items())
             + f" (shots, failed attempts and {summary['config']['schedule']['point_overhead_s']:g} s per point begun)"
         )
     profile = summary["noise_profile"]
@@ -210,3 +211,8 @@ def add_parser(commands) -> None:
     inspect.add_argument("file", help="the campaign's .h5 file (finished or running)")
     inspect.add_argument("--json", action="store_true", help="machine-readable output")
     inspect.set_defaults(handler=_inspect)
+
+
+def _of_budget(seconds: float, budget: float | None) -> str:
+    """An instrument's time spent, and of what budget when it has one."""
+    return f"{seconds:.4g} s" if budget is None else f"{seconds:.4g} s of {budget:.4g} s"

@@ -74,7 +74,8 @@ class CampaignConfig(FrozenModel):
             raise ValueError("give `instrument` (one) or `instruments` (several, each with a name), not both")
         named = data["instruments"]
         if isinstance(named, (list, tuple)) and named and isinstance(named[0], dict):
-            data = {**data, "instrument": {k: v for k, v in named[0].items() if k != "name"}}
+            own = ("name", "budget_s")  # a named instrument's own fields, not the instrument section's
+            data = {**data, "instrument": {k: v for k, v in named[0].items() if k not in own}}
         return data
 
     @field_validator("instruments")

@@ -117,16 +117,25 @@ INSTRUMENT_NAME = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
 
 class NamedInstrument(InstrumentConfig):
     """One of several instruments of a campaign (``instruments:``): an instrument section with a
-    ``name`` that its shots, its flow run and its bridge client are known by."""
+    ``name`` that its shots, its flow run and its bridge client are known by, and ``budget_s``,
+    the instrument time it may spend (counted as ``schedule.budget_s`` counts the campaign's:
+    its shots' and failed attempts' t, and the overhead of each point whose first attempt it
+    makes). An instrument whose budget cannot pay for another point is issued none; the others
+    go on, and the campaign ends as "budget_spent" when none of them can."""
 
     name: str = Field(
         pattern=INSTRUMENT_NAME,
         max_length=64,
         description="the instrument's name in the campaign: letters, digits, '_', '.', '-'; unique",
     )
+    budget_s: PositiveFloat | None = Field(
+        None,
+        description="the instrument time this instrument may spend (s): its shots' and failed attempts' t "
+        "plus point_overhead_s for each point it begins; null: only schedule.budget_s limits it",
+    )
 
     def __hash__(self) -> int:
-        return hash((self.name, super().__hash__()))
+        return hash((self.name, self.budget_s, super().__hash__()))
 
     @property
     def section(self) -> InstrumentConfig:

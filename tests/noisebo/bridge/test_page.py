@@ -237,3 +237,15 @@ def test_with_a_law_per_instrument_each_page_shows_its_instruments_optimal_t_and
         said = f"predicted optimal t: {number(own.t_opt_history[-1])} s for {name}; noise model converged: {converged} (its own law)"
         assert said in page
     assert own_data(final, "good").t_opt_history[-1] != own_data(final, "bad").t_opt_history[-1]
+
+
+def test_an_instrument_with_a_budget_of_its_own_sees_what_is_left_of_it():
+    from tests.noisebo.campaign.test_fleet import fresh, issue, measure
+    from tests.noisebo.campaign.test_instrument_budget import budgeted
+
+    state, request = issue(fresh(budgeted({"a": 100.0}, point_overhead_s=2.0)), "a")
+    state = measure(state, request)
+    left = 100.0 - 2.0 - 3 * request.t
+    mine = text_of(render({**MEASURING, "instrument": "a"}, state))
+    assert f"a's own budget 100 s, {number(left)} s left" in mine
+    assert "own budget" not in text_of(render({**MEASURING, "instrument": "b"}, state))

@@ -16,6 +16,7 @@ from noisebo.storage.hdf5 import read_campaign, spectra_reader
 from noisebo.storage.record import from_state, read_record
 from noisebo.storage.recorder import Recorder
 from tests.noisebo.campaign.test_fleet import NAMES, fleet_config
+from tests.noisebo.campaign.test_instrument_budget import budgeted
 from tests.noisebo.storage.test_hdf5 import assert_reads_as_whole, assert_same
 
 
@@ -69,7 +70,8 @@ def forrester_fleet(tmp_path_factory):
             seen["in_flight"] += 1
             assert_reads_as_whole(path, state, folder)
 
-    final, run = recorded_fleet(fleet_config(n_steps=6), path, seed=3, check=check)
+    config = budgeted({"b": 1e5}, n_steps=6)  # a budget of b's own, too large to end anything
+    final, run = recorded_fleet(config, path, seed=3, check=check)
     return final, run, path, seen
 
 
@@ -250,10 +252,11 @@ def test_each_instruments_time_is_its_shots_attempts_and_the_points_it_began(for
 
     from noisebo.cli.main import main
 
-    _, run, path, _ = forrester_fleet
+    final, run, path, _ = forrester_fleet
     record = read_record(path)
     by_instrument = record.spent_by_instrument
     assert set(by_instrument) == set(NAMES) and sum(by_instrument.values()) == pytest.approx(record.spent_s)
+    assert by_instrument == pytest.approx(dict(final.spent_by))  # the file counts as the engine does
     for name in NAMES:
         assert by_instrument[name] == pytest.approx(
             sum(t for t, n in zip(record.shots.t, record.shots.instrument) if n == name)
@@ -269,4 +272,5 @@ def test_each_instruments_time_is_its_shots_attempts_and_the_points_it_began(for
     assert handmade.spent_s == pytest.approx(12.5)
     assert main(["inspect", str(path)]) == 0
     line = next(line for line in capsys.readouterr().out.splitlines() if "instrument time:" in line)
-    assert line.startswith("  instrument time: a ") and ", b " in line and ", c " in line
+    assert line.startswith("  instrument time: a ") and ", c " in line
+    assert f", b {by_instrument['b']:.4g} s of 1e+05 s, " in line
