@@ -3,7 +3,7 @@
     python benchmarks/bridge.py [--shots N]
 
 Both campaigns take the same prerecorded readings, one point of N shots, through the same loop
-and recorder (journal fsynced per event): in-process from a driver that replays them, through
+and recorder (journal fsynced per commit): in-process from a driver that replays them, through
 the bridge from a client process (``bridge.client``) that posts them. The time between
 consecutive shots journaled is measured on the campaign's side; the overhead is the median
 interval through the bridge minus the median in-process. Two kinds of shot: a scalar, and a

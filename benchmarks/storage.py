@@ -5,7 +5,7 @@
     python benchmarks/storage.py --checksums [--n ...] [--repeats ...] [--kind ...] [--json ...]
 
 A synthetic campaign goes through the real engine events and ``storage.recorder.Recorder`` (the
-journal fsynced per event, as ``noisebo run`` commits them: a decision, each shot, the last shot
+journal fsynced per commit, as ``noisebo run`` commits them: a decision, each shot, the last shot
 with its point): "scalar" is Forrester-like (forrester.yaml's 200 x 100 grid, 30 shots per seed
 point, then 3; one failed attempt every 25 points), "spectra" PFM-like (pfm.yaml's grid, each
 shot a float32 sweep of 3 rows x 10 kHz x t, t around 0.47 s). For each n it prints the median

@@ -281,14 +281,16 @@ def resume(
     record_rrd: bool = True,
     live: str | None = None,
     budget_s: float | None = None,
+    wall_budget_s: float | None = None,
 ) -> str:
     """Continue a campaign from its file (after a crash, a kill, an abort or a spent budget)
     with the driver it was made with; ``budget_s``: its new instrument-time budget in all (s;
-    None: keep it). Its recording is rebuilt from the journal first, then continues. The flow run
+    None: keep it), ``wall_budget_s`` its new wall-time budget in all (s; None: keep it). Its recording is rebuilt from the journal first, then continues. The flow run
     is named NAME-POLICY-sSEED-resumed."""
     with opened(driver_of(Path(path))) as instrument:
         budget = KEEP_BUDGET if budget_s is None else float(budget_s)
-        with Recorder.resume(Path(path), budget) as recorder:
+        wall = KEEP_BUDGET if wall_budget_s is None else float(wall_budget_s)
+        with Recorder.resume(Path(path), budget, wall) as recorder:
             report = RunReport(recorder.state, recorder.h5_path, resumed=True)
             with _viewed(recorder, instrument, record_rrd, live, print) as observe, abort.reclaimed():
                 return str(run(recorder, print if show_progress else _silent, observe, instrument, report))

@@ -161,6 +161,23 @@ class BudgetChanged:
     budget_s: float | None
 
 
+@dataclass(frozen=True)
+class WallBudgetChanged:
+    """The campaign's wall-time budget from here on (s; None: none), set when it is resumed with
+    another."""
+
+    wall_budget_s: float | None
+
+
+@dataclass(frozen=True)
+class Clocked:
+    """The campaign's wall time (s) when a batch of events was committed: the seconds it has
+    been running since it was started, the time between a stop and its resume not counted.
+    The recorder stamps every commit with one; a campaign kept only in memory has none."""
+
+    wall_s: float
+
+
 Event = Union[
     Started,
     ShotTaken,
@@ -172,6 +189,8 @@ Event = Union[
     Summarised,
     StatusChanged,
     BudgetChanged,
+    WallBudgetChanged,
+    Clocked,
 ]
 
 

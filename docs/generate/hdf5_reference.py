@@ -29,6 +29,8 @@ ROOT_ATTRIBUTES = {  # what each root attribute says (the writers give attribute
     "n_shots": "shots taken",
     "n_failed_attempts": "failed attempts at shots",
     "budget_s": "the instrument-time budget (s); -1: none",
+    "wall_budget_s": "the wall-time budget (s); -1: none",
+    "wall_s": "the wall time the campaign had run (s) as of its last committed point or status, the time between a stop and its resume left out",
     "config_json": "the full config (JSON)",
     "versions_json": "Python's and the packages' versions (JSON)",
 }

@@ -43,7 +43,7 @@ ENDED = {
     Status.COMPLETED: "completed",
     Status.ABORTED: "aborted",
     Status.FAILED: "failed",
-    Status.BUDGET_SPENT: "its instrument-time budget is spent",
+    Status.BUDGET_SPENT: "its budget is spent",
 }
 NOT_CONNECTED = {"connected": False, "polling": False, "last_seen_s_ago": None}
 
@@ -144,6 +144,10 @@ def _progress(step: Request | DecisionDue | Wait | Done, state: EngineState, nam
         ""
         if state.budget_s is None
         else f"; budget {number(state.budget_s)} s, {number(max(state.budget_s - state.spent_s, 0.0))} s left"
+    )
+    wall = state.config.schedule.wall_budget_s
+    budget += f"; wall time {number(state.wall_s)} s" + (
+        "" if wall is None else f" of {number(wall)} s, {number(max(wall - state.wall_s, 0.0))} s left"
     )
     own_budget = instrument_budget.budget(state, name or "")
     if own_budget is not None:

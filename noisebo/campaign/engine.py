@@ -22,6 +22,8 @@ from noisebo.campaign.steps import make_point, seed_points
 from noisebo.config import CampaignConfig
 from noisebo.events import (
     BudgetChanged,
+    Clocked,
+    WallBudgetChanged,
     Decided,
     DecisionDue,
     Done,
@@ -82,7 +84,9 @@ class EngineState:
     none), the config's until a ``BudgetChanged``; ``spent_s``: instrument time spent, every
     shot taken and every failed attempt at its t plus ``point_overhead_s`` for every point
     begun, on all instruments together; ``spent_by``: with several instruments, each one's
-    share of it (the overhead to the instrument that begins the point). ``decided_for``: with
+    share of it (the overhead to the instrument that begins the point); ``wall_s``: the wall time
+    it has run as of its last ``Clocked`` (s; 0 without one); ``wall_budget_s``: the wall time it
+    may run (s; None: no limit), the config's until a ``WallBudgetChanged``. ``decided_for``: with
     several instruments, the instrument each decision's point was first issued to, in the order
     of ``decisions``."""
 
@@ -105,6 +109,8 @@ class EngineState:
     budget_s: float | None = None
     spent_s: float = 0.0
     spent_by: Mapping[str, float] = field(default_factory=dict)
+    wall_s: float = 0.0
+    wall_budget_s: float | None = None
     decided_for: tuple[str, ...] = ()
 
     def failure_counts(self) -> tuple[int, int]:
@@ -136,6 +142,7 @@ def start(started: Started) -> EngineState:
         dict(started.versions),
         started.created_utc,
         budget_s=started.config.schedule.budget_s,
+        wall_budget_s=started.config.schedule.wall_budget_s,
     )
 
 
@@ -188,6 +195,10 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
         return replace(state, status=event.status, reason=event.reason, budget_base=base)
     if isinstance(event, BudgetChanged):
         return replace(state, budget_s=event.budget_s)
+    if isinstance(event, Clocked):
+        return replace(state, wall_s=event.wall_s)
+    if isinstance(event, WallBudgetChanged):
+        return replace(state, wall_budget_s=event.wall_budget_s)
     raise EngineError(f"unknown event {type(event).__name__}")
 
 
@@ -316,7 +327,7 @@ def _ask_fleet(state: EngineState, instrument: str | None) -> Request | Decision
     if nxt < flights.n_specified(state):  # a seed point, or a decision's point not handed out yet
         request = _request(state, nxt)
         cost = state.config.schedule.point_overhead_s + request.t * request.wanted
-        short = _unaffordable(state, cost + held, f"point {nxt} costs {cost:.4g} s")
+        short = _unaffordable(state, cost, held, f"point {nxt} costs {cost:.4g} s")
         return (
             _budget_due(state, short, held, waiting)
             or instrument_budget.due(state, instrument, cost, f"point {nxt} costs {cost:.4g} s")
@@ -346,7 +357,7 @@ def _next_point(state: EngineState, instrument: str, held: float, waiting: bool)
 
     cheapest = cheapest_point_s(state.config)
     what = f"the cheapest point costs {cheapest:.4g} s"
-    short = _unaffordable(state, cheapest + held, what)
+    short = _unaffordable(state, cheapest, held, what)
     return (
         _budget_due(state, short, held, waiting)
         or instrument_budget.due(state, instrument, cheapest, what)
@@ -372,8 +383,9 @@ def _measure_or_reduce(
     there are such points: they end first)."""
     if request.taken >= request.wanted:
         return DecisionDue(len(state.decisions), reduce=True, instrument=request.instrument)
-    cost = _held_s(state, _flight(state, request.point))
-    short = _unaffordable(state, cost + held, f"point {request.point} needs {cost:.4g} s more")
+    flight = _flight(state, request.point)
+    cost = _held_s(state, flight)
+    short = _unaffordable(state, cost, held, f"point {request.point} needs {cost:.4g} s more", wall=not flight.begun)
     return _budget_due(state, short, held, waiting) or request
 
 
@@ -397,12 +409,25 @@ def budget_left(state: EngineState) -> float | None:
     return None if state.budget_s is None else state.budget_s - state.spent_s
 
 
-def _unaffordable(state: EngineState, cost: float, what: str) -> str:
-    """Why ``cost`` seconds more do not fit the budget ("" when they do, or without one)."""
-    left = budget_left(state)
-    if left is None or cost <= left + instrument_budget.SLACK_S:
-        return ""
-    return f"budget spent: {state.spent_s:.4g} s of {state.budget_s:.4g} s; {what}"
+WALL_SPENT = "wall time spent"  # how the reason of a campaign whose wall-time budget ended it begins
+
+
+def wall_left(state: EngineState) -> float | None:
+    """Wall time (s) the campaign has left to run; None without a wall-time budget."""
+    return None if state.wall_budget_s is None else state.wall_budget_s - state.wall_s
+
+
+def _unaffordable(state: EngineState, cost: float, held: float, what: str, wall: bool = True) -> str:
+    """Why a point of ``cost`` seconds does not fit ("" when it does): the instrument-time
+    budget beside the ``held`` seconds points in flight will spend, or (``wall``: a point not
+    begun) the wall time left, which the points in flight share as they run side by side."""
+    left, slack = budget_left(state), instrument_budget.SLACK_S
+    if left is not None and cost + held > left + slack:
+        return f"budget spent: {state.spent_s:.4g} s of {state.budget_s:.4g} s; {what}"
+    time_left = wall_left(state)
+    if wall and time_left is not None and cost > time_left + slack:
+        return f"{WALL_SPENT}: {state.wall_s:.4g} s of {state.wall_budget_s:.4g} s; {what}"
+    return ""
 
 
 def _request(state: EngineState, point: int) -> Request:
@@ -545,7 +570,9 @@ def step_inputs(state: EngineState, instrument: str = "") -> StepInputs:
     left = budget_left(state)
     if left is not None:
         left -= sum(_held_s(state, f) for f in state.flights)
-    left = instrument_budget.within(left, instrument_budget.left(state, instrument))
+    left = instrument_budget.within(
+        instrument_budget.within(left, wall_left(state)), instrument_budget.left(state, instrument)
+    )
     step = len(state.decisions)
     return StepInputs(state.config, method, state.data, state.seed, step, previous, left, pending, noise_points, others)
 
@@ -560,17 +587,25 @@ def stop(state: EngineState, status: Status, reason: str) -> tuple[Event, ...]:
 KEEP_BUDGET = object()
 
 
-def resumed(state: EngineState, budget_s: float | None | object = KEEP_BUDGET) -> tuple[Event, ...]:
+def resumed(
+    state: EngineState,
+    budget_s: float | None | object = KEEP_BUDGET,
+    wall_budget_s: float | None | object = KEEP_BUDGET,
+) -> tuple[Event, ...]:
     """The events that restart an unfinished campaign: its new instrument-time budget (when
-    ``budget_s`` is given: seconds in all, or None for none), then status running with a fresh
-    failure budget; nothing for a completed one."""
+    ``budget_s`` is given: seconds in all, or None for none) and wall-time budget (likewise
+    ``wall_budget_s``), then status running with a fresh failure budget; nothing for a
+    completed one."""
     if state.status is Status.COMPLETED:
         return ()
-    if budget_s is KEEP_BUDGET or budget_s == state.budget_s:
-        return (StatusChanged(Status.RUNNING, "resumed"),)
-    assert budget_s is None or isinstance(budget_s, (int, float))
-    budget = (BudgetChanged(None if budget_s is None else float(budget_s)),)
-    return (*budget, StatusChanged(Status.RUNNING, "resumed"))
+    changed: list[Event] = []
+    if budget_s is not KEEP_BUDGET and budget_s != state.budget_s:
+        assert budget_s is None or isinstance(budget_s, (int, float))
+        changed.append(BudgetChanged(None if budget_s is None else float(budget_s)))
+    if wall_budget_s is not KEEP_BUDGET and wall_budget_s != state.wall_budget_s:
+        assert wall_budget_s is None or isinstance(wall_budget_s, (int, float))
+        changed.append(WallBudgetChanged(None if wall_budget_s is None else float(wall_budget_s)))
+    return (*changed, StatusChanged(Status.RUNNING, "resumed"))
 
 
 def new_campaign(config: CampaignConfig, seed: int, driver: DriverInfo, versions: dict, created_utc: str) -> Started:

@@ -16,6 +16,7 @@ from noisebo.config import CampaignConfig
 from noisebo.events import DecisionDue, Wait
 
 SLACK_S = 1e-9  # sums of sweep times round
+ALL_SPENT = "every instrument's budget is spent"  # how the reason of a campaign they ended begins
 
 
 class Campaign(Protocol):
@@ -67,7 +68,7 @@ def due(state: Campaign, instrument: str, cost: float, what: str) -> DecisionDue
     if state.flights or any(pays(state, n, cost) for n in names if n != instrument):
         return Wait(f"{short}; the other instruments go on")
     spent = ", ".join(f"{n} {_spent(state, n)}" for n in names)
-    return DecisionDue(len(state.decisions), final=True, budget=f"every instrument's budget is spent ({spent}); {what}")
+    return DecisionDue(len(state.decisions), final=True, budget=f"{ALL_SPENT} ({spent}); {what}")
 
 
 def _spent(state: Campaign, instrument: str) -> str:

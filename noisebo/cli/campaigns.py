@@ -128,11 +128,12 @@ def _resume(args) -> int:
         raise CampaignFileError(
             f"cannot resume {path} with --budget-s {args.budget_s:g}: it has spent {state.spent_s:.4g} s already"
         )
-    if state.status.value == "budget_spent" and args.budget_s is None:
+    if args.wall_budget_s is not None and args.wall_budget_s <= state.wall_s:
         raise CampaignFileError(
-            f"{path}: {state.reason}; continue it with a larger budget: "
-            f"`noisebo resume {path} --budget-s SECONDS` (in all)"
+            f"cannot resume {path} with --wall-budget-s {args.wall_budget_s:g}: it has run {state.wall_s:.4g} s already"
         )
+    if state.status.value == "budget_spent":
+        _refuse_spent(path, state, args)
     if state.status.value == "completed":
         # A kill during the finished file's write leaves the running file in place: write the
         # finished file from the journal (the same file again when it was not cut short).
@@ -151,10 +152,38 @@ def _resume(args) -> int:
         campaign_flows, _ = prefect_module()
         print(f"resuming {path}", flush=True)
         with flow_settings(), abortable(path):
-            done = campaign_flows.resume(str(path), record_rrd=not args.no_rrd, live=args.live, budget_s=args.budget_s)
+            done = campaign_flows.resume(
+                str(path),
+                record_rrd=not args.no_rrd,
+                live=args.live,
+                budget_s=args.budget_s,
+                wall_budget_s=args.wall_budget_s,
+            )
     print(outcome_line(Path(done)))
     print(done)
     return 0
+
+
+def _refuse_spent(path: Path, state, args) -> None:
+    """Refuse to resume a spent campaign without more of the budget it spent."""
+    from noisebo.campaign.engine import WALL_SPENT
+    from noisebo.campaign.instrument_budget import ALL_SPENT
+
+    if state.reason.startswith(WALL_SPENT) and args.wall_budget_s is None:
+        raise CampaignFileError(
+            f"{path}: {state.reason}; continue it with a larger wall-time budget: "
+            f"`noisebo resume {path} --wall-budget-s SECONDS` (in all)"
+        )
+    if state.reason.startswith(ALL_SPENT):
+        raise CampaignFileError(
+            f"{path}: {state.reason}; an instrument's own budget_s is part of its config and is not "
+            "raised on resume: start a new campaign for more"
+        )
+    if not state.reason.startswith(WALL_SPENT) and args.budget_s is None:
+        raise CampaignFileError(
+            f"{path}: {state.reason}; continue it with a larger budget: "
+            f"`noisebo resume {path} --budget-s SECONDS` (in all)"
+        )
 
 
 def _journal_state(path: Path):
@@ -225,6 +254,12 @@ def add_parser(commands) -> None:
         type=positive_seconds,
         default=None,
         help="a new instrument-time budget in all (s), e.g. for a campaign whose budget is spent",
+    )
+    resume.add_argument(
+        "--wall-budget-s",
+        type=positive_seconds,
+        default=None,
+        help="a new wall-time budget in all (s), e.g. for a campaign whose wall time is spent",
     )
     add_view_options(resume)
     resume.set_defaults(handler=_resume)

@@ -114,6 +114,8 @@ def inspect_summary(path: Path) -> dict:
         "budget_s": record.budget_s,
         "spent_s": record.spent_s,
         "spent_s_by_instrument": record.spent_by_instrument,
+        "wall_s": record.wall_s,
+        "wall_budget_s": record.wall_budget_s,
         "points": rows,
     }
 
@@ -142,6 +144,10 @@ def _inspect(args) -> int:
         f"  {len(summary['points'])} points, {summary['n_shots']} shots, {summary['measurement_time_s']:.1f} s of measurement; "
         f"noise model {'not converged' if conv is None else f'converged at step {conv}'}; "
         f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s"
+    )
+    wall_budget = summary["wall_budget_s"]
+    print(
+        f"  wall time {summary['wall_s']:.4g} s" + ("" if wall_budget is None else f" of a {wall_budget:.4g} s budget")
     )
     if summary["budget_s"] is not None:
         print(

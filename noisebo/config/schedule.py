@@ -58,6 +58,13 @@ class ScheduleConfig(FrozenModel):
     "budget_spent" and its final models (``noisebo resume --budget-s`` continues it with more).
     ``n_steps`` still ends it first if it is reached first.
 
+    Wall-time budget: ``wall_budget_s`` (None: none) is the wall time the campaign may run, as
+    its recorder counts it at every commit (``Clocked``; the time between a stop and its resume
+    is left out). A point is begun only when its instrument time fits the wall time left (with
+    several instruments the points run side by side: each must fit on its own); a decision
+    plans within it too, and once the cheapest point cannot fit, the campaign ends as
+    "budget_spent". A point begun is finished. A campaign kept only in memory has no clock.
+
     ``mode``: "paper" (default) is the paper's protocol: seed points and every point until the
     noise model converges take ``shots_before`` shots, whose sample sd is the point's measured
     noise, then ``shots_after``. "budget" spends no instrument time on dedicated noise
@@ -133,6 +140,12 @@ class ScheduleConfig(FrozenModel):
         None,
         description="the instrument time the campaign may spend (s): every "
         "shot's t plus point_overhead_s per point; null: no budget",
+    )
+    wall_budget_s: PositiveFloat | None = Field(
+        None,
+        description="the wall time the campaign may run (s), counted at each commit, the time between a stop "
+        "and its resume left out; a point is begun only when its instrument time fits what is left; "
+        "null: no limit",
     )
     point_overhead_s: NonNegativeFloat = Field(
         0.0, description="instrument time per point besides its shots (s): moving the tip or stage, settling"

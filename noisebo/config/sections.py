@@ -9,6 +9,7 @@ from typing import Any, Literal
 from pydantic import (
     Field,
     ValidationError,
+    model_serializer,
     model_validator,
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
@@ -136,6 +137,13 @@ class NamedInstrument(InstrumentConfig):
 
     def __hash__(self) -> int:
         return hash((self.name, self.budget_s, super().__hash__()))
+
+    @model_serializer(mode="wrap")
+    def _no_budget_key(self, handler: Any) -> Any:
+        data = handler(self)
+        if isinstance(data, dict) and self.budget_s is None:  # a dump without one reads as before budgets
+            data.pop("budget_s", None)
+        return data
 
     @property
     def section(self) -> InstrumentConfig:

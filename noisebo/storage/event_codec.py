@@ -2,8 +2,9 @@
 
 Record types, one per event: campaign (Started), decision (Decided), shot (ShotTaken), failure
 (ShotFailed), more_shots (MoreShots), point (PointCommitted), issued (PointIssued), summary
-(Summarised), status (StatusChanged) and budget (BudgetChanged). Scalars travel in the record's JSON fields, arrays (spectra, model outputs) as
-raw arrays.
+(Summarised), status (StatusChanged), budget (BudgetChanged), wall_budget (WallBudgetChanged)
+and clock (Clocked). Scalars
+travel in the record's JSON fields, arrays (spectra, model outputs) as raw arrays.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from noisebo.campaign.engine import EngineError, EngineState, replay
 from noisebo.config import parse_config
 from noisebo.events import (
     BudgetChanged,
+    Clocked,
+    WallBudgetChanged,
     Decided,
     DriverInfo,
     Event,
@@ -93,6 +96,10 @@ def encode(event: Event) -> Record:
         return Record("status", {"status": event.status.value, "reason": event.reason})
     if isinstance(event, BudgetChanged):
         return Record("budget", {"budget_s": event.budget_s})
+    if isinstance(event, Clocked):
+        return Record("clock", {"wall_s": event.wall_s})
+    if isinstance(event, WallBudgetChanged):
+        return Record("wall_budget", {"wall_budget_s": event.wall_budget_s})
     raise TypeError(f"not a campaign event: {type(event).__name__}")
 
 
@@ -174,6 +181,10 @@ def decode(record: Record) -> Event:
             return StatusChanged(Status(f["status"]), f["reason"])
         if record.type == "budget":
             return BudgetChanged(None if f["budget_s"] is None else float(f["budget_s"]))
+        if record.type == "clock":
+            return Clocked(_finite_seconds(f["wall_s"]))
+        if record.type == "wall_budget":
+            return WallBudgetChanged(None if f["wall_budget_s"] is None else _finite_seconds(f["wall_budget_s"]))
     except (KeyError, TypeError, ValueError) as error:
         raise CorruptJournal(f"a {record.type!r} record that is not one ({type(error).__name__}: {error})") from None
     raise CorruptJournal(f"unknown record type {record.type!r}")
@@ -187,3 +198,10 @@ def rebuild(records: list[Record]) -> EngineState:
         return replay([decode(r) for r in records])
     except EngineError as error:
         raise CorruptJournal(str(error)) from None
+
+
+def _finite_seconds(value) -> float:
+    """A clock record's wall time: a finite number of seconds, at least 0."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < float("inf"):
+        raise ValueError(f"wall_s {value!r} is not a wall time in seconds")
+    return float(value)

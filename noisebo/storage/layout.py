@@ -91,7 +91,7 @@ INSTRUMENT_TEXT = {
     "steps": "the named instrument the step's point was first handed to: the one the decision was made for",
 }
 # Root attributes that change with every committed point; a running file keeps them in /committed.
-MUTABLE_ATTRS = ("converged_step", "n_points", "n_steps", "n_shots", "n_failed_attempts")
+MUTABLE_ATTRS = ("converged_step", "n_points", "n_steps", "n_shots", "n_failed_attempts", "wall_s")
 
 
 def put_dataset(group: h5py.Group, name: str, data, units: str, description: str) -> h5py.Dataset:
@@ -242,6 +242,8 @@ def root_attrs(state: EngineState) -> dict:
         n_shots=state.n_shots,
         n_failed_attempts=len(state.failures),
         budget_s=-1.0 if state.budget_s is None else float(state.budget_s),
+        wall_s=float(state.wall_s),
+        wall_budget_s=-1.0 if state.wall_budget_s is None else float(state.wall_budget_s),
         config_json=json.dumps(config.model_dump(mode="json")),
         versions_json=json.dumps(state.versions),
     )

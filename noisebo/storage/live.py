@@ -88,7 +88,7 @@ if TYPE_CHECKING:  # reading a running file needs no model
     from noisebo.campaign.engine import EngineState
 
 LAYOUT = "appending"
-COUNTERS = ("points", "steps", "shots", "failures", "spectra", "n_shots", "converged_step")
+COUNTERS = ("points", "steps", "shots", "failures", "spectra", "n_shots", "converged_step", "wall_us")
 ROWS_PER_CHUNK = 64  # a flush rewrites each table's last, partly filled chunk: keep chunks small
 TEXT_CHUNK = 1024  # bytes
 SPECTRA_CHUNK = 1 << 16  # bytes
@@ -290,7 +290,7 @@ class LiveFile:
         counters.attrs["names"] = " ".join(COUNTERS)
         counters.attrs["description"] = (
             "rows of each table to trust (points, steps, shots, failures, spectra) "
-            "and the root attributes n_shots, converged_step"
+            "and the root attributes n_shots, converged_step and wall_s (as wall_us, in microseconds)"
         )
         fill_grid(f, state)
         self._layout_points_and_steps()
@@ -389,6 +389,7 @@ class LiveFile:
             "spectra": rows["spectra"] + sum(len(v) for v in spectra.values()),
             "n_shots": state.n_shots,
             "converged_step": numbering.converged_attr(state.data.converged_step),
+            "wall_us": round(state.wall_s * 1e6),
         }
         self._columns["committed"].write(0, [counts[k] for k in COUNTERS])
         f.flush()
@@ -498,6 +499,7 @@ def read_tables(f: h5py.File, path) -> dict:
             "n_steps": c["steps"],
             "n_shots": c["n_shots"],
             "n_failed_attempts": c["failures"],
+            "wall_s": c.get("wall_us", 0) / 1e6,  # a file written before wall time was counted: 0
         },
     }
 

@@ -144,7 +144,9 @@ class CampaignRecord:
     """A campaign file, finished or still being written. ``config`` and ``driver`` as recorded
     (plain mappings: the config validates with ``noisebo.config.parse_config``);
     ``converged_step``: the first BO step at which the noise model had converged, None if never;
-    ``budget_s``: the instrument-time budget, None for none; ``grid``: the config's grids (x, t,
+    ``budget_s``: the instrument-time budget, None for none; ``wall_s``: the wall time the
+    campaign had run as of its last committed point or status (s; 0 in a file written before
+    wall time was counted); ``wall_budget_s``: the wall-time budget, None for none; ``grid``: the config's grids (x, t,
     t_fine); ``versions``: the packages that wrote it ({"noisebo": "0.1.0", "python": ..., ...};
     empty for a file that did not record them); ``attrs``: every root attribute as stored."""
 
@@ -159,6 +161,8 @@ class CampaignRecord:
     converged_step: int | None
     n_shots: int
     budget_s: float | None
+    wall_s: float
+    wall_budget_s: float | None
     grid: dict[str, np.ndarray]
     points: Points
     steps: Steps
@@ -255,6 +259,8 @@ def from_tables(path: Path, data: dict, failures: dict, fits: dict | None = None
         converged_step=None if converged < 1 else converged,
         n_shots=int(attrs["n_shots"]),
         budget_s=None if budget < 0 else budget,
+        wall_s=float(attrs.get("wall_s", 0.0)),
+        wall_budget_s=None if float(attrs.get("wall_budget_s", -1.0)) < 0 else float(attrs["wall_budget_s"]),
         grid={name: np.asarray(v) for name, v in data["grid"].items()},
         points=_points(data["points"]),
         steps=_steps(data["steps"]),

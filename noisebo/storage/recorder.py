@@ -17,12 +17,14 @@ from __future__ import annotations
 import importlib.metadata
 import os
 import platform
+import time
 from pathlib import Path
 from typing import Sequence
 
 from noisebo.campaign import engine
 from noisebo.campaign.engine import EngineState
 from noisebo.events import (
+    Clocked,
     Event,
     PointCommitted,
     Started,
@@ -111,6 +113,12 @@ class Recorder:
         self.state = state
         self.store: CampaignStore = Hdf5Store(self.h5_path) if store is None else store
         self.dropped: str | None = None  # what reopening the journal cut off (a torn tail), said to the user
+        self._wall_base, self._wall_start = state.wall_s, time.monotonic()
+
+    def wall_s(self) -> float:
+        """The campaign's wall time now (s): what its journal counted before this recorder
+        opened it, and the time since (to the microsecond)."""
+        return round(self._wall_base + time.monotonic() - self._wall_start, 6)
 
     @classmethod
     def create(cls, h5_path: Path, started: Started, store: CampaignStore | None = None) -> Recorder:
@@ -129,12 +137,13 @@ class Recorder:
         return recorder
 
     @classmethod
-    def resume(cls, h5_path: Path, budget_s=engine.KEEP_BUDGET) -> Recorder:
+    def resume(cls, h5_path: Path, budget_s=engine.KEEP_BUDGET, wall_budget_s=engine.KEEP_BUDGET) -> Recorder:
         """The campaign of ``h5_path`` from its journal, its status set back to running (unless
-        it completed), with a new instrument-time budget when ``budget_s`` is given: a torn tail
-        is cut off and stray half-written snapshots removed."""
+        it completed), with a new instrument-time budget when ``budget_s`` is given and a new
+        wall-time budget when ``wall_budget_s`` is: a torn tail is cut off and stray
+        half-written snapshots removed."""
         recorder = cls.attach(h5_path)
-        events = engine.resumed(recorder.state, budget_s)
+        events = engine.resumed(recorder.state, budget_s, wall_budget_s)
         recorder.commit(recorder.state, events)
         if not events:
             recorder.snapshot()
@@ -167,12 +176,18 @@ class Recorder:
         return recorder
 
     def commit(self, state: EngineState, events: Sequence[Event]) -> EngineState:
-        """Journal and apply ``events`` to ``state`` in order; returns the new state."""
+        """Apply ``events`` to ``state`` in order, stamped with the campaign's wall time
+        (``Clocked``), and journal them in one write (nothing is written when one does not
+        apply); returns the new state."""
+        if not events:
+            self.state = state
+            return state
+        events = (*events, Clocked(self.wall_s()))
         snapshot = False
         for event in events:
-            self._writer.append(event_codec.encode(event))
             state = engine.apply(state, event)
             snapshot = snapshot or isinstance(event, SNAPSHOT_AFTER)
+        self._writer.append_all([event_codec.encode(e) for e in events])
         self.state = state
         if snapshot:
             self.snapshot()

@@ -125,15 +125,20 @@ def test_other_errors_fail_the_task(tiny_config, prefect_harness):
     assert inst.calls == 1
 
 
-def test_the_recorder_journals_each_event_before_applying_it(tiny_config, tmp_path):
+def test_the_recorder_journals_each_commit_with_its_clock_and_a_bad_event_writes_nothing(tiny_config, tmp_path):
     path = tmp_path / "c.h5"
     with start_campaign(path, tiny_config, 1) as recorder:
         request = engine.ask(recorder.state)
         reading = driver.take_shot(build(tiny_config.instrument), 1, request)
-        state = recorder.commit(recorder.state, engine.tell(recorder.state, request, {0: reading}).events)
+        events = engine.tell(recorder.state, request, {0: reading}).events
+        state = recorder.commit(recorder.state, events)
+        with pytest.raises(engine.EngineError, match="shot 0 of point 0 out of order"):
+            recorder.commit(state, [events[0]])  # shot 0 again
+        assert recorder.state is state
     found, _ = journal.read(path.with_suffix(".journal"))
-    assert [r.type for r in found] == ["campaign", "shot"]
+    assert [r.type for r in found] == ["campaign", "shot", "clock"]
     assert state.n_shots == 1 and np.isclose(found[1].fields["value"], reading.value)
+    assert state.wall_s == found[2].fields["wall_s"] > 0
 
 
 def seeded(config, seed=3):

@@ -377,7 +377,7 @@ def test_a_fleet_of_one_is_the_one_instrument_campaign():
     fleet = run_fleet(config, {"a": SIM}, 4)
     dumped = config.model_dump(mode="json")
     named = dumped.pop("instruments")[0]
-    single = parse_config({**dumped, "instrument": {k: v for k, v in named.items() if k not in ("name", "budget_s")}})
+    single = parse_config({**dumped, "instrument": {k: v for k, v in named.items() if k != "name"}})
     one = driver.run_campaign(single, SIM, 4).final
     assert fleet.final.data == one.data and len(fleet.decided_at) == len(one.decisions) == 4
     assert fleet.decided_at == tuple(sorted(fleet.decided_at))

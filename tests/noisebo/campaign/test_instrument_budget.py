@@ -112,7 +112,11 @@ def test_a_bad_instrument_budget_is_refused_in_one_line(budget, message):
 
 def test_an_instrument_budget_reads_back_and_is_not_part_of_the_instrument_section():
     config = budgeted({"b": 30.0})
-    assert parse_config(config.model_dump(mode="json")) == config
+    dumped = config.model_dump(mode="json")
+    assert parse_config(dumped) == config
+    assert (
+        "budget_s" not in dumped["instruments"][0] and dumped["instruments"][1]["budget_s"] == 30.0
+    )  # as before budgets
     assert [i.budget_s for i in config.instruments] == [None, 30.0, None]
     assert "budget_s" not in config.instrument.model_dump() and config.instruments[1].section.kind == "forrester"
     assert isinstance(engine.ask(fresh(config), "b"), (DecisionDue, Request))

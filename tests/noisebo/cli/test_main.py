@@ -321,3 +321,30 @@ def test_a_spent_budget_is_resumed_only_with_a_larger_one(tiny_config, tmp_path,
     data = read_record(path)
     assert data.status == "budget_spent" and data.budget_s == 90.0
     assert 60.0 < sum(data.shots.t) <= 90.0 and data.summary is not None
+
+
+def test_a_spent_wall_time_is_resumed_only_with_a_larger_wall_budget(tiny_config, tmp_path, prefect_harness, capsys):
+    from noisebo.campaign.driver import drive
+    from noisebo.storage.record import read_record
+    from tests.noisebo.campaign.test_wall_budget import Slow, short_shots
+
+    config = short_shots(tiny_config, wall_budget_s=1.0, n_steps=100)
+    path = tmp_path / "wall.h5"
+    with start_campaign(path, config, 1) as recorder:
+        ran = drive(recorder.state, Slow(), recorder.commit).wall_s
+    record = read_record(path)
+    assert record.status == "budget_spent" and record.wall_budget_s == 1.0 and record.wall_s == ran
+    before = snapshot(tmp_path)
+    for argv, message in (
+        (["resume", str(path)], "continue it with a larger wall-time budget: `noisebo resume"),
+        (["resume", str(path), "--budget-s", "500"], "--wall-budget-s SECONDS` (in all)"),
+        (["resume", str(path), "--wall-budget-s", "0.5"], f"it has run {ran:.4g} s already"),
+    ):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err
+    assert snapshot(tmp_path) == before
+    assert main(["resume", str(path), "--wall-budget-s", f"{ran + 3.0:.6g}", "--no-rrd"]) == 0
+    data = read_record(path)
+    assert data.wall_budget_s == pytest.approx(ran + 3.0) and data.wall_s > ran
+    assert len(data.points) > len(record.points)

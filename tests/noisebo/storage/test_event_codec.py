@@ -6,6 +6,7 @@ import pytest
 from noisebo.acquisition.records import Decision
 from noisebo.config import CampaignConfig, ReductionConfig
 from noisebo.events import (
+    Clocked,
     Decided,
     DriverInfo,
     MoreShots,
@@ -83,6 +84,7 @@ def pfm_point():
         Decided(decision()),
         Summarised(Summary(np.zeros(3), np.ones(3), np.ones(5), 2.5, {"noise.a0": 0.1})),
         StatusChanged(Status.FAILED, "failure budget exceeded"),
+        Clocked(12.345678),
     ],
     ids=lambda e: type(e).__name__,
 )
@@ -140,6 +142,10 @@ def shot(point, k):
         ([Record("status", {"status": "done", "reason": ""})], "'done' is not a valid Status"),
         ([Record("weird", {})], "unknown record type 'weird'"),
         ([Record("shot", {"point": 0})], "a 'shot' record that is not one"),
+        ([Record("clock", {})], r"a 'clock' record that is not one \(KeyError: 'wall_s'\)"),
+        ([Record("clock", {"wall_s": -1.0})], r"a 'clock' record that is not one \(ValueError: wall_s -1.0 is not"),
+        ([Record("clock", {"wall_s": float("nan")})], r"\(ValueError: wall_s nan is not a wall time in seconds\)"),
+        ([Record("clock", {"wall_s": "soon"})], r"\(ValueError: wall_s 'soon' is not a wall time in seconds\)"),
     ],
 )
 def test_records_that_do_not_form_a_campaign_are_named(tail, message):

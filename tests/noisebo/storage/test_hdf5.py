@@ -8,6 +8,8 @@ import os
 import signal
 import subprocess
 import sys
+import time
+from dataclasses import replace
 from pathlib import Path
 
 import h5py
@@ -26,6 +28,7 @@ from noisebo.storage.hdf5 import (
     spectra_reader,
     write_snapshot,
 )
+from noisebo.storage.live import counts as live_counts
 from noisebo.storage.recorder import Recorder
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -157,6 +160,7 @@ print("not killed")
 def test_a_file_killed_mid_append_opens_with_exactly_the_committed_rows(at, tmp_path):
     # Point 6 has a failed attempt, rejected shots and spectra: every table gets rows in the killed append.
     path, n = tmp_path / "c.h5", 6
+    begun = time.monotonic()
     killed = subprocess.run(
         [sys.executable, "-c", CHILD, str(path), str(n), f"append:{at}"],
         cwd=ROOT,
@@ -166,6 +170,7 @@ def test_a_file_killed_mid_append_opens_with_exactly_the_committed_rows(at, tmp_
         timeout=120,
     )
     assert killed.returncode == -signal.SIGKILL, killed.stdout + killed.stderr[-2000:]
+    killed_after_s = time.monotonic() - begun
     with pytest.raises(OSError, match="already open for write"):
         h5py.File(path, "r")  # plain h5py refuses a file killed while open for SWMR writing ...
     with h5py.File(path, "r", swmr=True) as f:  # ... an SWMR reader opens it
@@ -174,7 +179,10 @@ def test_a_file_killed_mid_append_opens_with_exactly_the_committed_rows(at, tmp_
     for i in range(n):
         for batch in point_commits(SMALL, i, 0, True, FAIL_EVERY, REJECT_EVERY):
             state = engine.apply_all(state, batch)
-    assert_reads_as_whole(path, state, tmp_path)
+    with h5py.File(path, "r", swmr=True) as f:  # the recorder's clock, which the batches here lack
+        wall_s = live_counts(f)["wall_us"] / 1e6
+    assert 0 < wall_s < killed_after_s
+    assert_reads_as_whole(path, replace(state, wall_s=wall_s), tmp_path)
     assert len(read_failures(path)["kind"]) == 0  # point 6's failed attempt is past the counters
 
 

@@ -16,7 +16,7 @@ from noisebo.storage.record import CampaignRecord
 from noisebo.storage.recorder import Recorder, journal_path
 from noisebo.storage.store import CampaignStore, Hdf5Store
 
-WALL_CLOCK = {"latency_s"}  # a decision's measured seconds: the one thing two runs do not share
+WALL_CLOCK = {"latency_s", "wall_s"}  # a decision's measured seconds and the campaign's: what two runs do not share
 
 
 def recorded(config, path, store=None) -> tuple[CampaignRecord, CampaignRecord]:

@@ -1,0 +1,122 @@
+"""The campaign's wall time: the recorder stamps every commit with it (``Clocked``), a resume
+goes on from what the journal counted, and ``schedule.wall_budget_s`` begins a point only when
+its instrument time fits the wall time left, ending the campaign as "budget_spent" otherwise;
+a point begun is finished."""
+
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from noisebo.campaign import engine
+from noisebo.campaign.driver import drive
+from noisebo.events import Clocked, DecisionDue, DriverInfo, Request, ShotTaken, Status
+from noisebo.instruments.forrester import ForresterInstrument
+from noisebo.storage.event_codec import decode
+from noisebo.storage.journal import read
+from noisebo.storage.record import read_record
+from noisebo.storage.recorder import Recorder, journal_path
+
+
+class Slow(ForresterInstrument):
+    """The Forrester simulator with a shot that takes its exposure t in real time."""
+
+    def simulate(self, x, t, rng):
+        time.sleep(t)
+        return super().simulate(x, t, rng)
+
+
+def short_shots(config, **schedule):
+    """``config`` with exposures of 10 to 50 ms, so that shots take real time in a test."""
+    return config.with_overrides(space={"t_min": 0.01, "t_max": 0.05}, schedule=schedule)
+
+
+def started(config, seed=3):
+    return engine.new_campaign(config, seed, DriverInfo("forrester", "", {}), {}, "2026-11-29T00:00:00+00:00")
+
+
+def first_cost(state):
+    request = engine.ask(state)
+    return state.config.schedule.point_overhead_s + request.t * request.wanted
+
+
+def test_a_point_is_begun_only_when_its_instrument_time_fits_the_wall_time_left(tiny_config):
+    config = tiny_config.with_overrides(schedule={"wall_budget_s": 100.0, "point_overhead_s": 1.0})
+    state = engine.start(started(config))
+    cost = first_cost(state)
+    fits = replace(state, wall_s=100.0 - cost)
+    assert isinstance(engine.ask(fits), Request)
+    late = replace(state, wall_s=100.0 - cost + 0.01)
+    due = engine.ask(late)
+    assert due == DecisionDue(
+        0, final=True, budget=f"wall time spent: {late.wall_s:.4g} s of 100 s; point 0 needs {cost:.4g} s more"
+    )
+    ended = engine.replay([started(config), Clocked(late.wall_s), *engine.advance(late)])
+    assert ended.status is Status.BUDGET_SPENT and ended.reason == due.budget
+
+
+def test_a_point_begun_is_finished_past_the_wall_time(tiny_config):
+    config = tiny_config.with_overrides(schedule={"wall_budget_s": 100.0})
+    state = engine.start(started(config))
+    request = engine.ask(state)
+    shot = engine.tell(
+        state,
+        request,
+        {0: ForresterInstrument().simulate((request.x[0],), request.t, np.random.default_rng(0))},
+        decide_next=False,
+    )
+    over = replace(shot.state, wall_s=150.0)
+    again = engine.ask(over)
+    assert isinstance(again, Request) and (again.point, again.taken) == (0, 1)
+
+
+def test_a_decision_plans_within_the_wall_time_left(tiny_config):
+    config = tiny_config.with_overrides(schedule={"wall_budget_s": 100.0, "budget_s": 500.0})
+    state = replace(engine.start(started(config)), wall_s=70.0, spent_s=420.0)
+    assert engine.step_inputs(state).budget_left == pytest.approx(30.0)
+    state = replace(state, wall_s=10.0)
+    assert engine.step_inputs(state).budget_left == pytest.approx(80.0)  # the instrument time is shorter
+
+
+def test_the_recorder_stamps_every_commit_and_a_resume_goes_on_from_the_journals_count(tiny_config, tmp_path):
+    config = short_shots(tiny_config, n_steps=1)
+    path = tmp_path / "c.h5"
+    with Recorder.create(path, started(config)) as recorder:
+        stopped = drive(
+            recorder.state,
+            Slow(),
+            recorder.commit,
+            stop_requested=lambda: "stop" if recorder.state.n_shots >= 4 else None,
+        )
+    records, _ = read(journal_path(path))
+    clocks = [decode(r).wall_s for r in records if r.type == "clock"]
+    types = [r.type for r in records[1:]]
+    assert len(clocks) == sum(1 for a, b in zip(types, types[1:] + ["clock"]) if b == "clock" and a != "clock")
+    assert clocks == sorted(clocks) and clocks[-1] == stopped.wall_s >= 4 * 0.01
+    assert read_record(path).wall_s == stopped.wall_s  # the file says it as of its last status
+    time.sleep(0.3)  # time between a stop and its resume is not counted
+    with Recorder.resume(path) as recorder:
+        assert recorder.state.wall_s == pytest.approx(stopped.wall_s, abs=0.05)
+        final = drive(recorder.state, Slow(), recorder.commit)
+    assert final.status is Status.COMPLETED and final.wall_s > stopped.wall_s
+    assert read_record(path).wall_s == final.wall_s
+
+
+def test_a_wall_time_budget_ends_a_recorded_campaign_with_no_point_lost(tiny_config, tmp_path):
+    config = short_shots(tiny_config, wall_budget_s=2.0, n_steps=1000)
+    path = tmp_path / "c.h5"
+    with Recorder.create(path, started(config)) as recorder:
+        final = drive(recorder.state, Slow(), recorder.commit)
+    assert final.status is Status.BUDGET_SPENT and final.reason.startswith("wall time spent: ")
+    assert not final.taken  # every point begun was finished
+    cost = {p.committed.index: sum(s.t for s in p.shots) for p in final.points}
+    wall = 0.0
+    for event in map(decode, read(journal_path(path))[0]):  # each point begun where it fit the time left
+        if isinstance(event, Clocked):
+            wall = event.wall_s
+        elif isinstance(event, ShotTaken) and event.shot == 0:
+            assert wall + cost[event.point] <= 2.0
+    assert final.wall_s > 2.0 - min(cost.values())  # and the end came when the time left was short
+    record = read_record(path)
+    assert record.status == "budget_spent" and len(record.points) == len(final.points) >= 1
