@@ -145,14 +145,15 @@ def _progress(step: Request | DecisionDue | Wait | Done, state: EngineState, nam
         if state.budget_s is None
         else f"; budget {number(state.budget_s)} s, {number(max(state.budget_s - state.spent_s, 0.0))} s left"
     )
-    wall = state.config.schedule.wall_budget_s
+    wall, wall_left = state.wall_budget_s, engine.wall_left(state)  # the budget a resume may have raised
     budget += f"; wall time {number(state.wall_s)} s" + (
-        "" if wall is None else f" of {number(wall)} s, {number(max(wall - state.wall_s, 0.0))} s left"
+        "" if wall is None or wall_left is None else f" of {number(wall)} s, {number(max(wall_left, 0.0))} s left"
     )
-    own_budget = instrument_budget.budget(state, name or "")
-    if own_budget is not None:
-        left = max(own_budget - state.spent_by.get(name or "", 0.0), 0.0)
-        budget += f"; {html.escape(name or '')}'s own budget {number(own_budget)} s, {number(left)} s left"
+    own_budget, own_left = instrument_budget.budget(state, name or ""), instrument_budget.left(state, name or "")
+    if own_budget is not None and own_left is not None:
+        budget += (
+            f"; {html.escape(name or '')}'s own budget {number(own_budget)} s, {number(max(own_left, 0.0))} s left"
+        )
     own = name if state.config.noise_model.per_instrument and name else None
     learned = state.data if own is None else own_data(state, own)  # a law per instrument: this one's
     t_opt = f"{number(learned.t_opt_history[-1])} s" if learned.t_opt_history else "not yet (after the first decision)"

@@ -191,7 +191,7 @@ class CampaignRecord:
         attempts at their t, and the point overhead of every point whose first attempt it made
         (a failed one before a shot, else the first shot); {} with one instrument."""
         shots, failures = self.shots, self.failures
-        names = sorted(set(shots.instrument) | set(failures.instrument) - {""})
+        names = sorted((set(shots.instrument) | set(failures.instrument)) - {""})
         if not names:
             return {}
         spent = dict.fromkeys(names, 0.0)

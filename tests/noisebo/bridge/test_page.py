@@ -249,3 +249,10 @@ def test_an_instrument_with_a_budget_of_its_own_sees_what_is_left_of_it():
     mine = text_of(render({**MEASURING, "instrument": "a"}, state))
     assert f"a's own budget 100 s, {number(left)} s left" in mine
     assert "own budget" not in text_of(render({**MEASURING, "instrument": "b"}, state))
+
+
+def test_the_wall_time_shown_is_against_the_budget_in_force_a_resume_may_have_raised():
+    from tests.noisebo.campaign.test_fleet import fresh
+
+    state = replace(fresh(), wall_s=40.0, wall_budget_s=100.0)  # the config has none; a resume set one
+    assert "wall time 40 s of 100 s, 60 s left" in text_of(render({**MEASURING, "instrument": "a"}, state))

@@ -269,6 +269,10 @@ def test_each_instruments_time_is_its_shots_attempts_and_the_points_it_began(for
     config = {**record.config, "schedule": {**record.config["schedule"], "point_overhead_s": 0.5}}
     handmade = replace(record, shots=shots, failures=failures, config=config)
     assert handmade.spent_by_instrument == {"a": 2.5, "b": 4.5, "c": 5.5}
+    unnamed = replace(
+        handmade, shots=replace(shots, instrument=("",) * 4), failures=replace(failures, instrument=("", ""))
+    )
+    assert unnamed.spent_by_instrument == {}  # one instrument: no shares
     assert handmade.spent_s == pytest.approx(12.5)
     assert main(["inspect", str(path)]) == 0
     line = next(line for line in capsys.readouterr().out.splitlines() if "instrument time:" in line)
