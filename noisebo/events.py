@@ -173,7 +173,8 @@ class WallBudgetChanged:
 class Clocked:
     """The campaign's wall time (s) when a batch of events was committed: the seconds it has
     been running since it was started, the time between a stop and its resume not counted.
-    The recorder stamps every commit with one; a campaign kept only in memory has none."""
+    The recorder stamps every commit with one, the simulated fleet with its simulated time; a
+    campaign kept only in memory otherwise has none."""
 
     wall_s: float
 

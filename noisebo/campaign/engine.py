@@ -300,8 +300,21 @@ def still_wanted(state: EngineState, instrument: str, request: Request) -> bool:
     """Whether the shot ``request`` asked ``instrument`` for is still its to tell: not once the
     campaign has ended, nor once the point was taken over by another instrument after this one
     timed out on it (a late reading is then dropped; the new instrument measures the shot)."""
-    now = ask(state, instrument)
+    now = _shot_due(state, instrument)
     return isinstance(now, Request) and (now.point, now.taken) == (request.point, request.taken)
+
+
+def _shot_due(state: EngineState, instrument: str | None) -> Request | DecisionDue | Wait | Done:
+    """What a shot told by ``instrument`` must match: ``ask``, except that a point under way on
+    that instrument keeps taking its shots whatever the budgets say now. The instrument was asked
+    for the shot when it fitted; another instrument's commit while the shot ran (which moves the
+    wall clock and the time spent) must not make a shot already taken unwanted."""
+    if state.status is Status.RUNNING and state.config.instruments is not None and instrument:
+        own = next((f for f in state.flights if f.instrument == instrument), None)
+        request = None if own is None else _request(state, own.point)
+        if request is not None and request.taken < request.wanted:
+            return request
+    return ask(state, instrument or None)
 
 
 def _ask_fleet(state: EngineState, instrument: str | None) -> Request | DecisionDue | Wait | Done:
@@ -456,7 +469,7 @@ def tell(
     ``EngineError`` for a stale request or a shot not wanted now."""
     events: list[Event] = []
     for shot in sorted(outcomes):
-        current = ask(state, request.instrument or None)
+        current = _shot_due(state, request.instrument)
         if not isinstance(current, Request) or current.point != request.point:
             raise EngineError(
                 f"point {request.point} is not being measured now"

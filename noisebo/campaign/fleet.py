@@ -7,7 +7,9 @@ the order the instruments asked. The clock is simulated: a shot lasts its t plus
 the tip or stage), a decision ``decision_s``. Nothing sleeps: a campaign of hours runs in the
 seconds its decisions take, and the same seed, instruments and timing give the same campaign
 (turns at one time go in the order they were scheduled, the instruments first in the
-config's order). This is the fleet's benchmark and test bed; real instruments run the same
+config's order). Every commit is stamped with the simulated time (``Clocked``), as the recorder
+stamps a real campaign's with the wall time, so ``schedule.wall_budget_s`` ends a simulated
+fleet as it ends a real one. This is the fleet's benchmark and test bed; real instruments run the same
 engine in real time, each instrument's loop on a thread of its own
 (``noisebo.campaign.fleet_drive``).
 """
@@ -23,7 +25,18 @@ from noisebo.campaign.driver import in_memory, now_utc, take_shot
 from noisebo.campaign.engine import EngineState
 from noisebo.campaign.flights import flight_of
 from noisebo.config import CampaignConfig
-from noisebo.events import Decided, DecisionDue, Done, DriverInfo, Event, Outcome, PointCommitted, Request, Wait
+from noisebo.events import (
+    Clocked,
+    Decided,
+    DecisionDue,
+    Done,
+    DriverInfo,
+    Event,
+    Outcome,
+    PointCommitted,
+    Request,
+    Wait,
+)
 from noisebo.precision import float64
 
 
@@ -81,7 +94,8 @@ def run_fleet(
 ) -> FleetRun:
     """A whole campaign measured by ``instruments`` (name -> simulator, the config's names) in
     simulated time, in memory. ``on_commit`` sees the state before and the events of every
-    commit."""
+    commit, the last of them its ``Clocked`` (the simulated time of the commit; a decision's events
+    are applied when it begins, as the clock's turns are ordered)."""
     names = config.instrument_names
     if not names or set(names) != set(instruments):
         raise FleetError(f"the config names the instruments {list(names)}, the fleet has {sorted(instruments)}")
@@ -95,6 +109,7 @@ def run_fleet(
     waiting: list[str] = []  # instruments that wait for another's commit
 
     def commit(state: EngineState, events: Sequence[Event], turn: _Turn) -> EngineState:
+        events = (*events, Clocked(turn.time))
         if on_commit is not None:
             on_commit(state, events)
         commits.extend(Commit(turn.time, e.index, turn.name) for e in events if isinstance(e, PointCommitted))
@@ -115,6 +130,9 @@ def run_fleet(
         answer = engine.ask(state, turn.name)
         if isinstance(answer, Done):
             clock.done(turn.name, turn.time)
+            for name in waiting:  # the campaign may have ended: whoever waited on it asks again
+                heapq.heappush(turns, clock.turn(name, turn.time))
+            waiting.clear()
         elif isinstance(answer, Wait):
             waiting.append(turn.name)
         elif isinstance(answer, Request):

@@ -63,7 +63,8 @@ class ScheduleConfig(FrozenModel):
     is left out). A point is begun only when its instrument time fits the wall time left (with
     several instruments the points run side by side: each must fit on its own); a decision
     plans within it too, and once the cheapest point cannot fit, the campaign ends as
-    "budget_spent". A point begun is finished. A campaign kept only in memory has no clock.
+    "budget_spent". A point begun is finished. A campaign kept only in memory has no clock
+    (the simulated fleet, ``noisebo.campaign.fleet``, keeps its simulated time).
 
     ``mode``: "paper" (default) is the paper's protocol: seed points and every point until the
     noise model converges take ``shots_before`` shots, whose sample sd is the point's measured

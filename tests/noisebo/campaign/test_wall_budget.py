@@ -9,14 +9,17 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from noisebo.campaign import engine
-from noisebo.campaign.driver import drive
+from noisebo.campaign import engine, flights
+from noisebo.campaign.driver import drive, in_memory, take_shot
+from noisebo.campaign.fleet import FleetTiming, run_fleet
+from noisebo.campaign.instrument_budget import SLACK_S
 from noisebo.events import Clocked, DecisionDue, DriverInfo, Request, ShotTaken, Status
 from noisebo.instruments.forrester import ForresterInstrument
 from noisebo.storage.event_codec import decode
 from noisebo.storage.journal import read
 from noisebo.storage.record import read_record
 from noisebo.storage.recorder import Recorder, journal_path
+from tests.noisebo.campaign.test_fleet import NAMES, SIM, fleet_config, issue
 
 
 class Slow(ForresterInstrument):
@@ -120,3 +123,44 @@ def test_a_wall_time_budget_ends_a_recorded_campaign_with_no_point_lost(tiny_con
     assert final.wall_s > 2.0 - min(cost.values())  # and the end came when the time left was short
     record = read_record(path)
     assert record.status == "budget_spent" and len(record.points) == len(final.points) >= 1
+
+
+def test_a_simulated_fleet_keeps_a_clock_and_ends_when_its_wall_time_is_spent(monkeypatch):
+    config = fleet_config(wall_budget_s=60.0, n_steps=1000, point_overhead_s=0.5)
+    begun, clocks = {}, []
+    original = engine.ask
+
+    def ask(state, name=None):  # each point's first shot, with the wall time the engine saw
+        answer = original(state, name)
+        if name is not None and isinstance(answer, Request) and not flights.flight_of(state, answer.point).begun:
+            begun.setdefault(answer.point, (state.wall_s, config.schedule.point_overhead_s + answer.t * answer.wanted))
+        return answer
+
+    monkeypatch.setattr(engine, "ask", ask)
+    timing = FleetTiming(shot_overhead_s=0.1, decision_s=1.0)
+    run = run_fleet(config, {n: SIM for n in NAMES}, 4, timing, on_commit=lambda s, ev: clocks.append(ev[-1]))
+    final = run.final
+    assert final.status is Status.BUDGET_SPENT and final.reason.startswith(engine.WALL_SPENT)
+    assert len(begun) == len(final.points) > 3  # a point issued past the wall time is left unbegun, for a resume
+    assert all(not f.begun and not f.taken for f in final.flights)
+    assert all(wall + cost <= 60.0 + SLACK_S for wall, cost in begun.values())
+    assert all(isinstance(c, Clocked) for c in clocks)  # every commit is stamped with the simulated time
+    walls = [c.wall_s for c in clocks]
+    assert walls == sorted(walls) and final.wall_s == walls[-1] <= run.wall_s
+    assert [c.wall_s for c in clocks if c.wall_s in {m.wall_s for m in run.commits}]  # shots land on the clock
+    assert final.wall_s > 60.0 - max(cost for _, cost in begun.values())  # it ran until a point no longer fit
+
+
+def test_a_shot_asked_for_while_it_fitted_is_kept_when_another_instrument_moved_the_clock_meanwhile():
+    config = fleet_config(wall_budget_s=100.0)
+    state = engine.start(engine.new_campaign(config, 4, DriverInfo("fleet", "", {}), {}, "now"))
+    state, request = issue(state, "a")
+    cost = config.schedule.point_overhead_s + request.t * request.wanted
+    late = in_memory(state, [Clocked(100.0 - cost + 1.0)])  # b committed while a's first shot ran
+    assert not isinstance(engine.ask(late, "a"), Request)  # a point not begun no longer fits
+    assert engine.still_wanted(late, "a", request)
+    told = engine.tell(late, request, {0: take_shot(SIM, 4, request)}, decide_next=False)
+    flight = flights.flight_of(told.state, request.point)
+    assert flight.begun and [s.shot for s in flight.taken] == [0]
+    after = engine.ask(told.state, "a")
+    assert isinstance(after, Request) and (after.point, after.taken) == (request.point, 1)  # begun: finished
