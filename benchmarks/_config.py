@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 from noisebo.instruments import build  # noqa: E402
 from noisebo.instruments.registry import validated  # noqa: E402
 from noisebo.campaign.driver import simulates  # noqa: E402
-from noisebo.config import CampaignConfig, ConfigError, load_config  # noqa: E402
+from noisebo.config import CampaignConfig, ConfigError, load_config, parse_config  # noqa: E402
 
 EXIT_USAGE = 2  # as noisebo/cli/common.py
 
@@ -96,3 +96,16 @@ def benchmark_config(
             "one (it scores against its truth)",
         )
     return config, instrument
+
+
+def same_settings(kept: dict, now: dict) -> bool:
+    """Whether the settings a --json was measured with (``kept``) are ``now``: each entry as
+    stored, but "config" (a config's JSON dump) as the config it parses to, so a dump written
+    before a setting with a default was added still matches a config with that default."""
+    if kept.keys() != now.keys():
+        return False
+    try:
+        configs_match = "config" not in now or parse_config(kept["config"]) == parse_config(now["config"])
+    except ConfigError:
+        return False
+    return configs_match and all(kept[k] == now[k] for k in now if k != "config")

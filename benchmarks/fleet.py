@@ -61,7 +61,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _config import Parser, benchmark_config, refuse  # noqa: E402
+from _config import Parser, benchmark_config, refuse, same_settings  # noqa: E402
 from budget import default_target, scorer  # noqa: E402
 
 from noisebo.campaign.fleet import FleetTiming, run_fleet  # noqa: E402
@@ -285,7 +285,7 @@ def main(argv=None) -> int:
         "target": target,
     }
     kept = json.loads(args.json.read_text()) if args.json is not None and args.json.exists() else None
-    if kept is not None and kept["settings"] != settings:
+    if kept is not None and not same_settings(kept["settings"], settings):
         refuse(parser, f"{args.json} was measured with other settings; give another --json")
     records: dict[str, list] = kept["records"] if kept else {}
     print(said)

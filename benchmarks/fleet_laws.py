@@ -2,7 +2,8 @@
 
     python benchmarks/fleet_laws.py [--config PATH] [--ratio 2] [--seeds 20]
                                     [--designs own,shared,alone,pooled] [--between a0=0.05]
-                                    [--steps 30] [--n-seed 4] [--json PATH] [--report]
+                                    [--steps 30] [--n-seed 4] [--wall-budget-s S]
+                                    [--json PATH] [--report]
 
 One campaign of the config (its schedule, with --steps BO steps and --n-seed seed points) on two
 simulated instruments of its instrument: "good" with the config's settings and "bad" with its A1
@@ -19,6 +20,12 @@ read-out per shot, 1 s per decision). The designs:
   and half the steps (about the points each instrument measures in the designs above), seeds
   seed*1000 + 0 and + 1; its final t is its last decision's optimal t, its RMSE the mean of
   the two campaigns' final models'.
+
+--wall-budget-s S ends every campaign by its simulated wall time (``schedule.wall_budget_s``)
+instead of its steps (--steps then defaults to 100 000): the two instruments run side by side for
+S seconds whatever their points cost, as a lab's would, where a step count lets the instrument
+with the cheaper points take most of the steps. Each "alone" campaign then runs on a simulated
+instrument of its own for the same S seconds.
 
 Each instrument's t* (``t*(law)``, ``benchmarks/_tstar.py``) maximises the config's reward with
 that instrument's own noise law. A campaign's final t for an instrument is the optimal t
@@ -44,7 +51,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _config import Parser, benchmark_config, refuse  # noqa: E402
+from _config import Parser, benchmark_config, refuse, same_settings  # noqa: E402
 from _tstar import law_t_star  # noqa: E402
 from budget import scorer  # noqa: E402
 
@@ -56,6 +63,7 @@ from noisebo.instruments import build  # noqa: E402
 NAMES = ("good", "bad")
 WITHIN = 0.05
 SEED_STRIDE = 1000
+TIMING = FleetTiming(shot_overhead_s=0.1, decision_s=1.0)
 
 
 def two_instrument_config(base, ratio: float, per_instrument: bool, between: dict | None = None):
@@ -72,7 +80,7 @@ def run_design(config, seed: int, score) -> dict:
     """One campaign: each instrument's final optimal t and convergence, f's final error."""
     started = time.perf_counter()
     instruments = {i.name: build(i.section) for i in config.instruments}
-    final = run_fleet(config, instruments, seed, FleetTiming(shot_overhead_s=0.1, decision_s=1.0)).final
+    final = run_fleet(config, instruments, seed, TIMING).final
     last = {who: d for d, who in zip(final.decisions, final.decided_for)}
     return {
         "seed": seed,
@@ -85,18 +93,22 @@ def run_design(config, seed: int, score) -> dict:
 
 
 def run_alone(config, seed: int, score) -> dict:
-    """Each instrument of ``config`` on a campaign of its own (half the seed points and steps)."""
+    """Each instrument of ``config`` on a campaign of its own (half the seed points and steps;
+    with a wall-time budget, the same wall time on a simulated clock of its own)."""
     started = time.perf_counter()
     sched = config.schedule
     finals, rmse = {}, []
     for j, named in enumerate(config.instruments):
         data = config.model_dump(mode="json")
-        data.pop("instruments")
-        data["instrument"] = named.section.model_dump(mode="json")
-        data["noise_model"]["per_instrument"] = False
+        one = data.pop("instruments")[j]
+        data["noise_model"] |= {"per_instrument": False, "between_instruments": None}
         data["schedule"] |= {"n_seed": max(sched.n_seed // 2, 2), "n_steps": max(sched.n_steps // 2, 1)}
-        alone = parse_config(data)
-        final = run_campaign(alone, build(alone.instrument), seed * SEED_STRIDE + j).final
+        if sched.wall_budget_s is None:
+            alone = parse_config({**data, "instrument": named.section.model_dump(mode="json")})
+            final = run_campaign(alone, build(alone.instrument), seed * SEED_STRIDE + j).final
+        else:
+            alone = parse_config({**data, "instruments": [one]})
+            final = run_fleet(alone, {named.name: build(named.section)}, seed * SEED_STRIDE + j, TIMING).final
         finals[named.name] = final
         rmse.append(score(final.summary.f_mean) if final.summary else float("nan"))
     return {
@@ -152,8 +164,11 @@ def build_parser() -> Parser:
     parser.add_argument(
         "--between", default="a0=0.05", help="the pooled design's spreads, NAME=SD,... of a0, a1, p (default a0=0.05)"
     )
-    parser.add_argument("--steps", type=int, default=30, help="BO steps (default 30)")
+    parser.add_argument("--steps", type=int, default=None, help="BO steps (default 30; 100 000 with --wall-budget-s)")
     parser.add_argument("--n-seed", type=int, default=4, help="seed points (default 4)")
+    parser.add_argument(
+        "--wall-budget-s", type=float, default=None, help="each campaign's simulated wall time (s) instead of steps"
+    )
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--report", action="store_true", help="print the report of --json only")
     return parser
@@ -169,8 +184,13 @@ def main(argv=None) -> int:
     if not args.ratio > 0:
         refuse(parser, f"--ratio: a positive number, got {args.ratio:g}")
 
+    if args.wall_budget_s is not None and not args.wall_budget_s > 0:
+        refuse(parser, f"--wall-budget-s: a positive number of seconds, got {args.wall_budget_s:g}")
+    steps = args.steps if args.steps is not None else 30 if args.wall_budget_s is None else 100_000
+
     def edit(config):
-        return config.with_overrides(schedule={"n_steps": args.steps, "n_seed": args.n_seed})
+        schedule = {"n_steps": steps, "n_seed": args.n_seed, "wall_budget_s": args.wall_budget_s}
+        return config.with_overrides(schedule=schedule)
 
     base, instrument = benchmark_config(parser, args.config, edit)
     if "a1" not in base.instrument.settings:
@@ -184,7 +204,7 @@ def main(argv=None) -> int:
     t_star = {n: law_t_star(base, laws[n]) for n in NAMES}
     settings = {"config": base.model_dump(mode="json"), "ratio": args.ratio}
     kept = json.loads(args.json.read_text()) if args.json is not None and args.json.exists() else None
-    if kept is not None and kept["settings"] != settings:
+    if kept is not None and not same_settings(kept["settings"], settings):
         refuse(parser, f"{args.json} was measured with other settings; give another --json")
     records: dict[str, list] = kept["records"] if kept else {}
     print("t*: " + ", ".join(f"{n} {t_star[n]:.4g} s" for n in NAMES), flush=True)

@@ -19,7 +19,7 @@ if str(BENCHMARKS) not in sys.path:
 
 import _tstar  # noqa: E402
 import budget  # noqa: E402
-from _config import validated_config  # noqa: E402
+from _config import same_settings, validated_config  # noqa: E402
 
 from noisebo.instruments import build  # noqa: E402
 from noisebo.instruments.registry import validated  # noqa: E402
@@ -387,3 +387,16 @@ def test_the_prior_lines_say_where_each_warm_seed_kept_or_dropped_its_profile():
     ]
     assert budget.prior_said(rec(None)["profile"]) == "profile kept at all 9 steps (smallest p 0.2)"
     assert budget.prior_said(rec(4)["profile"]) == "profile dropped at step 4 (in use at 3 of 9 steps)"
+
+
+def test_a_json_measured_before_a_setting_with_a_default_was_added_still_matches():
+    config = load_config(ROOT / "data" / "configs" / "forrester.yaml")
+    now = {"config": config.model_dump(mode="json"), "ratio": 2.0}
+    older = json.loads(json.dumps(now))
+    del older["config"]["schedule"]["wall_budget_s"]  # a dump from before the setting existed
+    assert same_settings(older, now)
+    other = json.loads(json.dumps(now))
+    other["config"]["schedule"]["wall_budget_s"] = 600.0
+    assert not same_settings(other, now)
+    assert not same_settings({**older, "ratio": 3.0}, now)
+    assert not same_settings({"config": {"schedule": {"n_seed": -1}}, "ratio": 2.0}, now)  # not a config: no match

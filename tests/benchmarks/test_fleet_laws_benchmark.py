@@ -55,6 +55,17 @@ def test_the_pooled_design_is_reported_with_its_spreads(tmp_path):
     ]
 
 
+def test_a_wall_time_budget_ends_each_campaign_by_its_simulated_clock(tmp_path):
+    path = tmp_path / "laws.json"
+    done = run_benchmark("--designs", "own,alone", "--steps", "1000", "--wall-budget-s", "300", "--json", str(path))
+    assert done.returncode == 0, done.stderr[-2000:]
+    kept = json.loads(path.read_text())
+    assert {"wall_budget_s": 300.0, "n_steps": 1000}.items() <= kept["settings"]["config"]["schedule"].items()
+    own, alone = kept["records"]["own"][0], kept["records"]["alone"][0]
+    assert 4 < sum(own["points"].values()) < 4 + 1000  # the clock ended it, not the steps
+    assert all(2 < n < 2 + 500 for n in alone["points"].values())  # each alone for 300 s too
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
@@ -64,6 +75,7 @@ def test_the_pooled_design_is_reported_with_its_spreads(tmp_path):
         (["--designs", "pooled", "--between", "a0=0"], "--between: a positive spread of a0, a1 or p, got 'a0=0'"),
         (["--designs", "pooled", "--between", ","], "--between: at least one NAME=SD, got ','"),
         (["--ratio", "0"], "--ratio: a positive number, got 0"),
+        (["--wall-budget-s", "0"], "--wall-budget-s: a positive number of seconds, got 0"),
         (["--config", str(ROOT / "data" / "configs" / "pfm.yaml")], "has no a1 setting"),
     ],
 )
