@@ -310,7 +310,7 @@ def _shot_due(state: EngineState, instrument: str | None) -> Request | DecisionD
     for the shot when it fitted; another instrument's commit while the shot ran (which moves the
     wall clock and the time spent) must not make a shot already taken unwanted."""
     if state.status is Status.RUNNING and state.config.instruments is not None and instrument:
-        own = next((f for f in state.flights if f.instrument == instrument), None)
+        own = _own_flight(state, instrument)
         request = None if own is None else _request(state, own.point)
         if request is not None and request.taken < request.wanted:
             return request
@@ -326,7 +326,7 @@ def _ask_fleet(state: EngineState, instrument: str | None) -> Request | Decision
         return idle if isinstance(idle, DecisionDue) and idle.final else Wait("no point is under way")
     if instrument not in names:
         raise EngineError(f"no instrument named {instrument!r} in this campaign (its instruments: {', '.join(names)})")
-    own = next((f for f in state.flights if f.instrument == instrument), None)
+    own = _own_flight(state, instrument)
     if own is not None:
         earlier = [f for f in state.flights if f.point < own.point]
         held = sum(_held_s(state, f) for f in earlier)
@@ -352,6 +352,11 @@ def _ask_fleet(state: EngineState, instrument: str | None) -> Request | Decision
     if isinstance(answer, DecisionDue) and answer.final and waiting:
         return Wait("the last points are being measured")
     return answer
+
+
+def _own_flight(state: EngineState, instrument: str) -> Flight | None:
+    """The point under way on ``instrument``; None when it has none."""
+    return next((f for f in state.flights if f.instrument == instrument), None)
 
 
 def _silent_flight(state: EngineState) -> tuple[int, str] | None:

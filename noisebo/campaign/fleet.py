@@ -116,6 +116,11 @@ def run_fleet(
         decided_at.extend(turn.time for e in events if isinstance(e, Decided))
         return in_memory(state, events)
 
+    def wake(names: Sequence[str], time: float) -> None:
+        for name in names:
+            heapq.heappush(turns, clock.turn(name, time))
+        waiting.clear()
+
     while turns:
         turn = heapq.heappop(turns)
         if turn.shot is not None:
@@ -123,16 +128,12 @@ def run_fleet(
             if engine.still_wanted(state, turn.name, request):
                 told = engine.tell(state, request, {request.taken: outcome}, decide_next=False)
                 state = commit(state, told.events, turn)  # else taken over meanwhile: the late shot is dropped
-            for name in (turn.name, *waiting):  # the campaign has changed: whoever waited asks again
-                heapq.heappush(turns, clock.turn(name, turn.time))
-            waiting.clear()
+            wake((turn.name, *waiting), turn.time)  # the campaign has changed: whoever waited asks again
             continue
         answer = engine.ask(state, turn.name)
         if isinstance(answer, Done):
             clock.done(turn.name, turn.time)
-            for name in waiting:  # the campaign may have ended: whoever waited on it asks again
-                heapq.heappush(turns, clock.turn(name, turn.time))
-            waiting.clear()
+            wake(tuple(waiting), turn.time)  # the campaign may have ended: whoever waited on it asks again
         elif isinstance(answer, Wait):
             waiting.append(turn.name)
         elif isinstance(answer, Request):
