@@ -11,7 +11,9 @@ campaign's first decision, with the JAX compilation cache and the kept programs
 (``noisebo.programs``) warm from the campaigns before it (each repeat is a fresh campaign brought
 to that shot first, outside the timing); ``tell (decides, nothing kept)`` is the same with an empty
 folder of kept programs, as on the first decision of its kind on a machine: it traces the programs
-and keeps them. Run it on an idle machine: timings of whole processes move with the load.
+and keeps them. The refusals (exit 2, one line): ``inspect`` and ``report`` of the finished file
+with a byte of its metadata flipped, ``report`` of an empty folder. Run it on an idle machine:
+timings of whole processes move with the load.
 """
 
 from __future__ import annotations
@@ -40,19 +42,22 @@ TARGETS_S = {
     "ask": 1.0,
     "tell (decides)": 2.0,
     "tell (decides, nothing kept)": None,
+    "inspect (damaged file)": 1.0,
+    "report (damaged file)": 1.0,
+    "report (empty folder)": 1.0,
 }
 
 
-def noisebo(*args: str, cwd: Path, env: dict | None = None) -> tuple[float, str]:
-    """(seconds from start to exit, stdout) of one `noisebo ARGS` that must succeed, with ``env``
-    added to the environment."""
+def noisebo(*args: str, cwd: Path, env: dict | None = None, code: int = 0) -> tuple[float, str]:
+    """(seconds from start to exit, stdout) of one `noisebo ARGS` that must exit with ``code``, with
+    ``env`` added to the environment."""
     start = time.perf_counter()
     done = subprocess.run(
         [NOISEBO, *args], cwd=cwd, capture_output=True, text=True, check=False, env={**os.environ, **(env or {})}
     )
     elapsed = time.perf_counter() - start
-    if done.returncode != 0:
-        raise SystemExit(f"cli.py: `noisebo {' '.join(args)}` failed ({done.returncode}): {done.stderr.strip()[-400:]}")
+    if done.returncode != code:
+        raise SystemExit(f"cli.py: `noisebo {' '.join(args)}` exited {done.returncode}: {done.stderr.strip()[-400:]}")
     return elapsed, done.stdout
 
 
@@ -82,6 +87,19 @@ def answer(path: Path, work: Path, keep_last: bool) -> None:
             return
 
 
+def damaged_copy(finished: Path, work: Path) -> Path:
+    """A copy of ``finished`` with one byte of its root group's object header flipped."""
+    import struct
+
+    data = bytearray(finished.read_bytes())
+    root = struct.unpack_from("<Q", data, 12 + 3 * 8)[0]  # superblock version 2/3, 8-byte addresses
+    data[root + 24] ^= 0xFF
+    (work / "damaged").mkdir()
+    path = work / "damaged" / finished.name
+    path.write_bytes(bytes(data))
+    return path
+
+
 def _seed_points() -> int:
     import yaml
 
@@ -94,6 +112,8 @@ def timings(repeats: int) -> dict[str, list[float]]:
         noisebo("run", str(FORRESTER), "--out", str(work / "runs"), "--no-rrd", cwd=work)  # also warms the JAX cache
         finished = next((work / "runs").glob("*.h5"))
         asked = started(work, "asked")
+        damaged, empty = damaged_copy(finished, work), work / "empty"
+        empty.mkdir()
         found: dict[str, list[float]] = {name: [] for name in TARGETS_S}
         for _ in range(repeats):
             found["--help"].append(noisebo("--help", cwd=work)[0])
@@ -101,6 +121,9 @@ def timings(repeats: int) -> dict[str, list[float]]:
             found["instruments"].append(noisebo("instruments", cwd=work)[0])
             found["inspect"].append(noisebo("inspect", str(finished), cwd=work)[0])
             found["ask"].append(noisebo("ask", str(asked), cwd=work)[0])
+            found["inspect (damaged file)"].append(noisebo("inspect", str(damaged), cwd=work, code=2)[0])
+            found["report (damaged file)"].append(noisebo("report", str(damaged), cwd=work, code=2)[0])
+            found["report (empty folder)"].append(noisebo("report", str(empty), cwd=work, code=2)[0])
         for i in range(repeats):
             for name, env in (
                 ("tell (decides)", None),

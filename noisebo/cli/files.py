@@ -21,7 +21,9 @@ def _replay(args) -> int:
 
 def _report(args) -> int:
     target = Path(args.target)
-    if not target.is_dir():
+    if target.is_dir():
+        sweep_readable(target)
+    else:
         readable(target)
     from noisebo.view.report import report
 
@@ -37,6 +39,19 @@ def readable(path: Path) -> Path:
 
     call_isolated(check_readable, check_present(path), what=str(path))
     return path
+
+
+def sweep_readable(folder: Path) -> Path:
+    """``folder`` when it holds campaign files that all read whole and one at least has finished;
+    else one line, before the command loads its plotting stack."""
+    from noisebo.storage.hdf5 import CampaignFileError
+    from noisebo.storage.record import check_sweep
+
+    files = sorted(folder.glob("*.h5"))
+    if not files:
+        raise CampaignFileError(f"{folder}: no campaign files (*.h5) in this directory")
+    call_isolated(check_sweep, folder, [check_present(f) for f in files], what=str(folder))
+    return folder
 
 
 def _profile_summary(record) -> dict | None:

@@ -225,6 +225,15 @@ def check_readable(path: Path) -> None:
     read_record(path)
 
 
+def check_sweep(folder: Path, paths: list[Path]) -> None:
+    """Nothing when every campaign file in ``paths`` (a sweep's, in ``folder``) reads whole and one
+    at least has finished; else a ``CampaignFileError`` (light, as ``check_readable``)."""
+    from noisebo.storage.hdf5 import CampaignFileError
+
+    if all(read_record(path).summary is None for path in paths):
+        raise CampaignFileError(f"{folder}: none of the {len(paths)} campaign files has finished")
+
+
 def from_state(state: EngineState, path: Path | str | None = None) -> CampaignRecord:
     """The record of a campaign's state, as a file written from it reads back: what a store
     that keeps no file (``storage.memory``) gives its readers. ``path`` names where it is kept."""

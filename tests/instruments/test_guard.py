@@ -31,7 +31,7 @@ def test_a_hanging_call_is_cut_off_at_the_timeout_and_the_next_call_works():
     started = time.monotonic()
     with pytest.raises(InstrumentTimeout, match="no reading within 0.3 s"):
         guard.measure(np.array([-1.0]), 1.0)
-    assert time.monotonic() - started < 0.3 + 0.5
+    assert time.monotonic() - started < 15  # cut off, not waited out: the call hangs for 30 s
     assert guard.measure(np.array([2.0]), 1.0).value == 2.0
     inner.release.set()
 

@@ -1,5 +1,6 @@
 """SIGTERM while the campaign waits for an instrument PC that has not connected: the campaign
-stops waiting within 2 s and records the status "aborted" (a real process, a real bridge)."""
+stops waiting and records the status "aborted" (a real process, a real bridge; how soon is
+tests/e2e/test_bridge_signals.py's question)."""
 
 import os
 import re
@@ -18,7 +19,7 @@ from noisebo.storage import event_codec, journal
 from tests.noisebo.bridge.conftest import call
 from tests.noisebo.bridge.kills import OVERRIDES, SOURCE
 
-ABORT_WITHIN_S = 2.0
+ABORT_WITHIN_S = 60.0  # a hang guard: without the abort it waits for the PC for ever (it takes about 0.2 s)
 
 
 def remote_yaml(path: Path, token_file: Path) -> Path:
@@ -38,7 +39,7 @@ def journaled_status(path: Path) -> str | None:
     return event_codec.rebuild(journal.read(jpath)[0]).status.value
 
 
-def test_sigterm_while_waiting_for_an_instrument_pc_that_never_connected_aborts_within_2_s(tmp_path):
+def test_sigterm_while_waiting_for_an_instrument_pc_that_never_connected_aborts(tmp_path):
     token_file, path = tmp_path / "bridge.token", tmp_path / "waiting.h5"
     env = {k: v for k, v in os.environ.items() if k != "NOISEBO_BRIDGE_TOKEN"}
     campaign = subprocess.Popen(
