@@ -17,6 +17,18 @@ def _temporary_default(name: str, prefix: str) -> None:
         _MADE_HERE.append(os.environ[name])
 
 
+# One thread per process for XLA and the BLAS libraries, before anything imports numpy or JAX: the
+# test workers and the processes tests start share the machine's cores, and pools sized to every
+# core in every process oversubscribe them (tests/noisebo/campaign/test_engine.py took 30 s beside
+# one other JAX process with the pools, 8 s with one thread each; 7 s alone either way). The
+# processes a test starts inherit it. A value set by the caller wins.
+ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+ONE_THREAD_XLA_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+for _name, _value in ONE_THREAD.items():
+    os.environ.setdefault(_name, _value)
+if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {ONE_THREAD_XLA_FLAGS}".strip()
+
 # Before anything imports Prefect: a private Prefect home, quiet logs, no analytics.
 _temporary_default("PREFECT_HOME", "noisebo-test-prefect-")
 # One compilation cache for the run: the xdist workers and every process a test starts (a CLI
