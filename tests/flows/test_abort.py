@@ -25,7 +25,7 @@ def test_a_signal_while_the_work_runs_returns_the_stop_at_once_and_ends_the_work
 
     def busy() -> str:
         try:
-            deadline = time.monotonic() + 30
+            deadline = time.monotonic() + 600
             while time.monotonic() < deadline:  # Python work, as a decision's optimiser loop
                 ran["iterations"] += 1
             return "finished"
@@ -38,7 +38,7 @@ def test_a_signal_while_the_work_runs_returns_the_stop_at_once_and_ends_the_work
         began = time.monotonic()
         answer = abort.unless_stopped(busy, lambda name: f"stopped on {name}")
         returned_s = time.monotonic() - began
-    assert answer == "stopped on SIGTERM" and returned_s < 15  # not waited out: the work runs for 30 s
+    assert answer == "stopped on SIGTERM" and returned_s < 120  # a hang guard: the work runs for 600 s unless stopped
     deadline = time.monotonic() + 5
     while background.still_running() and time.monotonic() < deadline:
         time.sleep(0.01)

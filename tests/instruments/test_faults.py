@@ -59,12 +59,12 @@ def test_a_retried_shot_gets_its_real_reading():
 
 
 def test_an_injected_hang_is_cut_off_by_the_guard():
-    config = InstrumentConfig(kind="forrester", timeout_s=0.3, faults={"timeout": 1.0, "hang_s": 60.0})
+    config = InstrumentConfig(kind="forrester", timeout_s=0.3, faults={"timeout": 1.0, "hang_s": 600.0})
     inst = build(config)
     started = time.perf_counter()
     with pytest.raises(InstrumentTimeout):
         inst.simulate(np.array([0.5]), 1.0, np.random.default_rng(0))
-    assert time.perf_counter() - started < 30  # cut off, not waited out: the shot hangs for 60 s
+    assert time.perf_counter() - started < 120  # a hang guard: the shot hangs for 600 s unless cut off
     assert inst.ledger[0]["kind"] == "timeout"  # the guard passes the ledger through
 
 
