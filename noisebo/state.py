@@ -40,7 +40,9 @@ class Point:
 @dataclass(frozen=True)
 class CampaignState:
     """Points in measurement order (seed points first), the predicted optimal t of each BO step
-    (with a noise field, also its t*(x) on the reference points, (m,) per step), and the first
+    (with a noise field, also its t*(x) on the reference points, (m,) per step) with the number of
+    points its noise model was fitted on (``t_opt_points``, aligned with ``t_opt_history``; -1 where
+    not known, () in a state made from points alone), and the first
     BO step at which the noise model converged (None until it does); with a noise profile, the
     first BO step whose check dropped it (None while it is in use). ``rejected``: how many of each
     point's shots its reduction rejected, in the order of ``points``; () where not recorded (a
@@ -52,6 +54,7 @@ class CampaignState:
     t_opt_maps: tuple[np.ndarray, ...] = ()
     profile_dropped_step: int | None = None
     rejected: tuple[int, ...] = ()
+    t_opt_points: tuple[int, ...] = ()
 
     def with_profile(self, in_use: bool, step: int) -> CampaignState:
         """``state`` with the profile dropped at ``step`` if this step's check dropped it first."""
@@ -74,15 +77,29 @@ class CampaignState:
             return np.zeros(len(self.points), dtype=bool)
         return np.asarray(self.rejected, dtype=np.int64).reshape(-1) == 0
 
-    def with_t_opt(self, t_opt: float, is_converged: bool, t_opt_map: np.ndarray | None = None) -> CampaignState:
+    def with_t_opt(
+        self, t_opt: float, is_converged: bool, t_opt_map: np.ndarray | None = None, n_points: int = -1
+    ) -> CampaignState:
+        """``state`` with one more BO step's optimal t (and t*(x)), made on ``n_points`` points."""
         step = len(self.t_opt_history)
         converged_step = self.converged_step
         if converged_step is None and is_converged:
             converged_step = step
         maps = self.t_opt_maps if t_opt_map is None else self.t_opt_maps + (t_opt_map,)
         return replace(
-            self, t_opt_history=self.t_opt_history + (float(t_opt),), converged_step=converged_step, t_opt_maps=maps
+            self,
+            t_opt_history=self.t_opt_history + (float(t_opt),),
+            converged_step=converged_step,
+            t_opt_maps=maps,
+            t_opt_points=self.known_t_opt_points() + (int(n_points),),
         )
+
+    def known_t_opt_points(self) -> tuple[int, ...]:
+        """``t_opt_points``, with -1 (not known) for each step where it is not aligned with
+        ``t_opt_history``."""
+        if len(self.t_opt_points) == len(self.t_opt_history):
+            return self.t_opt_points
+        return (-1,) * len(self.t_opt_history)
 
     @property
     def is_converged(self) -> bool:

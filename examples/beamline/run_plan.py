@@ -36,4 +36,4 @@ with running_ioc("data/configs/forrester.yaml") as ioc:  # at a beamline: your I
         stage, det = SimAxis(ioc.prefix, 0), SimDetector(ioc.prefix)
     plan = campaign_plan(config, [stage], det, det.value, exposure=det.exposure, shot_key=det.key, path=args.out)
     result = RE(plan)
-print(f"{result.exit_status}: {args.out} (run {result.run_start_uids[0]})")
+print(f"{result.exit_status}: {args.out}" + "".join(f" (run {uid})" for uid in result.run_start_uids))

@@ -209,7 +209,12 @@ def acquire(
     axes the local refinement draws from ``key`` (default ``propose_key(0, step)``)."""
     post = prediction.posterior
     sched = config.schedule
-    t_opt, t_map, spread_t, now_converged = convergence
+    t_opt, t_map, spread_t, now_converged = (
+        convergence.t_opt,
+        convergence.t_opt_map,
+        convergence.t_interval,
+        convergence.converged,
+    )
     key = propose_key(0, step) if key is None else key
     choices = shot_choices(config, method.policy, now_converged, budget_left)
     if config.space.dimensions == 1:  # each count's map maximised exactly; the best count kept
@@ -254,6 +259,7 @@ def acquire(
         t_opt_interval=spread_t,
         profile_p=float(fitted.profile.p_value),
         profile_in_use=bool(fitted.profile.in_use),
+        n_points=convergence.n_points,
     )
     return decision
 

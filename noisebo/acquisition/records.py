@@ -27,7 +27,10 @@ class Decision:
     ``binned``: True when they were bins, an approximation (see ``noisebo.models.inputs``).
     ``profile_p``: the noise profile's posterior predictive p-value on the noise model's training
     points (NaN: no profile, or nothing to check yet); ``profile_in_use``: whether the profile
-    was this step's prior (``noisebo.models.profile_check``)."""
+    was this step's prior (``noisebo.models.profile_check``). ``n_points``: how many committed
+    points the noise model was fitted on (the instrument's own, for a law per instrument); two
+    decisions with the same count saw the same data (-1: not known, a record from before it was
+    kept)."""
 
     step: int
     x: tuple[float, ...]
@@ -52,6 +55,7 @@ class Decision:
     t_opt_interval: float = float("nan")
     profile_p: float = float("nan")
     profile_in_use: bool = False
+    n_points: int = -1
 
     def __post_init__(self) -> None:  # one number is one axis; a list (from a record) a tuple
         object.__setattr__(self, "x", as_position(self.x))

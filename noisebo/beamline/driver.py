@@ -117,8 +117,16 @@ class BlueskyInstrument:
             raise ConfigError(
                 f"instrument.settings.devices: {self.settings.devices} returned {type(devices).__name__}, not Devices"
             )
-        self._connect(devices)
-        from noisebo.beamline.plan import Rig
+        from noisebo.beamline.checks import DeviceMismatch, check_parts, check_read_by_detector
+        from noisebo.beamline.plan import Rig, value_signals
+
+        signals = value_signals(devices.value)
+        try:
+            check_parts(devices.axes, devices.detector, signals, devices.exposure, None)
+            self._connect(devices)
+            self._engine(check_read_by_detector(devices.detector, signals))
+        except DeviceMismatch as error:
+            raise ConfigError(f"instrument.settings.devices: {self.settings.devices}: {error}") from None
 
         self._rig = Rig(tuple(devices.axes), devices.detector, devices.value, devices.exposure, devices.shot_key)
 

@@ -33,16 +33,19 @@ from bluesky import plan_stubs as bps
 from bluesky.utils import FailedStatus, RunEngineControlException
 
 import noisebo
+from noisebo.beamline.checks import DeviceMismatch, check_parts, check_read_by_detector
 from noisebo.campaign import engine
 from noisebo.campaign.compile_ahead import CompileAhead
 from noisebo.campaign.driver import now_utc
 from noisebo.campaign.engine import EngineState
+from noisebo.campaign.progress import failure_lines
 from noisebo.config import CampaignConfig
+from noisebo.compile_cache import use_compilation_cache
 from noisebo.events import Decided, DecisionDue, Done, DriverInfo, Request, ShotError, Status
 from noisebo.precision import float64
 from noisebo.reduction import Reading
 from noisebo.storage import steps as numbering
-from noisebo.storage.recorder import Recorder, package_versions
+from noisebo.storage.recorder import Recorder, journal_path, journal_state, package_versions
 
 DECISIONS = "decisions"
 
@@ -107,6 +110,13 @@ class Spectrum:
         return Reading(None, rows[:, np.isfinite(rows[0])], self.reduction)
 
 
+def value_signals(value: Any) -> list:
+    """The signals whose readings make a shot: the value, or a ``Spectrum``'s three."""
+    if isinstance(value, Spectrum):
+        return [value.frequency, value.amplitude, value.phase]
+    return [value]
+
+
 def _field(readings: dict, signal: Any):
     if signal.name not in readings:
         raise NotInReading(f"the shot's readings have no {signal.name!r} (the value); they have {', '.join(readings)}")
@@ -158,6 +168,7 @@ def campaign_plan(
     shot_key: Any = None,
     md: dict | None = None,
     rerun: str | None = None,
+    write=print,
 ):
     """The whole campaign of ``config`` as one bluesky run (see the module's docstring).
 
@@ -172,15 +183,27 @@ def campaign_plan(
     noisebo's simulator draws for that key (``noisebo.beamline.sim_ioc``); ``md``: more metadata
     for the start document; ``rerun``: the campaign's Rerun view as ``noisebo run`` draws it,
     "record" (NAME.rrd beside the file), "spawn" (a local viewer) or a viewer's gRPC url, or None.
-    Returns the campaign's final state."""
-    if len(axes) != config.space.dimensions:
-        raise ValueError(f"the config has {config.space.dimensions} axes of x; {len(axes)} movables were given")
+    Returns the campaign's final state. Devices that cannot play their part (``checks``), axes
+    whose travel leaves out the config's range, and a path that holds another campaign are
+    refused (``DeviceMismatch``, ``BeyondLimits``, ``ValueError``) before anything moves and
+    before a document or a file is written; a path whose campaign has finished is said in a line
+    (``write``) and its state returned, with no run opened."""
+    check_parts(axes, detector, value_signals(value), exposure, config.space.dimensions)
     if exposure is None and not callable(getattr(detector, "prepare", None)):
-        raise ValueError(
+        raise DeviceMismatch(
             f"{getattr(detector, 'name', detector)!r} cannot be prepared with an exposure (it has no prepare): "
             "give exposure=, the signal that sets its exposure time"
         )
+    yield from check_read_by_detector(detector, value_signals(value))
     yield from check_limits(config, axes)
+    use_compilation_cache()  # as noisebo run: the first decision loads what another process compiled
+    finished = finished_before(config, Path(path), seed)
+    if finished is not None:
+        write(
+            f"{path}: the campaign {finished.status.value} before ({len(finished.points)} points, "
+            f"{finished.n_shots} shots{final_t_opt_text(finished)}); nothing was run: give a new path for a new campaign"
+        )
+        return finished
     recorder, resumed = open_campaign(config, Path(path), seed)
     state = recorder.state
     runs = RunsFile.beside(recorder.h5_path)
@@ -190,6 +213,8 @@ def campaign_plan(
     view: Any = None
 
     def commit(state: EngineState, events) -> EngineState:
+        for line in failure_lines(state, events):  # a device that fails is said at each attempt
+            write(line)
         state = recorder.commit(state, events)
         if view is not None:
             view.update(state)
@@ -202,6 +227,10 @@ def campaign_plan(
         state = yield from _loop(commit, state, rig, ahead)
         ended_well = state.status in (Status.COMPLETED, Status.BUDGET_SPENT)
         yield from bps.close_run(exit_status="success" if ended_well else "fail", reason=state.reason)
+        write(
+            f"{path}: the campaign {state.status.value}: {len(state.points)} points, {state.n_shots} shots"
+            f"{final_t_opt_text(state)}"
+        )
         if not ended_well:
             raise CampaignNotCompleted(
                 f"the campaign {state.status.value}: {state.reason}; continue it with the plan and path={str(path)!r}"
@@ -234,6 +263,22 @@ def check_limits(config: CampaignConfig, axes: Sequence[Any]):
                 f"{axis.name}: its travel limits [{low:g}, {high:g}] do not hold the config's "
                 f"{spec.name} in [{spec.low:g}, {spec.high:g}]; nothing was moved"
             )
+
+
+def finished_before(config: CampaignConfig, path: Path, seed: int) -> EngineState | None:
+    """The state of the campaign of this config and seed at ``path`` when it has finished
+    (completed, or its budget spent: nothing is left to ask); None otherwise (no file, another
+    campaign, one to continue), left to ``open_campaign``. Reads the journal, writes nothing."""
+    if not journal_path(path).exists():
+        return None
+    state = journal_state(path)[0]
+    same = state.config == config and state.seed == seed
+    return state if same and state.status in (Status.COMPLETED, Status.BUDGET_SPENT) else None
+
+
+def final_t_opt_text(state: EngineState) -> str:
+    """ "; final predicted optimal t 2.41 s" from the campaign's summary ("" without one)."""
+    return "" if state.summary is None else f"; final predicted optimal t {state.summary.t_opt:.4g} s"
 
 
 def open_campaign(config: CampaignConfig, path: Path, seed: int) -> tuple[Recorder, bool]:

@@ -102,6 +102,29 @@ class LastPoint(Answer):
     shots: int = Field(description="its number of shots")
 
 
+class InstrumentNoise(Answer):
+    """Where one instrument's own noise law stands (``noise_model.per_instrument``)."""
+
+    t_opt: float | None = Field(
+        description="the predicted optimal t of the last decision made for it (s; null: none yet)"
+    )
+    converged_at_step: int | None = Field(
+        description="the BO step, from 1, of the first decision for it that found its law converged (null: not yet)"
+    )
+
+
+class NoiseStanding(Answer):
+    """Where the noise model stands."""
+
+    t_opt: float | None = Field(description="the last decision's predicted optimal t (s; null before the first)")
+    converged_at_step: int | None = Field(
+        description="the BO step, from 1, at which the noise model converged (null: not yet)"
+    )
+    by_instrument: dict[str, InstrumentNoise] | None = Field(
+        description="with a noise law per instrument, each instrument's, by name (null: one law)"
+    )
+
+
 class InstrumentPC(Answer):
     """What the bridge has heard from the instrument PC."""
 
@@ -131,4 +154,5 @@ class StatusAnswer(Answer):
     )
     current: CurrentShot | None = Field(None, description="the shot wanted now (null unless waiting or measuring)")
     last_point: LastPoint | None = Field(None, description="the last committed point (null before the first)")
+    noise_model: NoiseStanding | None = Field(None, description="the predicted optimal t and convergence")
     instrument_pc: InstrumentPC | None = Field(None, description="what the bridge has heard from the instrument PC")

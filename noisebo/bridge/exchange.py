@@ -28,6 +28,7 @@ from noisebo.bridge.wire import (
 )
 from noisebo.campaign import engine, flights
 from noisebo.campaign.engine import EngineState
+from noisebo.campaign.own_noise import state_standings
 from noisebo.events import Done, Request, ShotError
 from noisebo.failures import InstrumentError, InstrumentTimeout, MeasurementStopped
 from noisebo.reduction import Reading
@@ -297,6 +298,7 @@ class Exchange:
             "now": _phase(current, last is not None, state.status.value),
             "current": current,
             "last_point": last_point,
+            "noise_model": noise_standing(state),
             "instrument_pc": {
                 "connected": last is not None,
                 "polling": polling > 0,
@@ -350,3 +352,18 @@ def _committed_entry(state: EngineState, point: int):
     if point < len(state.points) and state.points[point].committed.index == point:
         return state.points[point]
     return next((e for e in state.points if e.committed.index == point), None)
+
+
+def noise_standing(state: EngineState) -> dict:
+    """Where the noise model stands: the last predicted optimal t (s; None before the first
+    decision), the BO step (from 1) at which it converged (None: not yet), and with a law per
+    instrument each instrument's (``own_noise.state_standings``; None otherwise)."""
+    data = state.data
+    by = state_standings(state)
+    return {
+        "t_opt": data.t_opt_history[-1] if data.t_opt_history else None,
+        "converged_at_step": None if data.converged_step is None else data.converged_step + 1,
+        "by_instrument": {s.instrument: {"t_opt": s.t_opt, "converged_at_step": s.converged_step} for s in by}
+        if by
+        else None,
+    }

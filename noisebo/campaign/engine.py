@@ -88,7 +88,10 @@ class EngineState:
     it has run as of its last ``Clocked`` (s; 0 without one); ``wall_budget_s``: the wall time it
     may run (s; None: no limit), the config's until a ``WallBudgetChanged``. ``decided_for``: with
     several instruments, the instrument each decision's point was first issued to, in the order
-    of ``decisions``."""
+    of ``decisions``. ``failed_in_row``: the failed attempts since the last shot taken (or the
+    last (re)start); ``last_shot_wall_s``: the wall time of the last commit with no failed
+    attempt since a shot taken (or of the last (re)start), from which ``schedule.max_silent_s``
+    counts."""
 
     config: CampaignConfig
     seed: int
@@ -112,6 +115,8 @@ class EngineState:
     wall_s: float = 0.0
     wall_budget_s: float | None = None
     decided_for: tuple[str, ...] = ()
+    failed_in_row: int = 0
+    last_shot_wall_s: float = 0.0
 
     def failure_counts(self) -> tuple[int, int]:
         """(failed, attempted) shots of the whole campaign: failed attempts plus rejected shots,
@@ -180,7 +185,7 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
         if state.config.instruments is None and flights.under_way(state):
             raise EngineError(f"decision for step {d.step} out of order")
         t_map = d.t_opt_map if d.t_opt_map.size else None
-        data = state.data.with_t_opt(d.t_opt, d.converged, t_map)
+        data = state.data.with_t_opt(d.t_opt, d.converged, t_map, d.n_points)
         if state.config.noise_model.profile is not None:
             data = data.with_profile(d.profile_in_use, d.step)
         return replace(state, decisions=state.decisions + (d,), data=data)
@@ -191,12 +196,14 @@ def apply(state: EngineState | None, event: Event) -> EngineState:
     if isinstance(event, Summarised):
         return replace(state, summary=event.summary)
     if isinstance(event, StatusChanged):
-        base = state.failure_counts() if event.status is Status.RUNNING else state.budget_base
-        return replace(state, status=event.status, reason=event.reason, budget_base=base)
+        if event.status is Status.RUNNING:  # a (re)start: the failure budget counts afresh
+            state = replace(state, budget_base=state.failure_counts(), failed_in_row=0, last_shot_wall_s=state.wall_s)
+        return replace(state, status=event.status, reason=event.reason)
     if isinstance(event, BudgetChanged):
         return replace(state, budget_s=event.budget_s)
-    if isinstance(event, Clocked):
-        return replace(state, wall_s=event.wall_s)
+    if isinstance(event, Clocked):  # the silence counts from the last commit with no failure since a shot
+        last = event.wall_s if state.failed_in_row == 0 else state.last_shot_wall_s
+        return replace(state, wall_s=event.wall_s, last_shot_wall_s=last)
     if isinstance(event, WallBudgetChanged):
         return replace(state, wall_budget_s=event.wall_budget_s)
     raise EngineError(f"unknown event {type(event).__name__}")
@@ -236,9 +243,19 @@ def _apply_to_point(state: EngineState, event: ShotTaken | ShotFailed | MoreShot
         timed_out = event.kind == "timeout" and bool(event.instrument)
         silent = f"{event.instrument} timed out at shot {event.shot} ({event.reason})" if timed_out else ""
         flight = replace(flight, silent=silent)
-        return replace(state, flights=flights.with_flight(state, flight), failures=state.failures + (event,))
+        return replace(
+            state,
+            flights=flights.with_flight(state, flight),
+            failures=state.failures + (event,),
+            failed_in_row=state.failed_in_row + 1,
+        )
     flight = replace(flight, taken=flight.taken + (event,), silent="")
-    return replace(state, flights=flights.with_flight(state, flight), n_shots=state.n_shots + 1)
+    return replace(
+        state,
+        flights=flights.with_flight(state, flight),
+        n_shots=state.n_shots + 1,
+        failed_in_row=0,
+    )
 
 
 def _issued(state: EngineState, event: PointIssued) -> Flight:
@@ -521,12 +538,34 @@ def _reduce(state: EngineState, request: Request, make=make_point) -> list[Event
 
 
 def _budget(state: EngineState) -> list[Event]:
-    """A "failed" status once the failures since the (re)start exceed the budget, else nothing."""
+    """A "failed" status once the failures since the (re)start exceed the budget, or the
+    instrument looks dead (``dead_message``), else nothing."""
     failed, attempts = state.failure_counts()
     failed, attempts = failed - state.budget_base[0], attempts - state.budget_base[1]
     sched = state.config.schedule
-    message = budget_message(failed, attempts, sched.min_failed, sched.tolerated_rate)
+    message = dead_message(state) or budget_message(failed, attempts, sched.min_failed, sched.tolerated_rate)
     return [] if message is None else [StatusChanged(Status.FAILED, message)]
+
+
+def dead_message(state: EngineState) -> str | None:
+    """Why the instrument looks dead: ``schedule.max_failed_in_row`` failed attempts with no
+    shot taken between them, or failed attempts and no shot for ``schedule.max_silent_s`` of
+    wall time, since the (re)start; None otherwise."""
+    sched, failed = state.config.schedule, state.failed_in_row
+    if not failed:
+        return None
+    last = state.failures[-1]
+    cause = f"the last at point {last.point} shot {last.shot}: {last.kind}: {last.reason}"
+    advice = "continue the campaign once the instrument answers again"
+    if failed >= sched.max_failed_in_row:
+        return f"{failed} shot attempts failed in a row ({cause}); {advice}"
+    silent = state.wall_s - state.last_shot_wall_s
+    if sched.max_silent_s is not None and silent >= sched.max_silent_s:
+        return (
+            f"no shot taken for {silent:.4g} s of wall time (max_silent_s {sched.max_silent_s:g} s; "
+            f"{failed} attempts failed, {cause}); {advice}"
+        )
+    return None
 
 
 def advance(state: EngineState, stages: Stages | None = None, instrument: str | None = None) -> tuple[Event, ...]:

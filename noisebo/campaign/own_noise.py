@@ -20,8 +20,8 @@ prior drawn from the other instruments' laws (``others_data``, ``noisebo.models.
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import Protocol
+from dataclasses import dataclass, replace
+from typing import Protocol, Sequence
 
 from noisebo.acquisition.records import Decision
 from noisebo.config import CampaignConfig
@@ -77,10 +77,13 @@ def own_data(state: Fleet, name: str) -> CampaignState:
     the first of them that found its noise model converged."""
     steps = decisions_for(state, name)
     history = tuple(float(state.decisions[k].t_opt) for k in steps)
+    counts = tuple(int(state.decisions[k].n_points) for k in steps)
     converged = next((n for n, k in enumerate(steps) if state.decisions[k].converged), None)
     own = own_points(state, name)
     points = own if len(own.points) >= min_own_points(state.config) else replace(state.data, t_opt_maps=())
-    return replace(points, t_opt_history=history, converged_step=converged, profile_dropped_step=None)
+    return replace(
+        points, t_opt_history=history, t_opt_points=counts, converged_step=converged, profile_dropped_step=None
+    )
 
 
 def own_previous(state: Fleet, name: str) -> dict | None:
@@ -107,3 +110,44 @@ def others_data(state: Fleet, name: str) -> tuple[Other, ...]:
         for other in others
         if len(own_points(state, other).points) >= least
     )
+
+
+@dataclass(frozen=True)
+class Standing:
+    """Where one instrument's own noise law stands: the predicted optimal ``t_opt`` (s) of the
+    last decision made for it (None before its first) and ``converged_step``, the BO step
+    (counted from 1) of the first decision for it that found its law converged (None: not yet)."""
+
+    instrument: str
+    t_opt: float | None
+    converged_step: int | None
+
+    def text(self) -> str:
+        """ "a 2.41 s (converged at step 9)", for a line a person reads."""
+        t_opt = "no decision yet" if self.t_opt is None else f"{self.t_opt:.4g} s"
+        fate = "not converged" if self.converged_step is None else f"converged at step {self.converged_step}"
+        return f"{self.instrument} {t_opt} ({fate})"
+
+
+def standings(
+    names: Sequence[str], decided_for: Sequence[str], t_opt: Sequence[float], converged: Sequence[bool]
+) -> tuple[Standing, ...]:
+    """Each of ``names``' standing, from the decisions in step order (BO step k + 1 at index k):
+    the instrument each was made for, its predicted optimal t (s) and converged flag (each (k,);
+    a decision whose point is not yet issued has no instrument and is left out)."""
+    found = {name: Standing(name, None, None) for name in names}
+    for k, (who, t, now) in enumerate(zip(decided_for, t_opt, converged)):
+        if who in found:
+            first = found[who].converged_step
+            found[who] = Standing(who, float(t), first if first is not None or not now else k + 1)
+    return tuple(found.values())
+
+
+def state_standings(state: Fleet) -> tuple[Standing, ...]:
+    """``standings`` of a campaign with a noise law per instrument; () otherwise (one law: the
+    campaign's own optimal t is every instrument's)."""
+    config = state.config
+    if not config.noise_model.per_instrument or config.instruments is None:
+        return ()
+    made = state.decisions[: len(state.decided_for)]
+    return standings(config.instrument_names, state.decided_for, [d.t_opt for d in made], [d.converged for d in made])

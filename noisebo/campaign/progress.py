@@ -7,7 +7,17 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Sequence
 
 from noisebo.campaign.flights import flight_of
-from noisebo.events import Decided, Event, MoreShots, PointCommitted, PointIssued, Status, StatusChanged
+from noisebo.events import (
+    Decided,
+    Event,
+    MoreShots,
+    PointCommitted,
+    PointIssued,
+    ShotFailed,
+    ShotTaken,
+    Status,
+    StatusChanged,
+)
 from noisebo.state import format_position
 
 if TYPE_CHECKING:
@@ -17,8 +27,14 @@ if TYPE_CHECKING:
 def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
     """What a person watching the campaign is told about ``events`` (committed after ``state``)."""
     lines, n_steps = [], state.config.schedule.n_steps
+    in_row = state.failed_in_row
     for event in events:
-        if isinstance(event, PointCommitted):
+        if isinstance(event, ShotTaken):
+            in_row = 0
+        elif isinstance(event, ShotFailed):
+            in_row += 1
+            lines.append(failure_line(state, event, in_row))
+        elif isinstance(event, PointCommitted):
             p = event.point
             label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
             label += _on(state, event.index)  # which of several instruments measured it
@@ -37,6 +53,28 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
         elif isinstance(event, StatusChanged) and event.status is Status.BUDGET_SPENT:
             lines.append(event.reason)
     return lines
+
+
+def failure_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
+    """The lines of the failed attempts among ``events`` alone (``failure_line``)."""
+    lines, in_row = [], state.failed_in_row
+    for event in events:
+        if isinstance(event, ShotTaken):
+            in_row = 0
+        elif isinstance(event, ShotFailed):
+            in_row += 1
+            lines.append(failure_line(state, event, in_row))
+    return lines
+
+
+def failure_line(state: EngineState, event: ShotFailed, in_row: int) -> str:
+    """ "point 7 shot 2: attempt failed (timeout: ...); 3 in a row of 10 that end the campaign"."""
+    on = f" on {event.instrument}" if event.instrument else ""
+    most = state.config.schedule.max_failed_in_row
+    return (
+        f"point {event.point} shot {event.shot}{on}: attempt failed ({event.kind}: {event.reason}); "
+        f"{in_row} in a row of {most} that end the campaign"
+    )
 
 
 def _on(state: EngineState, point: int) -> str:

@@ -69,9 +69,9 @@ def _tell(args) -> int:
             return [manual.load_spectrum(p, shape, args.reduction) for p in args.spectrum]
         return manual.parse_values(args.values, shape)
 
-    def report(state, events):
+    def report(state, events):  # beside --json's answer, on stderr
         for line in progress_lines(state, events):
-            print(line, flush=True)
+            print(line, flush=True, file=sys.stderr if args.json else sys.stdout)
 
     state, step, n = _manually(lambda: manual.tell(path, args.point, outcomes_for, warn, report))
     print(f"recorded {n} shot{'s' * (n != 1)}", file=sys.stderr)

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from noisebo.storage.integrity import CampaignFileError
-from noisebo.cli.files import inspect_summary
+from noisebo.cli.files import inspect_summary, instruments_text
 from noisebo.cli.common import (
     CONFIG_HELP,
     OUT_HELP,
@@ -41,11 +41,12 @@ def say_starting() -> None:
 def outcome_line(path: Path) -> str:
     """One line of what a finished campaign found, from its file."""
     summary = inspect_summary(path)  # a file this process has just written: no need to isolate
-    t_opt = summary["final_t_opt"]
+    t_opt, by_instrument = summary["final_t_opt"], summary["t_opt_by_instrument"]
     return (
         f"{summary['status']}: {len(summary['points'])} points, {summary['n_shots']} shots, "
         f"{summary['measurement_time_s']:.1f} s of instrument time; final predicted optimal t "
         + ("none (no summary)" if t_opt is None else f"{t_opt:.4g} s")
+        + ("" if by_instrument is None else f"; each instrument's own: {instruments_text(by_instrument)}")
     )
 
 

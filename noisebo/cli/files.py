@@ -71,6 +71,27 @@ def _profile_summary(record) -> dict | None:
     }
 
 
+def _by_instrument(record) -> dict | None:
+    """With a noise law per instrument, each instrument's predicted optimal t and first
+    converged step (``own_noise.standings``); None otherwise."""
+    from noisebo.campaign.own_noise import standings
+
+    config = record.config
+    if not (config.get("noise_model") or {}).get("per_instrument") or not config.get("instruments"):
+        return None
+    names = [i["name"] for i in config["instruments"]]
+    steps = record.steps
+    found = standings(names, steps.instrument, steps.t_opt, steps.converged)
+    return {s.instrument: {"t_opt": s.t_opt, "converged_at_step": s.converged_step} for s in found}
+
+
+def instruments_text(by_instrument: dict) -> str:
+    """ "a 2.41 s (converged at step 9), b ..." from ``inspect_summary``'s ``t_opt_by_instrument``."""
+    from noisebo.campaign.own_noise import Standing
+
+    return ", ".join(Standing(name, s["t_opt"], s["converged_at_step"]).text() for name, s in by_instrument.items())
+
+
 def inspect_summary(path: Path) -> dict:
     """The JSON view of a campaign file (see ``noisebo inspect --json``)."""
     import numpy as np
@@ -123,6 +144,7 @@ def inspect_summary(path: Path) -> dict:
         "config": record.config,
         "first_converged_step": record.converged_step,
         "final_t_opt": None if summary is None else summary.t_opt,
+        "t_opt_by_instrument": _by_instrument(record),
         "noise_field": field,
         "n_shots": record.n_shots,
         "measurement_time_s": record.measurement_time_s,
@@ -160,6 +182,8 @@ def _inspect(args) -> int:
         f"noise model {'not converged' if conv is None else f'converged at step {conv}'}; "
         f"final predicted optimal t {summary['final_t_opt'] if summary['final_t_opt'] is None else round(summary['final_t_opt'], 4)} s"
     )
+    if summary["t_opt_by_instrument"] is not None:
+        print(f"  each instrument's own noise law: {instruments_text(summary['t_opt_by_instrument'])}")
     wall_budget = summary["wall_budget_s"]
     print(
         f"  wall time {summary['wall_s']:.4g} s" + ("" if wall_budget is None else f" of a {wall_budget:.4g} s budget")

@@ -49,7 +49,12 @@ class ScheduleConfig(FrozenModel):
 
     Failure budget: once at least ``min_failed`` shots have failed (instrument errors, timeouts,
     rejected readings), a campaign whose failed fraction of all attempts exceeds
-    ``tolerated_rate`` stops with ``FailureBudgetExceeded`` and the status "failed".
+    ``tolerated_rate`` stops with ``FailureBudgetExceeded`` and the status "failed". A dead
+    instrument is noticed sooner, whatever the attempts before: ``max_failed_in_row`` failed
+    attempts with no shot taken between them (10 by default), or ``max_silent_s`` of wall time
+    without a shot taken (None by default: no limit), end the campaign as "failed" with the
+    last failure's reason; both count from the (re)start, and the campaign continues once the
+    instrument is back.
 
     Instrument-time budget: ``budget_s`` (None: none) is the instrument time the campaign may
     spend, each shot's t plus ``point_overhead_s`` per point (moving the tip or stage,
@@ -136,6 +141,14 @@ class ScheduleConfig(FrozenModel):
     tolerated_rate: Rate = Field(
         0.5,
         description="failure budget: the campaign stops as failed once the failed fraction of attempts exceeds this",
+    )
+    max_failed_in_row: Count = Field(
+        10, ge=1, description="the campaign stops as failed after this many failed attempts with no shot taken between"
+    )
+    max_silent_s: PositiveFloat | None = Field(
+        None,
+        description="the campaign stops as failed after this much wall time (s) with failed attempts and no "
+        "shot taken; null: no limit",
     )
     budget_s: PositiveFloat | None = Field(
         None,

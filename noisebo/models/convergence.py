@@ -51,16 +51,30 @@ def first_converged_step(t_opt_history: Sequence[float], window: int, threshold:
     return None
 
 
+def on_new_data(counts: Sequence[int]) -> list[int]:
+    """The steps whose decision is the last made on its data: of a run of decisions made on the
+    same number of points (``counts``, one per step; the points in flight tell the noise model
+    nothing), only the last counts towards a convergence window. A count of -1 (not known) is
+    always new data."""
+    return [k for k, n in enumerate(counts) if n < 0 or k + 1 == len(counts) or counts[k + 1] != n]
+
+
+def _same_data(counts: Sequence[int], n_points: int) -> bool:
+    return bool(counts) and n_points >= 0 and counts[-1] == n_points
+
+
 class Convergence(NamedTuple):
     """Where the noise model stands after a step's prediction: the predicted optimal ``t_opt``
     (s), t*(x) on the reference points for a noise field (``t_opt_map`` (m,), else (0,)),
-    ``t_interval`` (the posterior rule's relative half-width, else NaN), and whether the model
-    has ``converged`` (now, or at an earlier step: it stays so)."""
+    ``t_interval`` (the posterior rule's relative half-width, else NaN), whether the model
+    has ``converged`` (now, or at an earlier step: it stays so), and ``n_points``, the number
+    of points it was fitted on (-1: not known)."""
 
     t_opt: float
     t_opt_map: np.ndarray
     t_interval: float
     converged: bool
+    n_points: int = -1
 
     def narrowing(self, schedule: ScheduleConfig) -> bool:
         """Whether the decision should still narrow the posterior of the optimal t: until the
@@ -75,21 +89,32 @@ class Convergence(NamedTuple):
 
     def recorded(self, state: CampaignState) -> CampaignState:
         """``state`` with this step's optimal t (and t*(x)) and convergence recorded."""
-        return state.with_t_opt(self.t_opt, self.converged, self.t_opt_map if self.t_opt_map.size else None)
+        t_map = self.t_opt_map if self.t_opt_map.size else None
+        return state.with_t_opt(self.t_opt, self.converged, t_map, self.n_points)
 
 
 def assess(schedule: ScheduleConfig, prediction: "Prediction", state: CampaignState) -> Convergence:
-    """Apply the schedule's convergence rule to the step's prediction: the paper's rule on the
-    history of t_opt (per position for a noise field), or the posterior rule on the draws'
-    interval; a model that converged before stays converged."""
+    """Apply the schedule's convergence rule to the step's prediction on ``state``'s points: the
+    paper's rule on the history of t_opt (per position for a noise field), or the posterior rule
+    on the draws' interval; a model that converged before stays converged. The window of the
+    paper's rule holds one optimal t per set of data (``on_new_data``): a decision made on the
+    same points as the one before (a fleet's decisions while every point is in flight) does not
+    advance it."""
     post = prediction.posterior
     t_opt = float(post.t_opt)
     t_map = np.zeros(0) if post.t_opt_map is None else np.asarray(post.t_opt_map, dtype=np.float64)
     spread_t = float("nan") if prediction.t_draws is None else t_interval(np.asarray(prediction.t_draws))
+    n_points = len(state.points)
+    counts = state.known_t_opt_points()
+    steps = on_new_data(counts)
     if schedule.convergence == "posterior":
         fresh = spread_t <= schedule.t_interval_rel
+    elif _same_data(counts, n_points):
+        fresh = False
     elif post.t_opt_map is None:
-        fresh = converged(state.t_opt_history + (t_opt,), schedule.window, schedule.threshold)
+        history = [state.t_opt_history[k] for k in steps]
+        fresh = converged(history + [t_opt], schedule.window, schedule.threshold)
     else:
-        fresh = converged_map(state.t_opt_maps + (t_map,), schedule.window, schedule.threshold)
-    return Convergence(t_opt, t_map, spread_t, bool(state.is_converged or fresh))
+        maps = [state.t_opt_maps[k] for k in steps] if len(state.t_opt_maps) == len(counts) else list(state.t_opt_maps)
+        fresh = converged_map(maps + [t_map], schedule.window, schedule.threshold)
+    return Convergence(t_opt, t_map, spread_t, bool(state.is_converged or fresh), n_points)

@@ -276,12 +276,15 @@ def _trajectory(ax, data: CampaignRecord, config: CampaignConfig, colours) -> No
 def _t_opt(ax, data: CampaignRecord, config: CampaignConfig, law) -> None:
     steps, s, r = data.steps, config.space, config.reward
     k = steps.step
-    ax.plot(k, steps.t_opt, "o-", color="tab:blue", label="predicted optimal t")
+    if config.noise_model.per_instrument and config.instruments is not None:
+        _t_opt_by_instrument(ax, steps, config.instrument_names)
+    else:
+        ax.plot(k, steps.t_opt, "o-", color="tab:blue", label="predicted optimal t")
     if law is not None:
         t_star = true_optimal_t(law, s.t_min, s.t_max, r.alpha, r.beta)
         ax.axhline(t_star, color="k", ls="--", lw=1, label=f"true t* = {t_star:.3g} s")
     converged = data.converged_step
-    if converged is not None:
+    if converged is not None and not config.noise_model.per_instrument:
         ax.axvline(converged, color="tab:green", ls=":", label=f"noise model converged (step {converged})")
     if data.summary is not None:
         ax.plot([k[-1] + 1 if len(k) else 1], [data.summary.t_opt], "s", color="tab:red", label="final model")
@@ -295,6 +298,29 @@ def _t_opt(ax, data: CampaignRecord, config: CampaignConfig, law) -> None:
         ylim=t_range_shown(shown, s.t_min, s.t_max),
     )
     ax.legend(fontsize=8)
+
+
+def _t_opt_by_instrument(ax, steps, names) -> None:
+    """A law per instrument: each instrument's predicted optimal t at the steps decided for it,
+    with a star where its own law converged."""
+    k = np.asarray(steps.step)
+    for colour, name in enumerate(names):
+        mine = np.asarray([who == name for who in steps.instrument], dtype=bool)
+        if not mine.any():
+            continue
+        line = ax.plot(
+            k[mine], np.asarray(steps.t_opt)[mine], "o-", color=f"C{colour}", ms=3, label=f"{name}'s optimal t"
+        )
+        first = next((i for i in np.flatnonzero(mine) if steps.converged[i]), None)
+        if first is not None:
+            ax.plot(
+                k[first],
+                steps.t_opt[first],
+                "*",
+                color=line[0].get_color(),
+                ms=12,
+                label=f"{name} converged (step {k[first]})",
+            )
 
 
 T_SPAN_SHOWN = 0.25  # the predicted optimal t's axis spans at least +-25 % of its middle value

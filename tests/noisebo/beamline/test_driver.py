@@ -2,6 +2,8 @@
 IOC over Channel Access, the devices built by the factory the config names, the campaign the
 same as on the simulator itself; and what it refuses before anything moves."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -71,3 +73,42 @@ def test_a_factory_that_cannot_give_devices_is_refused_naming_it(devices, messag
 def test_a_factory_path_not_module_colon_function_is_refused_by_the_config(devices):
     with pytest.raises(ConfigError, match="instrument.settings.devices"):
         validated(QUICK.with_overrides(instrument={"kind": "bluesky", "settings": {"devices": devices}}))
+
+
+def readback_as_value(prefix):
+    """The simulated IOC's devices with the axis's readback given as the shot's value."""
+    from noisebo.beamline.sim_devices import sim_ioc_devices
+
+    devices = sim_ioc_devices(prefix)
+    return replace(devices, value=devices.axes[0].readback)
+
+
+def axis_not_in_a_list(prefix):
+    from noisebo.beamline.sim_devices import sim_ioc_devices
+
+    devices = sim_ioc_devices(prefix)
+    return replace(devices, axes=devices.axes[0])
+
+
+def detector_as_an_axis(prefix):
+    from noisebo.beamline.sim_devices import sim_ioc_devices
+
+    devices = sim_ioc_devices(prefix)
+    return replace(devices, axes=[devices.detector])
+
+
+@pytest.mark.parametrize(
+    ("factory", "message"),
+    [
+        (readback_as_value, r"value: '\S*readback' is not in what '\S+' reads \(\S*value\): give a signal of"),
+        (axis_not_in_a_list, r"axes: give a list of movables, one per axis of x \(got 'm0'\)"),
+        (detector_as_an_axis, r"axes\[0\]: 'det' is not movable \(it has no set\(\)\)"),
+    ],
+    ids=["axis readback as the value", "an axis not in a list", "detector as an axis"],
+)
+def test_devices_that_cannot_play_their_part_are_refused_when_the_campaign_opens(factory, message):
+    with running_ioc(FORRESTER) as ioc:
+        devices = f"{__name__}:{factory.__name__}"
+        instrument = BlueskyInstrument(BlueskyInstrument.Settings(devices=devices, arguments={"prefix": ioc.prefix}))
+        with pytest.raises(ConfigError, match=rf"^instrument.settings.devices: {devices}: {message}"):
+            instrument.open()

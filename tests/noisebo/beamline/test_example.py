@@ -32,7 +32,10 @@ def test_the_example_runs_a_campaign_through_the_run_engine(tmp_path):
     )
     assert done.returncode == 0, done.stdout + done.stderr
     lines = done.stdout.splitlines()
-    assert [line.split(":")[0] for line in lines[:-1]] == [f"step {k}" for k in range(1, 7)]
+    assert [line.split(":")[0] for line in lines[:-2]] == [f"step {k}" for k in range(1, 7)]
+    assert (
+        lines[-2].startswith(f"{out}: the campaign completed: 9 points, ") and "final predicted optimal t" in lines[-2]
+    )
     assert lines[-1].startswith(f"success: {out} (run ")
     record = read_record(out)
     assert record.status == "completed" and len(record.points) == 3 + 6

@@ -23,7 +23,7 @@ from noisebo.beamline.plan import (  # noqa: E402
     DECISIONS,
     BeyondLimits,
     CampaignNotCompleted,
-    NotInReading,
+    DeviceMismatch,
     campaign_plan,
 )
 from noisebo.beamline.sim_devices import SimAxis, SimDetector, SimPreparedDetector  # noqa: E402
@@ -192,11 +192,46 @@ def test_axes_whose_limits_leave_out_part_of_x_are_refused_before_anything_moves
         ),
         (
             lambda x, det, path: campaign_plan(QUICK, [x], det, det.acquire, exposure=det.exposure, path=path),
-            NotInReading,
-            "the shot's readings have no 'det-acquire' \\(the value\\); they have det-value",
+            DeviceMismatch,
+            "^value: 'det-acquire' is not in what 'det' reads \\(det-value\\): give a signal of the detector's reading$",
+        ),
+        (
+            lambda x, det, path: campaign_plan(QUICK, [x], det, x.readback, exposure=det.exposure, path=path),
+            DeviceMismatch,
+            "^value: 'x-readback' is not in what 'det' reads \\(det-value\\)",
+        ),
+        (
+            lambda x, det, path: campaign_plan(QUICK, [x], x, det.value, exposure=det.exposure, path=path),
+            DeviceMismatch,
+            "^detector: 'x' is not triggerable and readable \\(it has no trigger\\(\\)\\)$",
+        ),
+        (
+            lambda x, det, path: campaign_plan(QUICK, [det], det, det.value, exposure=det.exposure, path=path),
+            DeviceMismatch,
+            "^axes\\[0\\]: 'det' is not movable \\(it has no set\\(\\)\\)$",
+        ),
+        (
+            lambda x, det, path: campaign_plan(QUICK, x, det, det.value, exposure=det.exposure, path=path),
+            DeviceMismatch,
+            "^axes: give a list of movables, one per axis of x \\(got 'x'\\)$",
+        ),
+        (
+            lambda x, det, path: campaign_plan(QUICK, [x], det, det.value, exposure=det.value, path=path),
+            DeviceMismatch,
+            "^exposure: 'det-value' is not movable",
         ),
     ],
-    ids=["axes", "no exposure", "another campaign", "value not read"],
+    ids=[
+        "axes",
+        "no exposure",
+        "another campaign",
+        "value not read",
+        "axis readback as the value",
+        "axis as the detector",
+        "detector as an axis",
+        "an axis not in a list",
+        "exposure not movable",
+    ],
 )
 def test_a_plan_called_wrongly_says_what_is_wrong(forrester_ioc, tmp_path, call, error, message):
     engine, x, det, _ = connected(forrester_ioc.prefix)
@@ -213,5 +248,27 @@ def test_a_plan_called_wrongly_says_what_is_wrong(forrester_ioc, tmp_path, call,
                 shot_key=det.key,
             )
         )
+    documents = []
+    engine.subscribe(lambda name, doc: documents.append(name))
+    there = path.exists()
     with pytest.raises(error, match=message):
         engine(call(x, det, path))
+    assert documents == [] and path.exists() == there  # no run opened, no file begun
+
+
+def test_a_finished_campaigns_path_is_said_and_no_run_is_opened(forrester_ioc, tmp_path):
+    engine, x, det, documents = connected(forrester_ioc.prefix)
+    path = tmp_path / "forrester.h5"
+    config = QUICK.with_overrides(schedule={"n_steps": 1})
+    plan = partial(campaign_plan, config, [x], det, det.value, exposure=det.exposure, path=path, shot_key=det.key)
+    engine(plan())
+    before, journal = len(documents), path.with_suffix(".journal").read_bytes()
+    lines = []
+    again = engine(plan(write=lines.append))
+    assert documents[before:] == [] and path.with_suffix(".journal").read_bytes() == journal
+    assert again.plan_result.status.value == "completed" and len(again.plan_result.points) == 4
+    assert re.fullmatch(
+        rf"{re.escape(str(path))}: the campaign completed before \(4 points, \d+ shots; final predicted optimal t "
+        r"[0-9.]+ s\); nothing was run: give a new path for a new campaign",
+        lines[0],
+    ), lines

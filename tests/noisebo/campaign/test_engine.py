@@ -10,6 +10,7 @@ from noisebo.campaign.engine import EngineError
 from noisebo.campaign.steps import seed_points
 from noisebo.config import CampaignConfig
 from noisebo.events import (
+    Clocked,
     Decided,
     DecisionDue,
     Done,
@@ -96,6 +97,70 @@ def test_the_failure_budget_stops_the_campaign_with_the_reason():
     # resumed, it gets a fresh budget
     state = driver.in_memory(state, engine.resumed(state))
     assert engine.ask(state).taken == 1 and state.budget_base == (3, 4)
+
+
+def _fail(state, times, reason="Virtual circuit disconnect"):
+    for _ in range(times):
+        state, events = engine.tell(state, engine.ask(state), {engine.ask(state).taken: ShotError("timeout", reason)})
+    return state, events
+
+
+def _succeed(state, times):
+    for _ in range(times):
+        request = engine.ask(state)
+        state, _ = engine.tell(state, request, {request.taken: Reading(1.0)}, decide_next=False)
+    return state
+
+
+def test_failed_attempts_in_a_row_end_the_campaign_whatever_the_successes_before():
+    config = SMALL.with_overrides(schedule={"n_seed": 20, "shots_before": 3, "max_failed_in_row": 4})
+    state = _succeed(fresh(config), 30)  # 30 good shots: the failed fraction stays far below 50 %
+    state, events = _fail(state, 3)
+    state = _succeed(state, 1)  # a shot taken: the run starts again
+    assert state.status is Status.RUNNING and state.failed_in_row == 0
+    state, events = _fail(state, 3)
+    assert state.status is Status.RUNNING and state.failed_in_row == 3
+    state, events = _fail(state, 1)
+    assert events[-1] == StatusChanged(
+        Status.FAILED,
+        "4 shot attempts failed in a row (the last at point 10 shot 1: timeout: Virtual circuit disconnect); "
+        "continue the campaign once the instrument answers again",
+    )
+    assert state.failure_counts() == (7, 38)  # the fraction alone would have gone on for 30 more
+    resumed = driver.in_memory(state, engine.resumed(state))  # continued: it counts afresh
+    assert resumed.status is Status.RUNNING and resumed.failed_in_row == 0
+    assert _fail(resumed, 3)[0].status is Status.RUNNING
+
+
+def test_wall_time_with_no_shot_taken_ends_the_campaign():
+    config = SMALL.with_overrides(schedule={"max_silent_s": 60.0})
+    state = driver.in_memory(_succeed(fresh(config), 1), [Clocked(100.0)])  # a shot committed at 100 s
+    state, _ = _fail(state, 1)
+    state = driver.in_memory(state, [Clocked(150.0)])
+    state, events = _fail(state, 1)
+    assert state.status is Status.RUNNING  # 50 s since the last shot
+    state = driver.in_memory(state, [Clocked(170.0)])
+    state, events = _fail(state, 1)
+    assert events[-1] == StatusChanged(
+        Status.FAILED,
+        "no shot taken for 70 s of wall time (max_silent_s 60 s; 3 attempts failed, the last at point 0 shot 1: "
+        "timeout: Virtual circuit disconnect); continue the campaign once the instrument answers again",
+    )
+
+
+def test_each_failed_attempt_is_a_line_with_its_reason():
+    from noisebo.campaign.progress import failure_lines, progress_lines
+
+    config = SMALL.with_overrides(schedule={"max_failed_in_row": 5})
+    state = _succeed(fresh(config), 1)
+    request = engine.ask(state)
+    failed = engine.tell(state, request, {1: ShotError("instrument error", "TimeoutError: det-value")})
+    line = "point 0 shot 1: attempt failed (instrument error: TimeoutError: det-value); 1 in a row of 5 that end the campaign"
+    assert progress_lines(state, failed.events) == failure_lines(state, failed.events) == [line]
+    again = engine.tell(failed.state, request, {1: ShotError("timeout", "no reading")})
+    assert failure_lines(failed.state, again.events) == [
+        "point 0 shot 1: attempt failed (timeout: no reading); 2 in a row of 5 that end the campaign"
+    ]
 
 
 def test_a_point_short_of_usable_shots_wants_more_and_rejected_shots_count_against_the_budget():

@@ -403,3 +403,22 @@ def test_a_budget_shared_by_the_fleet_is_never_overspent_and_ends_once_the_point
     cost = sum(s.t for p in final.points for s in p.shots) + 0.5 * len(final.points)
     assert final.spent_s == pytest.approx(cost) and final.spent_s <= 40.0 + 1e-9
     assert any(isinstance(a, Wait) and "held by points in flight" in a.reason for a in seen)
+
+
+def _decisions_on_the_seed_points(final):
+    return [d for d in final.decisions if d.n_points == final.config.schedule.n_seed]
+
+
+def test_decisions_made_on_the_seed_points_alone_do_not_converge_the_shared_noise_model():
+    """Three instruments ask for their first decisions while every other point is in flight:
+    those decisions see the seed points alone, and one set of data is one step of the window,
+    however loose the threshold."""
+    config = fleet_config(threshold=1e3, n_steps=6)
+    final = run_fleet(config, {n: SIM for n in NAMES}, 4, FleetTiming(0.5, 1.0)).final
+    on_seeds = _decisions_on_the_seed_points(final)
+    assert len(on_seeds) == 3  # the first decision for each instrument, made on the same data
+    assert not any(d.converged for d in on_seeds)
+    counts = [d.n_points for d in final.decisions]
+    converged_at = next(k for k, d in enumerate(final.decisions) if d.converged)
+    assert len(set(counts[: converged_at + 1])) == config.schedule.window  # on three sets of data
+    assert final.data.converged_step == converged_at

@@ -178,3 +178,16 @@ def test_a_decision_under_way_when_the_campaign_is_stopped_is_dropped():
     assert final.status is Status.ABORTED and final.reason == "SIGTERM received"
     assert [d.step for d in final.decisions] == [0]  # step 1's decision was dropped
     assert [e.decision.step for e in commits if isinstance(e, Decided)] == [0]
+
+
+def test_decisions_made_while_every_point_is_in_flight_do_not_converge_the_noise_model():
+    from tests.noisebo.campaign.test_fleet import fleet_config
+
+    config = fleet_config(threshold=1e3, n_steps=6)
+    instruments = {name: Paced() for name in NAMES}
+    final = drive_fleet(fresh(config), instruments, in_memory)
+    assert final.status is Status.COMPLETED
+    counts = [d.n_points for d in final.decisions]
+    assert counts[0] == config.schedule.n_seed and counts == sorted(counts)
+    converged_at = next(k for k, d in enumerate(final.decisions) if d.converged)
+    assert len(set(counts[: converged_at + 1])) == config.schedule.window  # one step per set of data

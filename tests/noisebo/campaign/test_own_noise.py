@@ -7,7 +7,18 @@ import pytest
 
 from noisebo.campaign import engine
 from noisebo.campaign.fleet import FleetTiming, run_fleet
-from noisebo.campaign.own_noise import decisions_for, min_own_points, own_data, own_previous
+from noisebo.bridge.exchange import noise_standing
+from noisebo.campaign.own_noise import (
+    Standing,
+    decisions_for,
+    min_own_points,
+    own_data,
+    own_previous,
+    standings,
+    state_standings,
+)
+from noisebo.cli.files import inspect_summary
+from noisebo.storage.hdf5 import write_snapshot
 from noisebo.campaign.stages import run_decision
 from noisebo.config import CampaignConfig, ConfigError, parse_config
 from noisebo.instruments import build
@@ -176,3 +187,32 @@ def test_each_instruments_convergence_is_told_once_with_its_name(campaign):
 @pytest.mark.parametrize("law, points", [("inv_sqrt", 3), ("quadrature", 3), ("power", 4)])
 def test_an_instrument_learns_alone_once_it_has_a_point_more_than_its_law_has_parameters(law, points):
     assert min_own_points(two_laws(mean=law)) == points
+
+
+def test_each_instruments_standing_by_hand():
+    found = standings(("a", "b", "c"), ("a", "b", "a", "b"), (1.0, 2.0, 3.0, 4.0), (False, False, True, True))
+    assert found == (Standing("a", 3.0, 3), Standing("b", 4.0, 4), Standing("c", None, None))
+    assert [s.text() for s in found] == [
+        "a 3 s (converged at step 3)",
+        "b 4 s (converged at step 4)",
+        "c no decision yet (not converged)",
+    ]
+    later = standings(("a",), ("a", "a"), (1.0, 2.0), (True, False))  # once converged, it stays so
+    assert later == (Standing("a", 2.0, 1),)
+
+
+def test_each_instruments_standing_is_its_own_laws_in_the_state_the_file_and_the_status(campaign, tmp_path):
+    config, _, final, _ = campaign
+    found = state_standings(final)
+    for s in found:
+        own = own_data(final, s.instrument)
+        assert s.t_opt == own.t_opt_history[-1]
+        steps = decisions_for(final, s.instrument)  # its own decisions' BO steps, from 0
+        assert s.converged_step == (None if own.converged_step is None else steps[own.converged_step] + 1)
+        assert own.t_opt_points == tuple(final.decisions[k].n_points for k in decisions_for(final, s.instrument))
+    path = tmp_path / "two.h5"
+    write_snapshot(path, final)
+    by_file = inspect_summary(path)["t_opt_by_instrument"]
+    assert by_file == {s.instrument: {"t_opt": s.t_opt, "converged_at_step": s.converged_step} for s in found}
+    assert noise_standing(final)["by_instrument"] == by_file
+    assert state_standings(engine.replay([engine.new_campaign(two_laws(False), 3, final.driver, {}, "now")])) == ()
