@@ -79,7 +79,12 @@ def load_factory(path: str):
         target: Any = importlib.import_module(module_name)
         for part in attribute.split("."):
             target = getattr(target, part)
-    except (ImportError, AttributeError) as error:
+    except ImportError as error:
+        raise ConfigError(
+            f"instrument.settings.devices: cannot load {path!r}: {error} (install its package, or put its "
+            "folder on PYTHONPATH)"
+        ) from None
+    except AttributeError as error:
         raise ConfigError(f"instrument.settings.devices: cannot load {path!r}: {error}") from None
     if not callable(target):
         raise ConfigError(f"instrument.settings.devices: {path!r} is not a function")

@@ -43,8 +43,8 @@ def refusals(*statuses: int, **said_instead: str) -> dict:
         400: "the body is not JSON",
         401: "no token, or the token in the URL",
         403: "a wrong token",
-        409: "the shot is not wanted (finished, not yet due, recorded with another reading, or the campaign "
-        "has ended): drop the reading and poll /next",
+        409: "the shot is not wanted (finished, not yet due, past the point's wanted shots, recorded with "
+        "another reading, or the campaign has ended): drop the reading and poll /next",
         413: "the body is over `max_body_mib`",
         422: "a field, a non-finite number, the wrong kind of reading or a spectrum of the wrong shape",
         503: "the campaign is starting, or the reading is not journaled yet: send the same post again",

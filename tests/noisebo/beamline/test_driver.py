@@ -56,7 +56,11 @@ def test_devices_that_do_not_answer_are_refused_naming_their_pvs():
 @pytest.mark.parametrize(
     ("devices", "message"),
     [
-        ("noisebo.beamline.nowhere:devices", "cannot load 'noisebo.beamline.nowhere:devices': No module named"),
+        (
+            "noisebo.beamline.nowhere:devices",
+            r"cannot load 'noisebo.beamline.nowhere:devices': No module named .*\(install its package, or put its "
+            r"folder on PYTHONPATH\)$",
+        ),
         ("noisebo.beamline.sim_devices:nothing", "cannot load 'noisebo.beamline.sim_devices:nothing'"),
         ("noisebo.beamline.sim_devices:TIMEOUT_S", "'noisebo.beamline.sim_devices:TIMEOUT_S' is not a function"),
         ("os:getcwd", "os:getcwd returned str, not Devices"),
