@@ -276,13 +276,16 @@ def _trajectory(ax, data: CampaignRecord, config: CampaignConfig, colours) -> No
 def _t_opt(ax, data: CampaignRecord, config: CampaignConfig, law) -> None:
     steps, s, r = data.steps, config.space, config.reward
     k = steps.step
-    if config.noise_model.per_instrument and config.instruments is not None:
+    per_instrument = config.noise_model.per_instrument and config.instruments is not None
+    whose = ""
+    if per_instrument:
         _t_opt_by_instrument(ax, steps, config.instrument_names)
+        whose = f" of {config.instrument_names[0]}"  # the truth drawn is the first instrument's
     else:
         ax.plot(k, steps.t_opt, "o-", color="tab:blue", label="predicted optimal t")
     if law is not None:
         t_star = true_optimal_t(law, s.t_min, s.t_max, r.alpha, r.beta)
-        ax.axhline(t_star, color="k", ls="--", lw=1, label=f"true t* = {t_star:.3g} s")
+        ax.axhline(t_star, color="k", ls="--", lw=1, label=f"true t*{whose} = {t_star:.3g} s")
     converged = data.converged_step
     if converged is not None and not config.noise_model.per_instrument:
         ax.axvline(converged, color="tab:green", ls=":", label=f"noise model converged (step {converged})")
