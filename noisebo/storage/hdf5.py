@@ -24,6 +24,7 @@ import ctypes.util
 import functools
 import json
 import os
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -191,11 +192,21 @@ def open_campaign(path: Path) -> h5py.File:
     running campaign holds, or held when it was killed), as its superblock says
     (``storage.integrity.examine``: a truncated or damaged file is an error before HDF5 sees it)."""
     path = Path(path)
-    opening = examine(path, rebuild_advice(path))
-    try:
-        return _open_swmr(path) if opening is Opening.SWMR else h5py.File(path, "r")
-    except OSError as error:
-        raise damaged(path, error) from None
+    for attempt in range(OPEN_ATTEMPTS):
+        opening = examine(path, rebuild_advice(path))
+        try:
+            return _open_swmr(path) if opening is Opening.SWMR else h5py.File(path, "r")
+        except OSError as error:
+            # a running campaign replaced the file between its superblock's reading and the
+            # opening (a new snapshot renamed over it): the next look finds the new one
+            if attempt + 1 < OPEN_ATTEMPTS and "already open for write" in str(error):
+                time.sleep(OPEN_RETRY_S)
+                continue
+            raise damaged(path, error) from None
+    raise AssertionError("unreachable")
+
+
+OPEN_ATTEMPTS, OPEN_RETRY_S = 3, 0.05
 
 
 # An SWMR reader tries a metadata block again when its checksum fails (the writer may be writing
