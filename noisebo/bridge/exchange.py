@@ -363,7 +363,5 @@ def noise_standing(state: EngineState) -> dict:
     return {
         "t_opt": data.t_opt_history[-1] if data.t_opt_history else None,
         "converged_at_step": None if data.converged_step is None else data.converged_step + 1,
-        "by_instrument": {s.instrument: {"t_opt": s.t_opt, "converged_at_step": s.converged_step} for s in by}
-        if by
-        else None,
+        "by_instrument": {s.instrument: s.as_json() for s in by} if by else None,
     }

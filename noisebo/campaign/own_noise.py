@@ -122,6 +122,10 @@ class Standing:
     t_opt: float | None
     converged_step: int | None
 
+    def as_json(self) -> dict:
+        """``{"t_opt": ..., "converged_at_step": ...}``, as ``noisebo inspect --json`` and ``/status`` give it."""
+        return {"t_opt": self.t_opt, "converged_at_step": self.converged_step}
+
     def text(self) -> str:
         """ "a 2.41 s (converged at step 9)", for a line a person reads."""
         t_opt = "no decision yet" if self.t_opt is None else f"{self.t_opt:.4g} s"

@@ -27,13 +27,9 @@ if TYPE_CHECKING:
 def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
     """What a person watching the campaign is told about ``events`` (committed after ``state``)."""
     lines, n_steps = [], state.config.schedule.n_steps
-    in_row = state.failed_in_row
-    for event in events:
-        if isinstance(event, ShotTaken):
-            in_row = 0
-        elif isinstance(event, ShotFailed):
-            in_row += 1
-            lines.append(failure_line(state, event, in_row))
+    for event, failed in zip(events, _failure_texts(state, events)):
+        if failed is not None:
+            lines.append(failed)
         elif isinstance(event, PointCommitted):
             p = event.point
             label = "seed point" if event.step < 0 else f"step {event.step + 1}/{n_steps}"
@@ -57,14 +53,17 @@ def progress_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
 
 def failure_lines(state: EngineState, events: Sequence[Event]) -> list[str]:
     """The lines of the failed attempts among ``events`` alone (``failure_line``)."""
-    lines, in_row = [], state.failed_in_row
+    return [line for line in _failure_texts(state, events) if line is not None]
+
+
+def _failure_texts(state: EngineState, events: Sequence[Event]) -> list[str | None]:
+    """Per event, its ``failure_line`` (a failed attempt, counted in the run since the last shot
+    taken) or None."""
+    texts, in_row = [], state.failed_in_row
     for event in events:
-        if isinstance(event, ShotTaken):
-            in_row = 0
-        elif isinstance(event, ShotFailed):
-            in_row += 1
-            lines.append(failure_line(state, event, in_row))
-    return lines
+        in_row = 0 if isinstance(event, ShotTaken) else in_row + isinstance(event, ShotFailed)
+        texts.append(failure_line(state, event, in_row) if isinstance(event, ShotFailed) else None)
+    return texts
 
 
 def failure_line(state: EngineState, event: ShotFailed, in_row: int) -> str:

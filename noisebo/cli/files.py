@@ -82,7 +82,7 @@ def _by_instrument(record) -> dict | None:
     names = [i["name"] for i in config["instruments"]]
     steps = record.steps
     found = standings(names, steps.instrument, steps.t_opt, steps.converged)
-    return {s.instrument: {"t_opt": s.t_opt, "converged_at_step": s.converged_step} for s in found}
+    return {s.instrument: s.as_json() for s in found}
 
 
 def instruments_text(by_instrument: dict) -> str:
