@@ -121,6 +121,8 @@ def test_a_paused_run_resumes_and_an_aborted_one_continues_in_a_new_run_each_sho
     assert engine(plan()).exit_status == "success"
     record = same_as_alone(path)
     starts = [doc["noisebo"] for name, doc in documents if name == "start"]
+    documented = {"config", "seed", "version", "file", "resumed", "points_before", "previous_runs"}  # the docs' table
+    assert all(set(s) == documented for s in starts)
     assert [s["resumed"] for s in starts] == [False, True] and starts[1]["points_before"] == len(first.points)
     uids = [doc["uid"] for name, doc in documents if name == "start"]
     assert [s["previous_runs"] for s in starts] == [[], uids[:1]]  # the new run names the one it continues
