@@ -21,6 +21,12 @@ serves, for the campaign config CONFIG's instrument (a simulator: Forrester, Bra
                          campaign through the IOC decides as ``noisebo run`` does. A real detector
                          has nothing like them.
 
+With ``--plain`` the records have the shape of a common IOC that knows nothing of noisebo, for
+the worked example of one's own devices (``examples/beamline/own_devices.py``): a put to
+``PREFIX:M{i}`` or ``PREFIX:ACQUIRE`` completes at once, ``PREFIX:M{i}:DMOV`` (bi) is 0 while axis
+i moves and 1 once it stands, ``PREFIX:ACQUIRE`` returns to 0 when the value is in, and there are
+no SEED, POINT, SHOT records: each shot draws the next of the IOC's own random stream (``--seed``).
+
 Channel Access stays on the addresses the environment names (EPICS_CAS_INTF_ADDR_LIST). The line
 ``NOISEBO_IOC_READY PREFIX`` on stdout says the records are served.
 """
@@ -48,7 +54,14 @@ READY = "NOISEBO_IOC_READY"
 STEP_S = 0.01  # the readback's update period while an axis moves
 
 
-def serve(prefix: str, config_path: str, velocity: float, limits: tuple[float, float] | None = None) -> None:
+def serve(
+    prefix: str,
+    config_path: str,
+    velocity: float,
+    limits: tuple[float, float] | None = None,
+    plain: bool = False,
+    seed: int = 0,
+) -> None:
     from softioc import asyncio_dispatcher, builder, softioc
 
     from noisebo.config import load_config
@@ -62,12 +75,20 @@ def serve(prefix: str, config_path: str, velocity: float, limits: tuple[float, f
     dispatcher = asyncio_dispatcher.AsyncioDispatcher()
     builder.SetDeviceName(prefix.removesuffix(":"))
     readbacks = [
-        _axis(builder, i, axis.low, velocity, limits or (axis.low, axis.high))
+        _axis(builder, i, axis.low, velocity, limits or (axis.low, axis.high), plain)
         for i, axis in enumerate(config.space.axes)
     ]
     exposure = builder.aOut("EXPOSURE", initial_value=config.space.t_min, PREC=6, EGU="s", DRVL=0.0)
     value = builder.aIn("VALUE", initial_value=math.nan, PREC=9)
-    key = {name: builder.longOut(name, initial_value=0, DRVL=0) for name in ("SEED", "POINT", "SHOT")}
+    key = {} if plain else {name: builder.longOut(name, initial_value=0, DRVL=0) for name in ("SEED", "POINT", "SHOT")}
+    shots_taken = [0]
+
+    def shot_rng() -> np.random.Generator:
+        if plain:  # the IOC's own stream, as a real detector's noise is its own
+            shots_taken[0] += 1
+            return numpy_rng(seed, MEASURE, shots_taken[0] - 1)
+        return numpy_rng(int(key["SEED"].get()), MEASURE, int(key["POINT"].get()), int(key["SHOT"].get()))
+
     sweep = _longest_sweep(simulator, config)
     rows = [builder.WaveformIn(name, np.full(sweep, np.nan, np.float32)) for name in SPECTRUM] if sweep else []
 
@@ -77,8 +98,7 @@ def serve(prefix: str, config_path: str, velocity: float, limits: tuple[float, f
         t = float(exposure.get())
         await asyncio.sleep(t)
         x = np.array([float(rb.get()) for rb in readbacks])
-        rng = numpy_rng(int(key["SEED"].get()), MEASURE, int(key["POINT"].get()), int(key["SHOT"].get()))
-        reading = simulator.simulate(x, max(t, 1e-9), rng)
+        reading = simulator.simulate(x, max(t, 1e-9), shot_rng())
         if reading.spectrum is None:
             value.set(float(reading.value))
         else:
@@ -86,7 +106,7 @@ def serve(prefix: str, config_path: str, velocity: float, limits: tuple[float, f
             padded[:, : reading.spectrum.shape[1]] = reading.spectrum[:, :sweep]
             for record, row in zip(rows, padded):
                 record.set(row)
-        acquire.set(0, process=False)
+        acquire.set(0, process=plain)  # processed, so that monitors see it: a plain IOC's clients wait on them
 
     acquire = builder.boolOut(
         "ACQUIRE",
@@ -95,7 +115,7 @@ def serve(prefix: str, config_path: str, velocity: float, limits: tuple[float, f
         ONAM="Acquire",
         on_update=acquire_shot,
         always_update=True,
-        blocking=True,
+        blocking=not plain,
     )
     builder.LoadDatabase()
     softioc.iocInit(dispatcher, enable_pva=False)
@@ -116,21 +136,39 @@ def _longest_sweep(simulator, config) -> int:
     return 0 if shot.spectrum is None else int(shot.spectrum.shape[1])
 
 
-def _axis(builder, index: int, start: float, velocity: float, limits: tuple[float, float]):
+def _axis(builder, index: int, start: float, velocity: float, limits: tuple[float, float], plain: bool):
+    """Axis ``index``'s records; its readback. A newer setpoint takes over a move under way."""
     readback = builder.aIn(f"M{index}:RBV", initial_value=start, PREC=9)
+    done = builder.boolIn(f"M{index}:DMOV", initial_value=1, ZNAM="Moving", ONAM="Done") if plain else None
+    moves = [0]
 
     async def move(target) -> None:
+        moves[0] += 1
+        this = moves[0]
+        if done is not None:
+            done.set(0)
         position = float(readback.get())
         while abs(target - position) > 1e-12:
             position += math.copysign(min(abs(target - position), velocity * STEP_S), target - position)
             readback.set(position)
             await asyncio.sleep(STEP_S)
+            if moves[0] != this:
+                return
         readback.set(float(target))
+        if done is not None:
+            done.set(1)
 
     low, high = limits
     start = min(max(start, low), high)
     builder.aOut(
-        f"M{index}", initial_value=start, PREC=9, DRVL=low, DRVH=high, on_update=move, always_update=True, blocking=True
+        f"M{index}",
+        initial_value=start,
+        PREC=9,
+        DRVL=low,
+        DRVH=high,
+        on_update=move,
+        always_update=True,
+        blocking=not plain,
     )
     return readback
 
@@ -160,10 +198,13 @@ def running_ioc(
     velocity: float = 10.0,
     timeout_s: float = 60.0,
     limits: tuple[float, float] | None = None,
+    plain: bool = False,
+    seed: int = 0,
 ):
     """The simulated IOC for ``config`` in a process of its own, for as long as the ``with``
     lasts (a ``SimIoc``; ``prefix`` default a new one, "NB<8 hex digits>:"; ``limits``: every
-    axis's travel limits, default the config's range). Channel Access stays
+    axis's travel limits, default the config's range; ``plain``: the records of a common IOC,
+    with ``seed`` its own random stream's, as ``--plain`` serves them). Channel Access stays
     on loopback unless the environment names other addresses (``CA_ENVIRONMENT``). Run one at a time
     on a host: with searches sent to 127.0.0.1 alone, the last IOC to bind the server port
     answers them all."""
@@ -171,6 +212,7 @@ def running_ioc(
     env = {**CA_ENVIRONMENT, **os.environ}
     command = [sys.executable, "-u", "-m", "noisebo.beamline.sim_ioc", prefix, str(config), "--velocity", str(velocity)]
     command += ["--parent", str(os.getpid())] + (["--limits", *map(str, limits)] if limits else [])
+    command += ["--plain", "--seed", str(seed)] if plain else []
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         _wait_until_ready(process, prefix, timeout_s)
@@ -231,12 +273,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--velocity", type=float, default=10.0, help="axis speed, units of x per s (default 10)")
     parser.add_argument("--limits", type=float, nargs=2, metavar=("LOW", "HIGH"), help="every axis's travel limits")
     parser.add_argument("--parent", type=int, help="end when this process ends (running_ioc passes its own)")
+    parser.add_argument("--plain", action="store_true", help="the records of a common IOC: puts complete at once")
+    parser.add_argument("--seed", type=int, default=0, help="with --plain: the seed of the IOC's own random stream")
     args = parser.parse_args(argv)
     if args.parent is not None:
         _end_with(args.parent)
     if not args.prefix.endswith(":") or len(args.prefix) < 2:
         parser.error(f"the prefix must end in a colon, as NB1: does; got {args.prefix!r}")
-    serve(args.prefix, args.config, args.velocity, tuple(args.limits) if args.limits else None)
+    if args.seed < 0:
+        parser.error(f"--seed: a non-negative integer, got {args.seed}")
+    serve(args.prefix, args.config, args.velocity, tuple(args.limits) if args.limits else None, args.plain, args.seed)
 
 
 if __name__ == "__main__":
